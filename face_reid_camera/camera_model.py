@@ -128,6 +128,27 @@ class CameraPose:
         pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
         return (pts - self.translation) @ self.rotation
 
+    def quaternion_xyzw(self) -> tuple[float, float, float, float]:
+        """The rotation as a unit quaternion (x, y, z, w), e.g. for geometry_msgs/Pose."""
+        m = self.rotation
+        trace = float(m[0, 0] + m[1, 1] + m[2, 2])
+        if trace > 0:
+            s = 2.0 * math.sqrt(trace + 1.0)
+            w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+        else:
+            i = int(np.argmax(np.diag(m)))
+            j, k = (i + 1) % 3, (i + 2) % 3
+            s = 2.0 * math.sqrt(max(1e-12, 1.0 + m[i, i] - m[j, j] - m[k, k]))
+            q = [0.0, 0.0, 0.0]
+            q[i] = 0.25 * s
+            q[j] = (m[j, i] + m[i, j]) / s
+            q[k] = (m[k, i] + m[i, k]) / s
+            w = (m[k, j] - m[j, k]) / s
+            x, y, z = q
+        if w < 0:
+            x, y, z, w = -x, -y, -z, -w
+        return float(x), float(y), float(z), float(w)
+
     @property
     def up_in_camera(self) -> FloatArray:
         """World +z expressed in the camera frame (the floor normal a seeded RANSAC expects)."""

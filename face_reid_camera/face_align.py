@@ -1,0 +1,136 @@
+"""Face alignment: warp a face to dlib's 150x150 embedder chip from YuNet's five landmarks.
+
+A least-squares similarity transform (rotation, uniform scale, translation; closed-form Umeyama, so it is
+deterministic, unlike RANSAC) maps the detected landmarks onto :data:`ALIGN_TEMPLATE_150`, which was
+fitted against dlib's own ``get_face_chip`` (padding 0.25); the face is then resampled bilinearly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "ALIGN_TEMPLATE_150",
+    "CHIP_SIZE_PX",
+    "align_face",
+    "align_faces",
+    "estimate_similarity",
+]
+
+CHIP_SIZE_PX = 150
+
+# (x, y) in the 150x150 chip, YuNet's landmark order: right eye, left eye, nose tip, right mouth corner,
+# left mouth corner (the subject's right is on the image's left).
+ALIGN_TEMPLATE_150: NDArray[np.float64] = np.array(
+    [
+        [47.15, 46.17],
+        [102.09, 44.71],
+        [75.0, 78.7],
+        [52.9, 103.27],
+        [100.66, 101.74],
+    ],
+    dtype=np.float64,
+)
+ALIGN_TEMPLATE_150.setflags(write=False)
+
+# Landmark sets spanning less than this (RMS distance to their centroid, pixels) are degenerate.
+_MIN_LANDMARK_SPREAD_PX = 1.0
+
+
+def _validate_landmarks(landmarks5: np.ndarray) -> NDArray[np.float64]:
+    points = np.asarray(landmarks5)
+    if points.shape != (5, 2):
+        raise ValueError(f"landmarks5 must have shape (5, 2), got {points.shape}")
+    if not np.issubdtype(points.dtype, np.number) or np.issubdtype(points.dtype, np.complexfloating):
+        raise ValueError(f"landmarks5 must be real numbers, got dtype {points.dtype}")
+    points = points.astype(np.float64)
+    if not np.isfinite(points).all():
+        raise ValueError("landmarks5 contains NaN or infinite values")
+    spread = float(np.sqrt(((points - points.mean(axis=0)) ** 2).sum(axis=1).mean()))
+    if spread < _MIN_LANDMARK_SPREAD_PX:
+        raise ValueError(f"landmarks5 are degenerate (spread {spread:.3g} px < {_MIN_LANDMARK_SPREAD_PX} px)")
+    return points
+
+
+def estimate_similarity(src: np.ndarray, dst: np.ndarray) -> NDArray[np.float64]:
+    """Least-squares similarity (Umeyama 1991) mapping ``src`` (K,2) onto ``dst`` (K,2): 2x3 matrix."""
+    src = np.asarray(src, dtype=np.float64)
+    dst = np.asarray(dst, dtype=np.float64)
+    src_mean = src.mean(axis=0)
+    dst_mean = dst.mean(axis=0)
+    src_c = src - src_mean
+    dst_c = dst - dst_mean
+    src_var = (src_c**2).sum() / len(src)
+    if src_var <= 0.0:
+        raise ValueError("cannot estimate a similarity from coincident points")
+    cov = dst_c.T @ src_c / len(src)
+    u, sing, vt = np.linalg.svd(cov)
+    sign = np.ones(2)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:  # forbid reflections
+        sign[-1] = -1.0
+    rotation = u @ np.diag(sign) @ vt
+    scale = float((sing * sign).sum() / src_var)
+    matrix = np.empty((2, 3), dtype=np.float64)
+    matrix[:, :2] = scale * rotation
+    matrix[:, 2] = dst_mean - matrix[:, :2] @ src_mean
+    return matrix
+
+
+def _validate_image(image_bgr: np.ndarray) -> np.ndarray:
+    if not isinstance(image_bgr, np.ndarray):
+        raise ValueError(f"image must be a numpy array, got {type(image_bgr).__name__}")
+    if image_bgr.dtype != np.uint8:
+        raise ValueError(f"image must be uint8, got {image_bgr.dtype}")
+    if image_bgr.ndim == 3 and image_bgr.shape[2] == 1:
+        image_bgr = image_bgr[:, :, 0]
+    if not (image_bgr.ndim == 2 or (image_bgr.ndim == 3 and image_bgr.shape[2] in (3, 4))):
+        raise ValueError(f"image must be HxW grey, HxWx3 BGR or HxWx4 BGRA, got shape {image_bgr.shape}")
+    if image_bgr.shape[0] == 0 or image_bgr.shape[1] == 0:
+        raise ValueError(f"image is empty: shape {image_bgr.shape}")
+    return image_bgr
+
+
+def _warp_to_rgb(image: np.ndarray, matrix: NDArray[np.float64]) -> NDArray[np.uint8]:
+    chip = cv2.warpAffine(
+        image,
+        matrix,
+        (CHIP_SIZE_PX, CHIP_SIZE_PX),
+        flags=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
+    if chip.ndim == 2:
+        return cv2.cvtColor(chip, cv2.COLOR_GRAY2RGB)
+    if chip.shape[2] == 4:
+        return cv2.cvtColor(chip, cv2.COLOR_BGRA2RGB)
+    return cv2.cvtColor(chip, cv2.COLOR_BGR2RGB)
+
+
+def align_face(image_bgr: np.ndarray, landmarks5: np.ndarray) -> NDArray[np.uint8]:
+    """Return the 150x150x3 uint8 RGB chip of the face whose 5 YuNet landmarks (pixels) are given.
+
+    ``image_bgr``: uint8 HxWx3 BGR (HxW grey and HxWx4 BGRA are accepted too). Parts of the chip that
+    fall outside the image are black. Raises ValueError on a bad image or bad landmarks (wrong shape,
+    non-finite, degenerate).
+    """
+    image = _validate_image(image_bgr)
+    matrix = estimate_similarity(_validate_landmarks(landmarks5), ALIGN_TEMPLATE_150)
+    return _warp_to_rgb(image, matrix)
+
+
+def align_faces(
+    image_bgr: np.ndarray, landmarks_list: Sequence[np.ndarray] | np.ndarray
+) -> NDArray[np.uint8]:
+    """Align several faces of one image: returns [N, 150, 150, 3] uint8 RGB (N may be 0)."""
+    image = _validate_image(image_bgr)
+    if isinstance(landmarks_list, np.ndarray) and landmarks_list.ndim != 3 and landmarks_list.size > 0:
+        raise ValueError(f"landmarks_list must be [N, 5, 2], got shape {landmarks_list.shape}")
+    chips = np.empty((len(landmarks_list), CHIP_SIZE_PX, CHIP_SIZE_PX, 3), dtype=np.uint8)
+    for index, landmarks in enumerate(landmarks_list):
+        matrix = estimate_similarity(_validate_landmarks(landmarks), ALIGN_TEMPLATE_150)
+        chips[index] = _warp_to_rgb(image, matrix)
+    return chips
