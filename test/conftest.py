@@ -1,0 +1,29 @@
+"""Shared test set-up: keep all DDS traffic on loopback and give each test its own domain."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+# Set before anything imports rclpy: never let discovery traffic leave this machine.
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.pop("ROS_STATIC_PEERS", None)
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+DATA_DIR = Path(__file__).parent / "data"
+FACES_DIR = DATA_DIR / "faces"
+RGBD_DIR = DATA_DIR / "rgbd"
+
+_domain_counter = [0]
+
+
+@pytest.fixture
+def ros_domain_id(monkeypatch: pytest.MonkeyPatch) -> int:
+    """A ROS_DOMAIN_ID of this test only (derived from the pytest process id), set in the environment."""
+    _domain_counter[0] += 1
+    domain = 1 + (os.getpid() * 7 + _domain_counter[0]) % 100
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    return domain
