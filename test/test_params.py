@@ -1,0 +1,67 @@
+"""The camera parameter table, config/camera.yaml and the pipeline config agree."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from face_reid_camera import params
+
+CONFIG = Path(__file__).resolve().parents[1] / "config" / "camera.yaml"
+
+
+def test_config_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
+    assert params.load_params_yaml(CONFIG) == params.defaults()
+    regenerated = tmp_path / "camera.yaml"
+    params.write_defaults_yaml(regenerated)
+    assert regenerated.read_text() == CONFIG.read_text(), "regenerate config/camera.yaml from params.py"
+
+
+def test_every_parameter_is_described_with_care() -> None:
+    names = [spec.name for spec in params.CAMERA_PARAMS]
+    assert len(names) == len(set(names))
+    for spec in params.CAMERA_PARAMS:
+        assert len(spec.description) > 20, spec.name
+        assert not spec.description.startswith("Person detector:"), f"{spec.name} has no real description"
+
+
+def test_defaults_build_a_valid_pipeline_config() -> None:
+    config = params.pipeline_config(params.defaults())
+    assert config.head_roi_size_m == pytest.approx(0.3)
+    pose = params.camera_pose(params.defaults())
+    assert pose.translation[2] == pytest.approx(2.5)
+    # pitch > 0 looks down: the optical axis has a negative world z component
+    assert pose.rotation[2, 2] < 0
+
+
+def test_overrides_nested_and_flat(tmp_path: Path) -> None:
+    path = tmp_path / "p.yaml"
+    path.write_text(
+        "face_reid_camera:\n  ros__parameters:\n    camera_id: cam7\n    head_roi_size_m: 1\n"
+        "    person:\n      voxel_size_m: 0.05\n"
+    )
+    values = params.load_params_yaml(path)
+    assert values["camera_id"] == "cam7"
+    assert values["head_roi_size_m"] == 1.0 and isinstance(values["head_roi_size_m"], float)
+    assert params.pipeline_config(values).person.voxel_size_m == pytest.approx(0.05)
+
+
+@pytest.mark.parametrize("body,match", [
+    ("    no_such_param: 1\n", "unknown camera parameter"),
+    ("    detect_faces: 3\n", "detect_faces"),
+    ("    camera_pose_xyz_m: [1.0, 2.0]\n", "camera_pose_xyz_m"),
+    ("    head_roi_size_m: big\n", "head_roi_size_m"),
+])
+def test_bad_values_are_named(tmp_path: Path, body: str, match: str) -> None:
+    path = tmp_path / "p.yaml"
+    path.write_text("face_reid_camera:\n  ros__parameters:\n" + body)
+    with pytest.raises(ValueError, match=match):
+        params.load_params_yaml(path)
+
+
+def test_invalid_value_ranges_fail_in_the_config() -> None:
+    values = params.defaults()
+    values["head_roi_size_m"] = -0.3
+    with pytest.raises(ValueError, match="head_roi_size_m"):
+        params.pipeline_config(values)
