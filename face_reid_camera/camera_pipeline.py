@@ -6,6 +6,7 @@ call :meth:`CameraPipeline.process` with numpy images and get a :class:`FrameRes
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -193,8 +194,12 @@ class CameraPipeline:
             )
         people: list[PersonObservation] = []
         rois: list[tuple[int, int, int, int] | None] = []
+        plane = detection.ground_plane
         for cand in detection.people:
-            cam = np.asarray(cand.centroid_cam, dtype=np.float64)
+            head = np.asarray(cand.head_cam, dtype=np.float64)
+            # The person's position is the head centre dropped onto the floor: unlike the centroid
+            # of the visible surface it does not shift towards whichever camera sees the person.
+            cam = head - float(plane.height_of(head[None, :])[0]) * plane.normal if plane is not None else head
             rng = float(np.linalg.norm(cam))
             std = self.config.position_std_base_m + self.config.position_std_per_m2 * rng * rng
             roi = (
@@ -253,11 +258,7 @@ class CameraPipeline:
                 if not np.all(np.isfinite(emb)):
                     continue
                 obs = FaceObservation(face, quality, yaw, eye_dist, np.asarray(emb, dtype=np.float32))
-                p = people[i]
-                people[i] = PersonObservation(
-                    p.position_world, p.position_camera, p.position_std_m, p.height_m, p.num_points,
-                    p.head_roi_xywh, obs,
-                )
+                people[i] = dataclasses.replace(people[i], face=obs)
         t2 = time.perf_counter()
         timings["face_detect_ms"] = (t1 - t0) * 1e3
         timings["embed_ms"] = (t2 - t1) * 1e3

@@ -28,7 +28,7 @@ class SyncStats:
 class StampSynchronizer(Generic[T, U]):
     """Pairs colour and depth items by stamp (seconds), newest first, within ``slop_s``."""
 
-    def __init__(self, slop_s: float = 0.02, buffer_size: int = 4) -> None:
+    def __init__(self, slop_s: float = 0.02, buffer_size: int = 16) -> None:
         if not slop_s >= 0:
             raise ValueError(f"slop_s must be >= 0 seconds, got {slop_s!r}")
         if buffer_size < 1:

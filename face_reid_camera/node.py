@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
 def _make_node_class() -> type:
     from rcl_interfaces.msg import ParameterDescriptor
     from rclpy.node import Node
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CameraInfo, Image
 
     from face_reid_camera.embedder import FaceEmbedder
@@ -125,7 +125,9 @@ def _make_node_class() -> type:
             self._running = True
 
             image_qos = QoSProfile(
-                depth=2, history=HistoryPolicy.KEEP_LAST, reliability=qos_profile_sensor_data.reliability
+                depth=2, history=HistoryPolicy.KEEP_LAST,
+                reliability=ReliabilityPolicy.RELIABLE if values["image_qos_reliable"]
+                else ReliabilityPolicy.BEST_EFFORT,
             )
             self.create_subscription(Image, str(values["color_topic"]), self._on_color, image_qos)
             self.create_subscription(Image, str(values["depth_topic"]), self._on_depth, image_qos)

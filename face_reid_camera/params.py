@@ -17,7 +17,7 @@ import yaml
 
 from face_reid_camera.camera_model import CameraPose
 from face_reid_camera.camera_pipeline import CameraPipelineConfig, FaceQualityConfig
-from face_reid_camera.person_detector import PersonDetectorConfig
+from face_reid_camera.person_detector import PERSON_PARAM_DESCRIPTIONS, PersonDetectorConfig
 
 ParamValue = bool | int | float | str | list[float]
 
@@ -34,36 +34,6 @@ class ParamSpec:
 
 
 _PERSON_DEFAULTS = PersonDetectorConfig()
-_PERSON_DESCRIPTIONS: dict[str, str] = {
-    "depth_stride_px": "Use every n-th depth row and column before anything else (px; 1 = all pixels).",
-    "voxel_size_m": "Voxel grid size for down-sampling the point cloud (m).",
-    "min_depth_m": "Ignore depth returns closer than this (m).",
-    "max_depth_m": "Ignore depth returns farther than this (m); people beyond are not detected.",
-    "ground_distance_threshold_m": "Points within this distance of the floor plane are floor (m, at 0 m range).",
-    "depth_noise_coefficient_per_m": "Floor inlier band grows by this times range^2 (Kinect-like noise, 1/m).",
-    "ransac_iterations": "RANSAC hypotheses per frame for the floor plane (count).",
-    "ransac_max_sample_points": "Points sub-sampled to score floor hypotheses (count).",
-    "ground_seed_angle_deg": "Seeded: max angle between the floor normal and the configured pose's (deg).",
-    "ground_seed_height_tolerance_m": "Seeded: max difference of camera height vs the configured pose (m).",
-    "ground_max_tilt_deg": "Unseeded: max angle between the floor normal and the camera's up axis (deg).",
-    "min_ground_points": "A floor plane needs at least this many inlier points (count).",
-    "ground_max_below_fraction": "Reject floor planes with more than this fraction of points below (0..1).",
-    "min_camera_height_m": "Reject floor planes closer to the camera than this (m).",
-    "cluster_tolerance_m": "Max gap between points of one Euclidean cluster (m).",
-    "min_person_height_m": "Clusters whose top is lower above the floor are not people (m).",
-    "max_person_height_m": "Clusters whose top is higher above the floor are not people (m).",
-    "min_person_width_m": "Narrower clusters (in the floor plane) are not people (m).",
-    "max_person_width_m": "Wider clusters are not people unless split by heads (m).",
-    "min_cluster_points": "Clusters with fewer voxels are ignored (count).",
-    "heads_minimum_distance_m": "Two heads of one merged cluster must be at least this far apart (m).",
-    "head_annulus_inner_m": "Head test: inner radius of the shoulder ring around a head candidate (m).",
-    "head_annulus_outer_m": "Head test: outer radius of the shoulder ring around a head candidate (m).",
-    "head_min_drop_m": "Head test: the shoulder ring must be at least this much lower than the head top (m).",
-    "upper_body_depth_m": "Head search only looks this far below a cluster's top (m).",
-    "max_head_plateau_fraction": "Clusters whose top plateau is wider than this fraction are not split (0..1).",
-    "head_top_to_centre_m": "Head centre = head top minus this along the floor normal (m).",
-    "random_seed": "Seed of the floor RANSAC random generator (int; fixed for reproducible runs).",
-}
 
 
 def _person_specs() -> list[ParamSpec]:
@@ -72,8 +42,7 @@ def _person_specs() -> list[ParamSpec]:
         value = getattr(_PERSON_DEFAULTS, f.name)
         if not isinstance(value, bool | int | float | str):
             continue
-        description = _PERSON_DESCRIPTIONS.get(f.name) or (f.metadata.get("description") if f.metadata else None)
-        specs.append(ParamSpec(f"person.{f.name}", value, description or f"Person detector: {f.name}."))
+        specs.append(ParamSpec(f"person.{f.name}", value, PERSON_PARAM_DESCRIPTIONS[f.name]))
     return specs
 
 
@@ -98,6 +67,10 @@ CAMERA_PARAMS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec("camera_info_topic", "color/camera_info", "CameraInfo of the registered depth/colour images."),
     ParamSpec("output_topic", "face_reid/frames", "Where face_reid_msgs/CameraFrame messages are published."),
+    ParamSpec(
+        "image_qos_reliable", False,
+        "Subscribe to images with RELIABLE QoS (true) or BEST_EFFORT (false, matches any publisher).",
+    ),
     ParamSpec("sync_slop_s", 0.02, "Max stamp difference between a colour and a depth image of one pair (s)."),
     ParamSpec("max_frame_age_s", 0.5, "Drop pairs older than this when processing starts (s; 0 = never)."),
     ParamSpec("detect_faces", True, "Run face detection and embedding (false = people positions only)."),
