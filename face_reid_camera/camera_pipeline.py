@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.embedder import FaceEmbedder
 from face_reid_camera.face_detector import FaceDetection, YuNetDetector
+from face_reid_camera.ground_plane import GroundPlane
 from face_reid_camera.head_roi import head_roi_px
 from face_reid_camera.person_detector import PersonDetector, PersonDetectorConfig
 
@@ -114,6 +115,8 @@ class FrameResult:
     people: list[PersonObservation]
     ground_plane_found: bool
     timings_ms: dict[str, float]
+    ground_plane: GroundPlane | None = None
+    ground_plane_source: str = "none"
 
     @property
     def num_faces(self) -> int:
@@ -202,10 +205,8 @@ class CameraPipeline:
             cam = head - float(plane.height_of(head[None, :])[0]) * plane.normal if plane is not None else head
             rng = float(np.linalg.norm(cam))
             std = self.config.position_std_base_m + self.config.position_std_per_m2 * rng * rng
-            roi = (
-                head_roi_px(np.asarray(cand.head_cam), color_intrinsics, self.config.head_roi_size_m)
-                if color_intrinsics is not None
-                else None
+            roi = head_roi_px(
+                np.asarray(cand.head_cam), color_intrinsics or intrinsics, self.config.head_roi_size_m
             )
             rois.append(roi)
             people.append(
@@ -222,7 +223,9 @@ class CameraPipeline:
         if self.config.detect_faces and color_bgr is not None and people:
             people = self._add_faces(color_bgr, people, rois, timings)
         timings["total_ms"] = (time.perf_counter() - t0) * 1e3
-        return FrameResult(people, detection.ground_plane is not None, timings)
+        return FrameResult(
+            people, detection.ground_plane is not None, timings, detection.ground_plane, detection.ground_plane_source
+        )
 
     def _add_faces(
         self,
@@ -243,7 +246,7 @@ class CameraPipeline:
         faces = self.face_detector.detect_in_rois(color_bgr, [rois[i] for i in order])
         t1 = time.perf_counter()
         found: list[tuple[int, FaceDetection, float, float, float]] = []
-        for i, face in zip(order, faces):
+        for i, face in zip(order, faces, strict=False):
             if face is None:
                 continue
             yaw, eye_dist = face_pose_from_landmarks(face.landmarks)
@@ -254,7 +257,7 @@ class CameraPipeline:
         if found:
             embeddings = self.embedder.embed_faces(color_bgr, [f[1].landmarks for f in found])
             people = list(people)
-            for (i, face, quality, yaw, eye_dist), emb in zip(found, embeddings):
+            for (i, face, quality, yaw, eye_dist), emb in zip(found, embeddings, strict=False):
                 if not np.all(np.isfinite(emb)):
                     continue
                 obs = FaceObservation(face, quality, yaw, eye_dist, np.asarray(emb, dtype=np.float32))

@@ -268,7 +268,7 @@ def _stamp_s(stamp: Any) -> float:
     return float(stamp.sec) + float(stamp.nanosec) * 1e-9
 
 
-def CameraNode() -> Any:  # noqa: N802 - factory that looks like the class it builds
+def CameraNode() -> Any:
     """Create the node (imports rclpy lazily so ``--help`` works without a ROS environment)."""
     return _make_node_class()()
 

@@ -158,7 +158,7 @@ class PersonDetectorConfig:
     head_annulus_outer_m: float = 0.35
     head_min_drop_m: float = 0.18
     upper_body_depth_m: float = 0.5
-    max_head_plateau_fraction: float = 0.3
+    max_head_plateau_fraction: float = 0.4
     min_shoulder_offset_m: float = 0.06
     head_top_to_centre_m: float = 0.1
     random_seed: int | None = 0

@@ -12,7 +12,6 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from numpy.typing import NDArray
 
 from face_reid_camera import params as camera_params
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_camera.camera_pipeline import CameraPipeline
+from face_reid_camera.camera_pipeline import CameraPipeline, FrameResult
 from face_reid_camera.errors import ModelLoadError
 from face_reid_camera.pcd_io import intrinsics_from_organized_cloud, read_pcd
 
@@ -56,8 +55,8 @@ def parse_intrinsics_yaml(path: Path) -> CameraIntrinsics:
         raise ValueError(f"{path}: intrinsics YAML needs fx, fy, cx, cy, width, height (missing {exc})") from exc
 
 
-def iter_frames(inputs: list[Path]) -> Iterator[ReplayFrame]:
-    """Yield frames in name order from folders and files; unreadable frames raise ValueError."""
+def list_frame_files(inputs: list[Path]) -> list[Path]:
+    """The frame files named by ``inputs`` (folders expanded, name order); missing paths raise."""
     files: list[Path] = []
     for path in inputs:
         if path.is_dir():
@@ -66,34 +65,44 @@ def iter_frames(inputs: list[Path]) -> Iterator[ReplayFrame]:
             files.append(path)
         else:
             raise FileNotFoundError(f"no such file or folder: {path}")
-    for path in files:
-        if path.suffix == ".pcd":
-            xyz = read_pcd(path)
-            if xyz.ndim != 3 or xyz.shape[0] < 2:
-                raise ValueError(f"{path}: only organized point clouds (height > 1) can be replayed")
-            depth = np.ascontiguousarray(xyz[:, :, 2], dtype=np.float32)
-            yield ReplayFrame(path.name, depth, None, intrinsics_from_organized_cloud(xyz))
-            continue
-        if not path.name.endswith("_depth_mm.png"):
-            raise ValueError(f"{path}: expected *_depth_mm.png or *.pcd")
-        raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if raw is None or raw.dtype != np.uint16 or raw.ndim != 2:
-            raise ValueError(f"{path}: not a 16-bit single-channel PNG (depth in mm)")
-        depth = raw.astype(np.float32) * np.float32(0.001)
-        depth[raw == 0] = np.nan
-        rgb_path = path.with_name(path.name[: -len("_depth_mm.png")] + "_rgb.png")
-        color = cv2.imread(str(rgb_path), cv2.IMREAD_COLOR) if rgb_path.exists() else None
-        yield ReplayFrame(path.name[: -len("_depth_mm.png")], depth, color)
+    return files
 
 
-def _floor_summary(pipeline: CameraPipeline) -> dict[str, float] | None:
-    plane = getattr(pipeline.person_detector, "last_ground_plane", None)
+def load_frame(path: Path) -> ReplayFrame:
+    """Read one frame (a *_depth_mm.png with its *_rgb.png, or an organized .pcd); ValueError if unusable."""
+    if path.suffix == ".pcd":
+        xyz = read_pcd(path)
+        if xyz.ndim != 3 or xyz.shape[0] < 2:
+            raise ValueError(f"{path}: only organized point clouds (height > 1) can be replayed")
+        depth = np.ascontiguousarray(xyz[:, :, 2], dtype=np.float32)
+        return ReplayFrame(path.name, depth, None, intrinsics_from_organized_cloud(xyz))
+    if not path.name.endswith("_depth_mm.png"):
+        raise ValueError(f"{path}: expected *_depth_mm.png or *.pcd")
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.dtype != np.uint16 or raw.ndim != 2:
+        raise ValueError(f"{path}: not a 16-bit single-channel PNG (depth in mm)")
+    depth = raw.astype(np.float32) * np.float32(0.001)
+    depth[raw == 0] = np.nan
+    rgb_path = path.with_name(path.name[: -len("_depth_mm.png")] + "_rgb.png")
+    color = cv2.imread(str(rgb_path), cv2.IMREAD_COLOR) if rgb_path.exists() else None
+    if rgb_path.exists() and color is None:
+        raise ValueError(f"{rgb_path}: unreadable colour image")
+    return ReplayFrame(path.name[: -len("_depth_mm.png")], depth, color)
+
+
+def _floor_summary(result: FrameResult) -> dict[str, object] | None:
+    """Camera height and downward tilt implied by the floor plane (how users check placement)."""
+    plane = result.ground_plane
     if plane is None:
         return None
     normal = np.asarray(plane.normal, dtype=np.float64)
-    # Camera optical axis (0, 0, 1) against the floor: tilt below the horizon.
+    # Angle of the optical axis (0, 0, 1) below the horizon.
     tilt = math.degrees(math.asin(max(-1.0, min(1.0, -float(normal[2])))))
-    return {"camera_height_m": round(float(plane.offset), 3), "camera_tilt_down_deg": round(tilt, 1)}
+    return {
+        "source": result.ground_plane_source,
+        "camera_height_m": round(float(plane.offset), 3),
+        "camera_tilt_down_deg": round(tilt, 1),
+    }
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -147,45 +156,43 @@ def main(argv: list[str] | None = None) -> int:
 
     frames = errors = people_total = 0
     try:
-        frame_iter = iter_frames(args.inputs)
-        while True:
-            try:
-                frame = next(frame_iter)
-            except StopIteration:
-                break
-            except (ValueError, OSError) as exc:
-                errors += 1
-                print(f"face-reid-replay: skipped a frame: {exc}", file=sys.stderr)
-                continue
-            h, w = frame.depth_m.shape
-            if args.intrinsics:
-                fx, fy, cx, cy = args.intrinsics
-                intr = CameraIntrinsics(fx, fy, cx, cy, w, h)
-            elif fixed_intr is not None:
-                intr = fixed_intr
-            else:
-                intr = frame.intrinsics_hint or CameraIntrinsics.kinect_default(w, h)
-            try:
-                result = pipeline.process(frame.color_bgr, frame.depth_m, intr)
-            except ValueError as exc:
-                errors += 1
-                print(f"face-reid-replay: {frame.name}: {exc}", file=sys.stderr)
-                continue
-            frames += 1
-            people_total += len(result.people)
-            line = {
-                "frame": frame.name,
-                "ground_plane_found": result.ground_plane_found,
-                "floor": _floor_summary(pipeline),
-                "num_people": len(result.people),
-                "num_faces": result.num_faces,
-                "people": [p.to_json() for p in result.people],
-                "timings_ms": {k: round(v, 2) for k, v in result.timings_ms.items()},
-            }
-            print(json.dumps(line), flush=True)
+        files = list_frame_files(args.inputs)
     except FileNotFoundError as exc:
         print(f"face-reid-replay: error: {exc}", file=sys.stderr)
         return 2
+    for path in files:
+        try:
+            frame = load_frame(path)
+        except (ValueError, OSError) as exc:
+            errors += 1
+            print(f"face-reid-replay: skipped {path.name}: {exc}", file=sys.stderr)
+            continue
+        h, w = frame.depth_m.shape
+        if args.intrinsics:
+            fx, fy, cx, cy = args.intrinsics
+            intr = CameraIntrinsics(fx, fy, cx, cy, w, h)
+        elif fixed_intr is not None:
+            intr = fixed_intr
+        else:
+            intr = frame.intrinsics_hint or CameraIntrinsics.kinect_default(w, h)
+        try:
+            result = pipeline.process(frame.color_bgr, frame.depth_m, intr)
+        except ValueError as exc:
+            errors += 1
+            print(f"face-reid-replay: skipped {frame.name}: {exc}", file=sys.stderr)
+            continue
+        frames += 1
+        people_total += len(result.people)
+        line = {
+            "frame": frame.name,
+            "ground_plane_found": result.ground_plane_found,
+            "floor": _floor_summary(result),
+            "num_people": len(result.people),
+            "num_faces": result.num_faces,
+            "people": [p.to_json() for p in result.people],
+            "timings_ms": {k: round(v, 2) for k, v in result.timings_ms.items()},
+        }
+        print(json.dumps(line), flush=True)
     print(f"face-reid-replay: {frames} frames, {people_total} detections, {errors} skipped", file=sys.stderr)
     return 0 if frames > 0 or errors == 0 else 1
 

@@ -27,9 +27,9 @@ def _roi(msg: Any, xywh: tuple[float, float, float, float] | None, width: int = 
     if xywh is None:
         return
     x, y, w, h = (float(v) for v in xywh)
-    x0, y0 = max(0, int(round(x))), max(0, int(round(y)))
+    x0, y0 = max(0, round(x)), max(0, round(y))
     msg.x_offset, msg.y_offset = x0, y0
-    msg.width, msg.height = max(0, int(round(x + w)) - x0), max(0, int(round(y + h)) - y0)
+    msg.width, msg.height = max(0, round(x + w) - x0), max(0, round(y + h) - y0)
 
 
 def person_to_msg(person_cls: type, person: PersonObservation) -> Any:

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ros_procs import procs
 
 pytest.importorskip("rclpy")

@@ -26,7 +26,7 @@ def ros_env(domain_id: int) -> dict[str, str]:
 
 def start(args: list[str], domain_id: int, log_path: Path | None = None) -> subprocess.Popen[str]:
     """Start ``python ARGS`` (a helper script or ``-m module``) in its own process group."""
-    stderr = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
+    stderr = open(log_path, "w") if log_path else subprocess.DEVNULL
     return subprocess.Popen(
         [sys.executable, *args], env=ros_env(domain_id), cwd=REPO, stdout=subprocess.PIPE, stderr=stderr,
         text=True, start_new_session=True,
