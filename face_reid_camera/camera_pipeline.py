@@ -246,7 +246,7 @@ class CameraPipeline:
         faces = self.face_detector.detect_in_rois(color_bgr, [rois[i] for i in order])
         t1 = time.perf_counter()
         found: list[tuple[int, FaceDetection, float, float, float]] = []
-        for i, face in zip(order, faces, strict=False):
+        for i, face in zip(order, faces, strict=True):
             if face is None:
                 continue
             yaw, eye_dist = face_pose_from_landmarks(face.landmarks)
@@ -257,7 +257,7 @@ class CameraPipeline:
         if found:
             embeddings = self.embedder.embed_faces(color_bgr, [f[1].landmarks for f in found])
             people = list(people)
-            for (i, face, quality, yaw, eye_dist), emb in zip(found, embeddings, strict=False):
+            for (i, face, quality, yaw, eye_dist), emb in zip(found, embeddings, strict=True):
                 if not np.all(np.isfinite(emb)):
                     continue
                 obs = FaceObservation(face, quality, yaw, eye_dist, np.asarray(emb, dtype=np.float32))
