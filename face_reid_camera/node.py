@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -117,6 +118,7 @@ def _make_node_class() -> type:
             )
             self.counters = NodeCounters()
             self._reported: dict[str, int] = {}
+            self._last_logged: dict[str, float] = {}
             self._intrinsics: CameraIntrinsics | None = None
             self._camera_frame_id = str(values["camera_frame_id"])
             self._sync: StampSynchronizer[Any, Any] = StampSynchronizer(float(values["sync_slop_s"]))
@@ -243,8 +245,13 @@ def _make_node_class() -> type:
 
         # --- reporting ------------------------------------------------------------------------
         def _count(self, counter: str, message: str) -> None:
-            setattr(self.counters, counter, getattr(self.counters, counter) + 1)
-            self.get_logger().error(message, throttle_duration_sec=5.0)
+            """Count a dropped input; log it at once the first time, then at most every 5 s per reason."""
+            total = getattr(self.counters, counter) + 1
+            setattr(self.counters, counter, total)
+            now = time.monotonic()
+            if now - self._last_logged.get(counter, -1e9) >= 5.0:
+                self._last_logged[counter] = now
+                self.get_logger().error(f"{message} [{counter}: {total} so far]")
 
         def _report(self) -> None:
             c, s = self.counters, self._sync.stats

@@ -23,6 +23,9 @@ def main() -> int:
     parser.add_argument("--rate-hz", type=float, default=10.0)
     parser.add_argument("--wait-s", type=float, default=20.0)
     parser.add_argument("--depth-encoding", default="16UC1")
+    parser.add_argument("--bad-first", action="store_true",
+                        help="first publish malformed input (no CameraInfo yet, bad encodings, truncated data, "
+                             "size mismatch, all-NaN depth), then the good frames")
     args = parser.parse_args()
     scene = json.loads(args.scene)
 
@@ -60,26 +63,46 @@ def main() -> int:
             return 1
         rclpy.spin_once(node, timeout_sec=0.05)
     time.sleep(0.5)
-    for i in range(args.frames):
-        frame = frames[i % len(frames)]
+
+    def send(color_img, color_enc, depth_img, depth_enc, info_size=(intr.width, intr.height), truncate=False):
         stamp = node.get_clock().now().to_msg()
-        info = CameraInfo()
-        info.header.stamp, info.header.frame_id = stamp, "synthetic_camera_optical"
-        info.width, info.height = intr.width, intr.height
-        info.k = [intr.fx, 0.0, intr.cx, 0.0, intr.fy, intr.cy, 0.0, 0.0, 1.0]
-        pub_i.publish(info)
-        for pub, image, enc in (
-            (pub_c, frame.rgb_bgr, "bgr8"),
-            (pub_d, frame.depth_mm if args.depth_encoding == "16UC1"
-             else np.where(frame.depth_mm > 0, frame.depth_mm / 1000.0, np.nan).astype(np.float32),
-             args.depth_encoding),
-        ):
+        if info_size is not None:
+            info = CameraInfo()
+            info.header.stamp, info.header.frame_id = stamp, "synthetic_camera_optical"
+            info.width, info.height = info_size
+            info.k = [intr.fx, 0.0, intr.cx, 0.0, intr.fy, intr.cy, 0.0, 0.0, 1.0]
+            pub_i.publish(info)
+        for pub, image, enc in ((pub_c, color_img, color_enc), (pub_d, depth_img, depth_enc)):
             msg = Image()
             msg.header.stamp, msg.header.frame_id = stamp, "synthetic_camera_optical"
-            msg.height, msg.width, msg.step, data = encode_image(image, enc)
-            msg.encoding, msg.data = enc, data
+            msg.height, msg.width, msg.step, data = encode_image(image, enc if enc in ("bgr8", "16UC1", "32FC1")
+                                                               else "bgr8")
+            msg.encoding = enc
+            msg.data = data[: len(data) // 2] if (truncate and pub is pub_d) else data
             pub.publish(msg)
         time.sleep(1.0 / args.rate_hz)
+
+    def depth_of(frame):
+        if args.depth_encoding == "16UC1":
+            return frame.depth_mm
+        return np.where(frame.depth_mm > 0, frame.depth_mm / 1000.0, np.nan).astype(np.float32)
+
+    if args.bad_first:
+        good = frames[0]
+        for _ in range(3):  # no CameraInfo yet
+            send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, info_size=None)
+        for _ in range(3):  # unsupported colour encoding
+            send(good.rgb_bgr, "yuv422", depth_of(good), args.depth_encoding)
+        for _ in range(3):  # truncated depth data
+            send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, truncate=True)
+        for _ in range(3):  # depth smaller than CameraInfo says
+            send(good.rgb_bgr, "bgr8", depth_of(good)[::2, ::2], args.depth_encoding)
+        nan_depth = np.full((intr.height, intr.width), np.nan, np.float32)
+        for _ in range(6):  # all-NaN depth: a valid frame with nobody in it
+            send(good.rgb_bgr, "bgr8", nan_depth, "32FC1")
+    for i in range(args.frames):
+        frame = frames[i % len(frames)]
+        send(frame.rgb_bgr, "bgr8", depth_of(frame), args.depth_encoding)
     print(json.dumps({"published": args.frames, "face_visible": frames[0].face_visible}), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
