@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from ros_procs import procs
 
 pytest.importorskip("rclpy")
@@ -22,7 +21,9 @@ pytestmark = pytest.mark.ros
 FACES = Path(__file__).parent / "data" / "faces"
 SCENE = {
     "camera_pose": [0.0, 0.0, 2.2, 0.0, 0.3, 0.0],
-    "people": [{"x": 2.4, "y": 0.0, "facing": 3.14159, "face": str(sorted((FACES / "lfw_Tony_Blair").glob("*.jpg"))[0])}],
+    "people": [
+        {"x": 2.4, "y": 0.0, "facing": 3.14159, "face": str(sorted((FACES / "lfw_Tony_Blair").glob("*.jpg"))[0])}
+    ],
 }
 
 
@@ -65,7 +66,9 @@ def test_malformed_input_is_logged_counted_and_survived(ros_domain_id: int, tmp_
 
 
 @pytest.mark.parametrize("content", [None, b"this is not an onnx model"])
-def test_node_refuses_to_start_without_a_usable_model(ros_domain_id: int, tmp_path: Path, content: bytes | None) -> None:
+def test_node_refuses_to_start_without_a_usable_model(
+    ros_domain_id: int, tmp_path: Path, content: bytes | None
+) -> None:
     model = tmp_path / "yunet.onnx"
     if content is not None:
         model.write_bytes(content)
