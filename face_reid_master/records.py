@@ -1,0 +1,60 @@
+"""Plain records the master core consumes and produces (the rclpy-free twins of the messages).
+
+``CameraFrameRecord`` mirrors face_reid_msgs/CameraFrame, ``NamedTrackRecord`` mirrors
+face_reid_msgs/NamedTrack. The node converts messages to and from these; the simulator and the
+evaluation produce and consume them directly, so the same core runs live and offline.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+EMBEDDING_DIM = 128
+
+STATE_TENTATIVE = 0
+STATE_CONFIRMED = 1
+STATE_LOST = 2
+
+
+@dataclass(frozen=True)
+class PersonRecord:
+    """One person seen by one camera in one frame (world frame, metres)."""
+
+    position_world: NDArray[np.float64]
+    position_std_m: float = 0.1
+    height_m: float = float("nan")
+    embedding: NDArray[np.float32] | None = None
+    face_score: float = 0.0
+    face_quality: float = 0.0
+
+
+@dataclass(frozen=True)
+class CameraFrameRecord:
+    """Everything one camera saw at ``stamp_s`` (seconds, the capture time)."""
+
+    camera_id: str
+    stamp_s: float
+    people: tuple[PersonRecord, ...] = ()
+    frame_id: str = "world"
+
+
+@dataclass(frozen=True)
+class NamedTrackRecord:
+    """One published track: tracker state + face identity + name."""
+
+    track_id: int
+    face_id: int  # 0 = undecided
+    name: str
+    identity_confidence: float
+    face_observations: int
+    position_xy: NDArray[np.float64]
+    velocity_xy: NDArray[np.float64]
+    covariance: NDArray[np.float64]  # 4x4 over (x, y, vx, vy)
+    height_m: float
+    state: int
+    first_seen_s: float
+    last_seen_s: float
+    cameras: tuple[str, ...] = field(default_factory=tuple)
