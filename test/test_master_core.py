@@ -1,0 +1,134 @@
+"""The master core end to end on generated frames with real face embeddings.
+
+A person walks through two cameras' views, leaves every view long enough for the track to die and
+comes back: the new track must get the SAME face id (the face table, not the tracker, restores the
+identity), and the predefined-people gallery names it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from face_reid_camera.embedder import FaceEmbedder
+from face_reid_camera.face_detector import YuNetDetector
+from face_reid_master.master_core import MasterConfig, MasterCore
+from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord, PersonRecord
+from face_reid_master.tracker import TrackerConfig
+
+FACES = Path(__file__).parent / "data" / "faces"
+IDS = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez"]
+
+
+@pytest.fixture(scope="module")
+def embeddings() -> dict[str, np.ndarray]:
+    """identity -> (n_photos, 128) real embeddings of the fixture photos."""
+    detector, embedder = YuNetDetector(), FaceEmbedder()
+    out = {}
+    for ident in IDS:
+        rows = []
+        for path in sorted((FACES / ident).glob("*.jpg")):
+            photo = cv2.imread(str(path))
+            best = max(detector.detect(photo), key=lambda d: float(d.box_xywh[2] * d.box_xywh[3]))
+            rows.append(embedder.embed_faces(photo, [best.landmarks])[0])
+        out[ident] = np.stack(rows)
+    return out
+
+
+def _walk(core: MasterCore, who: dict[str, tuple[np.ndarray, np.ndarray | None]], t0: float, t1: float,
+          rate_hz: float = 10.0, cameras: tuple[str, ...] = ("cam_a", "cam_b")) -> float:
+    """Feed frames: who = name -> (start xy, embedding rows or None); people walk +x at 0.5 m/s."""
+    t = t0
+    k = 0
+    while t < t1:
+        cam = cameras[k % len(cameras)]
+        people = []
+        for start, embs in who.values():
+            pos = np.array([start[0] + 0.5 * (t - t0), start[1], 0.0])
+            emb = embs[k % len(embs)] if embs is not None else None
+            people.append(PersonRecord(pos, 0.05, 1.75, emb, 0.9, 0.8))
+        core.process_frame(CameraFrameRecord(cam, t, tuple(people)))
+        k += 1
+        t = t0 + k / rate_hz
+    return t
+
+
+def _config(**kw) -> MasterConfig:
+    return MasterConfig(tracker=TrackerConfig(lost_after_s=0.5, delete_after_s=1.0), **kw)
+
+
+@pytest.mark.parametrize("method", ["bayes", "threshold"])
+def test_leave_and_return_keeps_the_face_id(embeddings, method: str) -> None:
+    core = MasterCore(_config(method=method))
+    a, b = embeddings[IDS[0]], embeddings[IDS[1]]
+    # both people visible with their first 5 photos
+    t = _walk(core, {"a": (np.array([0.0, 0.0]), a[:5]), "b": (np.array([0.0, 2.0]), b[:5])}, 0.0, 4.0)
+    first = {tr.face_id: tr for tr in core.tracks()}
+    assert len(first) == 2 and 0 not in first, core.tracks()
+    face_of_a = next(tr.face_id for tr in core.tracks() if abs(tr.position_xy[1]) < 0.5)
+    track_of_a = next(tr.track_id for tr in core.tracks() if tr.face_id == face_of_a)
+    # everybody leaves: no detections for 3 s -> tracks deleted, faces released
+    _walk(core, {}, t, t + 3.0)
+    assert core.tracks() == []
+    # A comes back alone, with OTHER photos of the same person
+    _walk(core, {"a": (np.array([5.0, -1.0]), a[5:])}, t + 3.0, t + 7.0)
+    (back,) = core.tracks()
+    assert back.track_id != track_of_a
+    assert back.face_id == face_of_a
+    assert back.state == STATE_CONFIRMED
+    assert core.stats.faces_reidentified >= 1 and core.stats.faces_created == 2
+
+
+def test_an_unknown_person_gets_a_new_face_id(embeddings) -> None:
+    core = MasterCore(_config())
+    t = _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:5])}, 0.0, 3.0)
+    _walk(core, {}, t, t + 3.0)
+    _walk(core, {"c": (np.array([1.0, 0.0]), embeddings[IDS[2]])}, t + 3.0, t + 7.0)
+    (track,) = core.tracks()
+    assert track.face_id not in (0, 1)
+    assert core.stats.faces_created == 2 and core.stats.faces_reidentified == 0
+
+
+def test_predefined_person_is_named(embeddings) -> None:
+    gallery = {"Tony": embeddings[IDS[0]][8:], "Colin": embeddings[IDS[1]][8:]}
+    core = MasterCore(_config(), gallery=gallery)
+    _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:8]),
+                 "x": (np.array([0.0, 2.0]), embeddings[IDS[2]][:8])}, 0.0, 5.0)
+    names = {round(float(tr.position_xy[1])): tr.name for tr in core.tracks()}
+    assert names == {0: "Tony", 2: ""}
+
+
+def test_bad_input_is_counted_not_raised(embeddings) -> None:
+    core = MasterCore(_config(known_camera_ids=("cam_a",)))
+    good = embeddings[IDS[0]][0]
+    frames = [
+        CameraFrameRecord("cam_zzz", 1.0, (PersonRecord(np.zeros(3), 0.1, 1.7, good),)),
+        CameraFrameRecord("cam_a", math.nan, ()),
+        CameraFrameRecord("cam_a", 1.0, (PersonRecord(np.array([np.nan, 0, 0]), 0.1),)),
+        CameraFrameRecord("cam_a", 1.1, (PersonRecord(np.zeros(3), 0.1, 1.7, good[:100]),)),
+        CameraFrameRecord("cam_a", 1.2, (PersonRecord(np.zeros(3), 0.1, 1.7, np.full(128, np.nan, np.float32)),)),
+        CameraFrameRecord("cam_a", 1.3, (PersonRecord(np.zeros(3), -1.0),)),
+    ]
+    outcomes = [core.process_frame(f, now_s=1.3) for f in frames]
+    assert [o.accepted for o in outcomes] == [False, False, True, True, True, True]
+    assert "unknown camera" in outcomes[0].reason
+    # stamps far in the past or future relative to now
+    assert not core.process_frame(CameraFrameRecord("cam_a", -100.0, ()), now_s=1.3).accepted
+    assert not core.process_frame(CameraFrameRecord("cam_a", 500.0, ()), now_s=1.3).accepted
+    s = core.stats
+    assert (s.frames_rejected_unknown_camera, s.frames_rejected_bad_stamp) == (1, 1)
+    assert (s.frames_rejected_stale, s.frames_rejected_future) == (1, 1)
+    assert s.detections_rejected_position == 2
+    assert (s.embeddings_rejected_length, s.embeddings_rejected_nonfinite) == (1, 1)
+    assert s.embeddings_used == 0
+
+
+def test_config_validation() -> None:
+    with pytest.raises(ValueError):
+        MasterConfig(method="magic")
+    with pytest.raises(ValueError):
+        MasterConfig(max_stamp_age_s=-1)
