@@ -8,29 +8,15 @@ in agreement). Pure Python: no rclpy.
 from __future__ import annotations
 
 import dataclasses
-import json
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from face_reid_camera.camera_model import CameraPose
 from face_reid_camera.camera_pipeline import CameraPipelineConfig, FaceQualityConfig
+from face_reid_camera.param_table import ParamSpec, ParamTable, ParamValue
 from face_reid_camera.person_detector import PERSON_PARAM_DESCRIPTIONS, PersonDetectorConfig
 
-ParamValue = bool | int | float | str | list[float]
-
 NODE_NAME = "face_reid_camera"
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One declared parameter."""
-
-    name: str
-    default: ParamValue
-    description: str
 
 
 _PERSON_DEFAULTS = PersonDetectorConfig()
@@ -91,65 +77,23 @@ CAMERA_PARAMS: tuple[ParamSpec, ...] = (
     *_person_specs(),
 )
 
-_BY_NAME = {spec.name: spec for spec in CAMERA_PARAMS}
+TABLE = ParamTable(NODE_NAME, CAMERA_PARAMS, "the face-reid camera node (face-reid-camera / face-reid-replay)")
+USAGE = "face-reid-camera --ros-args --params-file config/camera.yaml"
 
 
 def defaults() -> dict[str, ParamValue]:
     """All parameters at their default values."""
-    return {spec.name: spec.default for spec in CAMERA_PARAMS}
+    return TABLE.defaults()
 
 
-def load_params_yaml(path: str | Path, node_name: str = NODE_NAME) -> dict[str, ParamValue]:
-    """Read a ROS 2 params file (``node: ros__parameters: {...}``) over the defaults.
-
-    Nested keys (``person: {voxel_size_m: ...}``) are flattened with dots. Unknown keys and
-    values of the wrong type raise ValueError, naming the key.
-    """
-    with open(path, encoding="utf-8") as fh:
-        doc = yaml.safe_load(fh) or {}
-    section = doc.get(node_name, doc.get("/**", {})) if isinstance(doc, dict) else {}
-    raw = (section or {}).get("ros__parameters", {}) if isinstance(section, dict) else {}
-    if not isinstance(raw, dict):
-        raise ValueError(f"{path}: '{node_name}.ros__parameters' must be a mapping")
-    params = defaults()
-    for key, value in _flatten(raw).items():
-        params[key] = check_value(key, value)
-    return params
+def load_params_yaml(path: str | Path) -> dict[str, ParamValue]:
+    """Read a ROS 2 params file over the defaults (nested keys flattened with dots)."""
+    return TABLE.load_yaml(path)
 
 
 def check_value(name: str, value: Any) -> ParamValue:
     """Validate one parameter value against its declared default's type."""
-    if name not in _BY_NAME:
-        raise ValueError(f"unknown camera parameter {name!r}")
-    default = _BY_NAME[name].default
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        value = float(value) if ok else value
-    elif isinstance(default, list):
-        ok = isinstance(value, list) and len(value) == len(default) and all(
-            isinstance(v, int | float) and not isinstance(v, bool) for v in value
-        )
-        value = [float(v) for v in value] if ok else value
-    else:
-        ok = isinstance(value, str)
-    if not ok:
-        raise ValueError(f"parameter {name!r} must be like {default!r}, got {value!r}")
-    return value
-
-
-def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in tree.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + "."))
-        else:
-            out[name] = value
-    return out
+    return TABLE.check_value(name, value)
 
 
 def camera_pose(params: dict[str, ParamValue]) -> CameraPose:
@@ -184,22 +128,4 @@ def pipeline_config(params: dict[str, ParamValue]) -> CameraPipelineConfig:
 
 def write_defaults_yaml(path: str | Path) -> None:
     """Write ``config/camera.yaml`` with every parameter at its default (comments = descriptions)."""
-    lines = [
-        "# Defaults of the face-reid camera node (face-reid-camera / face-reid-replay).",
-        "# Generated from face_reid_camera/params.py; every parameter with its unit.",
-        "# Use: face-reid-camera --ros-args --params-file config/camera.yaml",
-        f"{NODE_NAME}:",
-        "  ros__parameters:",
-    ]
-    nested_open = ""
-    for spec in CAMERA_PARAMS:
-        group, _, leaf = spec.name.rpartition(".")
-        indent = "    "
-        if group:
-            if group != nested_open:
-                lines.append(f"    {group}:")
-                nested_open = group
-            indent = "      "
-        lines.append(f"{indent}# {spec.description}")
-        lines.append(f"{indent}{leaf}: {json.dumps(spec.default)}")
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    TABLE.write_yaml(path, USAGE)

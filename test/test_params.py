@@ -48,7 +48,7 @@ def test_overrides_nested_and_flat(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("body,match", [
-    ("    no_such_param: 1\n", "unknown camera parameter"),
+    ("    no_such_param: 1\n", "unknown face_reid_camera parameter"),
     ("    detect_faces: 3\n", "detect_faces"),
     ("    camera_pose_xyz_m: [1.0, 2.0]\n", "camera_pose_xyz_m"),
     ("    head_roi_size_m: big\n", "head_roi_size_m"),
