@@ -1,0 +1,52 @@
+"""Test helper process: subscribe to /tracks_named and print one JSON line per message.
+
+Usage: python test/ros_procs/collect_tracks.py --topic /tracks_named --duration-s S
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--topic", default="/tracks_named")
+    parser.add_argument("--duration-s", type=float, default=30.0)
+    args = parser.parse_args()
+
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from face_reid_msgs.msg import NamedTrackArray
+
+    rclpy.init()
+    node = rclpy.create_node("tracks_collector")
+
+    def on_tracks(msg: NamedTrackArray) -> None:
+        line = {
+            "stamp": msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
+            "frame_id": msg.header.frame_id,
+            "tracks": [
+                {"track_id": t.track_id, "face_id": t.face_id, "name": t.name, "state": t.state,
+                 "confidence": t.identity_confidence, "x": t.position.x, "y": t.position.y,
+                 "cameras": list(t.cameras)}
+                for t in msg.tracks
+            ],
+        }
+        print(json.dumps(line), flush=True)
+
+    qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(NamedTrackArray, args.topic, on_tracks, qos)
+    deadline = time.monotonic() + args.duration_s
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""Test helper process: publish face_reid_msgs/CameraFrame messages of one camera following a plan.
+
+Usage: python test/ros_procs/publish_camera_frames.py --camera-id C --topic T --plan PLAN.json
+PLAN.json: {"rate_hz": 10, "embeddings": "E.npz", "segments": [{"t0": 0, "t1": 4, "people": [
+  {"x": 0, "y": 0, "vx": 0.5, "vy": 0, "identity": "a", "photos": [0, 1, 2]}]}]}
+Times are seconds after the first subscriber matched; E.npz holds identity -> (n, 128) embeddings.
+Stamps are the publisher's clock (the master checks them against its own).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--camera-id", required=True)
+    parser.add_argument("--topic", required=True)
+    parser.add_argument("--plan", required=True)
+    parser.add_argument("--wait-s", type=float, default=30.0)
+    args = parser.parse_args()
+    with open(args.plan, encoding="utf-8") as fh:
+        plan = json.load(fh)
+    embeddings = dict(np.load(plan["embeddings"]))
+
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from face_reid_msgs.msg import CameraFrame, PersonObservation
+
+    rclpy.init()
+    node = rclpy.create_node(f"fake_camera_{args.camera_id}")
+    qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+    pub = node.create_publisher(CameraFrame, args.topic, qos)
+    deadline = time.monotonic() + args.wait_s
+    while pub.get_subscription_count() == 0:
+        if time.monotonic() > deadline:
+            print(json.dumps({"error": "no subscriber"}), flush=True)
+            return 1
+        rclpy.spin_once(node, timeout_sec=0.05)
+    start = time.monotonic() + float(plan.get("start_delay_s", 1.0))
+    end = max(seg["t1"] for seg in plan["segments"])
+    period = 1.0 / float(plan.get("rate_hz", 10.0))
+    k = 0
+    while True:
+        t = k * period
+        if t > end:
+            break
+        time.sleep(max(0.0, start + t - time.monotonic()))
+        msg = CameraFrame()
+        msg.header.stamp = node.get_clock().now().to_msg()
+        msg.header.frame_id = "world"
+        msg.camera_id = args.camera_id
+        for seg in plan["segments"]:
+            if not seg["t0"] <= t < seg["t1"]:
+                continue
+            for p in seg["people"]:
+                obs = PersonObservation()
+                dt = t - seg["t0"]
+                obs.position_world.x = float(p["x"] + p.get("vx", 0.0) * dt)
+                obs.position_world.y = float(p["y"] + p.get("vy", 0.0) * dt)
+                obs.position_std_m, obs.height_m = 0.05, 1.75
+                photos = p.get("photos") or []
+                if photos:
+                    emb = embeddings[p["identity"]][photos[k % len(photos)]]
+                    obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
+                    obs.embedding = emb.astype(np.float32).tolist()
+                msg.people.append(obs)
+        pub.publish(msg)
+        k += 1
+    time.sleep(0.5)
+    print(json.dumps({"published": k}), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

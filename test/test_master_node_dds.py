@@ -1,0 +1,119 @@
+"""Cross-process DDS test of the master: two camera processes -> master -> /tracks_named subscriber.
+
+A person walks from camera A's view into camera B's (hand-over: one track), leaves every view
+until the track dies, and comes back: the subscriber must see a NEW track id with the SAME face id
+and the predefined name. The master is then killed with SIGKILL: everything it learned must be in
+its database.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from ros_procs import procs
+
+pytest.importorskip("rclpy")
+pytest.importorskip("face_reid_msgs.srv")
+
+pytestmark = pytest.mark.ros
+
+FACES = Path(__file__).parent / "data" / "faces"
+IDS = {"tony": "lfw_Tony_Blair", "colin": "lfw_Colin_Powell"}
+
+
+@pytest.fixture(scope="module")
+def embeddings(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from face_reid_camera.embedder import FaceEmbedder
+    from face_reid_camera.face_detector import YuNetDetector
+
+    detector, embedder = YuNetDetector(), FaceEmbedder()
+    out = {}
+    for key, ident in IDS.items():
+        rows = []
+        for path in sorted((FACES / ident).glob("*.jpg")):
+            photo = cv2.imread(str(path))
+            best = max(detector.detect(photo), key=lambda d: float(d.box_xywh[2] * d.box_xywh[3]))
+            rows.append(embedder.embed_faces(photo, [best.landmarks])[0])
+        out[key] = np.stack(rows)
+    path = tmp_path_factory.mktemp("emb") / "embeddings.npz"
+    np.savez(path, **out)
+    return path
+
+
+def _plan(path: Path, embeddings: Path, segments: list[dict]) -> Path:
+    path.write_text(json.dumps({"rate_hz": 10, "embeddings": str(embeddings), "segments": segments}))
+    return path
+
+
+def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Path, embeddings: Path) -> None:
+    emb = dict(np.load(embeddings))
+    gallery = tmp_path / "gallery.npz"
+    np.savez(gallery, Tony=emb["tony"][8:10], Colin=emb["colin"][8:10])
+    tony_a = {"x": 0.0, "y": 0.0, "vx": 0.5, "identity": "tony", "photos": [0, 1, 2, 3, 4]}
+    colin = {"x": 0.0, "y": 2.5, "vx": 0.3, "identity": "colin", "photos": [0, 1, 2, 3, 4, 5]}
+    plan_a = _plan(tmp_path / "a.json", embeddings, [
+        {"t0": 0.0, "t1": 3.0, "people": [tony_a]},
+        {"t0": 0.0, "t1": 5.0, "people": [colin]},
+    ])
+    plan_b = _plan(tmp_path / "b.json", embeddings, [
+        {"t0": 2.0, "t1": 5.0, "people": [dict(tony_a, x=1.0)]},  # hand-over: same trajectory in camera B
+        {"t0": 8.5, "t1": 12.5, "people": [{"x": 1.0, "y": -1.5, "vx": 0.4, "identity": "tony", "photos": [5, 6, 7]}]},
+    ])
+    db = tmp_path / "faces.db"
+    master = procs.start(
+        ["-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={db}", "-p", f"gallery_path:={gallery}",
+         "-p", "tracker.lost_after_s:=0.5", "-p", "tracker.delete_after_s:=1.0",
+         "-p", "topic_discovery_period_s:=0.5", "-p", "min_face_features_for_name:=3"],
+        ros_domain_id, tmp_path / "master.log",
+    )
+    collector = procs.start(
+        [str(procs.PROCS / "collect_tracks.py"), "--duration-s", "35"], ros_domain_id, tmp_path / "collector.log"
+    )
+    cams = [
+        procs.start([str(procs.PROCS / "publish_camera_frames.py"), "--camera-id", cid, "--topic",
+                     f"/{cid}/face_reid/frames", "--plan", str(plan)], ros_domain_id, tmp_path / f"{cid}.log")
+        for cid, plan in (("cam_a", plan_a), ("cam_b", plan_b))
+    ]
+    try:
+        for cam in cams:
+            cam.wait(timeout=60)
+        out, _ = collector.communicate(timeout=60)
+        assert master.poll() is None, (tmp_path / "master.log").read_text()
+        os.killpg(master.pid, signal.SIGKILL)  # no clean shutdown: nothing learned may be lost
+        master.wait(timeout=10)
+    finally:
+        for p in (*cams, collector, master):
+            procs.stop(p)
+    logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
+    messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    assert messages, logs
+    assert all(m["frame_id"] == "world" for m in messages)
+    tony = [t for m in messages for t in m["tracks"] if t["name"] == "Tony"]
+    colin = [t for m in messages for t in m["tracks"] if t["name"] == "Colin"]
+    assert tony and colin, logs
+    tony_faces = {t["face_id"] for t in tony}
+    tony_tracks = [t["track_id"] for t in tony]
+    assert len(tony_faces) == 1 and 0 not in tony_faces, tony
+    assert len(set(tony_tracks)) == 2, f"expected the first visit and the return as two tracks: {set(tony_tracks)}"
+    assert {t["face_id"] for t in colin} != tony_faces
+    # hand-over: during the overlap one track was seen by both cameras
+    assert any(set(t["cameras"]) == {"cam_a", "cam_b"} for t in tony)
+    # the return was recognised before its end: the last message holds the returning track, named
+    last_tony = [t for t in messages[-1]["tracks"] if t["name"] == "Tony"] or [tony[-1]]
+    assert last_tony[0]["track_id"] == tony_tracks[-1]
+
+    # kill -9 lost nothing: both faces, with their names, are in the database
+    from face_reid_master.face_store import FaceStore
+
+    with FaceStore(db) as store:
+        faces = store.load_faces()
+    assert {f.name for f in faces} >= {"Tony", "Colin"}
+    assert tony_faces <= {f.face_id for f in faces}
+    assert (db.stat().st_mode & 0o777) == 0o600
