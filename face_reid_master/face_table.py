@@ -144,6 +144,7 @@ class IdentityStats:
     sinkhorn_not_converged: int = 0
     last_sinkhorn_iterations: int = 0
     shortlist_searches: int = 0
+    faces_forgotten: int = 0
 
 
 # ----------------------------------------------------------------------------------- pure functions
@@ -781,22 +782,48 @@ class IdentityManagerBase:
             raise ValueError(f"name must be a str or None, got {name!r}")
         self._face(face_id).name = name
 
+    def forget_face(self, face_id: int) -> bool:
+        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
+
+        The face leaves face_list (its table column / threshold votes go) and its bank slot is zeroed.
+        If a live track carries it, that track becomes unidentified again: its assignment, confidence
+        and queued observations are dropped (they were merged into / meant for the forgotten face), so
+        while the person stays in view new observations are classified afresh and normally create a
+        *new* face id after ``min_observations``.  Face ids are never reused within this manager.
+        """
+        fid = _check_int("face_id", face_id, -(2**63))
+        face = self._faces.get(fid)
+        if face is None:
+            return False
+        if face.track_id is None:
+            self._make_unavailable([fid])
+        else:
+            track = self._tracks.get(face.track_id)
+            if track is not None and track.face_id == fid:
+                track.face_id = None
+                track.confidence = 0.0
+                track.n_observations = 0
+                track.votes.clear()
+                self._pending_obs.pop(track.track_id, None)
+        self._bank.free_slot(face.slot)
+        del self._faces[fid]
+        self.stats.faces_forgotten += 1
+        return True
+
+    def export_face(self, face_id: int) -> LearnedFace:
+        """Snapshot (copy) of one learned face, e.g. to save it when its track is released; KeyError if unknown."""
+        f = self._face(face_id)
+        return LearnedFace(
+            f.face_id, self._bank.features(f.slot).copy(), f.name, f.created_s, f.last_seen_s, f.n_observations
+        )
+
     def export_faces(self) -> list[LearnedFace]:
         """Snapshot of all learned faces (copies), for the persistent memory."""
-        out = []
-        for fid in sorted(self._faces):
-            f = self._faces[fid]
-            out.append(
-                LearnedFace(
-                    fid,
-                    self._bank.features(f.slot).copy(),
-                    f.name,
-                    f.created_s,
-                    f.last_seen_s,
-                    f.n_observations,
-                )
-            )
-        return out
+        return [self.export_face(fid) for fid in sorted(self._faces)]
+
+    def reserve_face_ids(self, highest_used_id: int) -> None:
+        """Never hand out face ids <= ``highest_used_id`` (ids of forgotten faces stay retired)."""
+        self._next_face_id = max(self._next_face_id, _check_int("highest_used_id", highest_used_id, 0) + 1)
 
     def import_faces(self, faces: Iterable[LearnedFace]) -> None:
         """Add previously exported faces to face_list; ValueError on an id clash or wrong dimension."""

@@ -48,8 +48,9 @@ class MasterConfig:
     max_stamp_future_s: float = 2.0
     min_face_quality: float = 0.0
     publish_tentative: bool = False
-    save_interval_s: float = 5.0
+    save_interval_s: float = 30.0
     name_update_interval_s: float = 0.5
+    prune_interval_s: float = 60.0
     # identity (Bayesian)
     posterior_threshold: float = 0.95
     prior_probability: float = 0.1
@@ -67,7 +68,9 @@ class MasterConfig:
     def __post_init__(self) -> None:
         if self.method not in ("bayes", "threshold"):
             raise ValueError(f"method must be 'bayes' or 'threshold', got {self.method!r}")
-        for name in ("max_stamp_age_s", "max_stamp_future_s", "save_interval_s", "name_update_interval_s"):
+        for name in (
+            "max_stamp_age_s", "max_stamp_future_s", "save_interval_s", "name_update_interval_s", "prune_interval_s"
+        ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0 seconds, got {value!r}")
@@ -97,6 +100,7 @@ class MasterStats:
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
+    faces_pruned: int = 0
     store_errors: int = 0
 
     def as_dict(self) -> dict[str, int]:
@@ -164,9 +168,11 @@ class MasterCore:
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
         self._names: dict[int, str] = {}  # face id -> name from the predefined people
         self._last_stamp = -math.inf
+        self._last_prune_s = -math.inf
         if store is not None:
             faces = store.load_faces()
             self.identity.import_faces(faces)
+            self.identity.reserve_face_ids(int(store.max_face_id()))
             for face in faces:
                 self._refresh_name(face.face_id, face.features)
 
@@ -280,6 +286,9 @@ class MasterCore:
 
     def _maintain_faces(self, stamp: float) -> None:
         cfg = self.config
+        if self.store is not None and stamp - self._last_prune_s >= cfg.prune_interval_s:
+            self._last_prune_s = stamp
+            self._prune_unnamed(stamp)
         for fid, since in list(self._dirty_faces.items()):
             if stamp - since >= cfg.save_interval_s:
                 self._save_face(fid)
@@ -303,13 +312,28 @@ class MasterCore:
         self._dirty_faces.pop(face_id, None)
         if self.store is None:
             return
-        face = next((f for f in self.identity.export_faces() if f.face_id == face_id), None)
-        if face is None:
+        try:
+            face = self.identity.export_face(face_id)
+        except KeyError:
             return
         try:
             self.store.save_face(face)
         except Exception:  # the store logs; identity keeps working in memory
             self.stats.store_errors += 1
+
+    def _prune_unnamed(self, stamp: float) -> None:
+        """Retention: forget unnamed faces the store says are too old (never those on live tracks)."""
+        try:
+            pruned = self.store.prune_unnamed(stamp, keep=tuple(self.identity.assigned_tracks().values()))
+        except Exception:
+            self.stats.store_errors += 1
+            return
+        for fid in pruned:
+            self.identity.forget_face(fid)
+            self.people.remove_face(fid)
+            self._names.pop(fid, None)
+            self._dirty_faces.pop(fid, None)
+            self.stats.faces_pruned += 1
 
     def flush(self) -> None:
         """Write every face with unsaved features to the store (call at shutdown)."""
@@ -325,7 +349,7 @@ class MasterCore:
 
     def forget_face(self, face_id: int) -> bool:
         """Delete a learned face everywhere (memory, names, store). True if it existed."""
-        found = bool(self.identity.forget_face(face_id)) if hasattr(self.identity, "forget_face") else False
+        found = bool(self.identity.forget_face(face_id))
         self.people.remove_face(face_id)
         self._names.pop(face_id, None)
         self._dirty_faces.pop(face_id, None)

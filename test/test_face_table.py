@@ -734,3 +734,143 @@ def test_log_ratio_cap_limits_the_evidence_of_one_observation() -> None:
         m.step(0.0)
         conf.append(m.posterior_of(10)[2])
     assert conf[0] > 0.99 and conf[1] < 0.9
+
+
+# ------------------------------------------------------------------------------------------------
+# forget_face: deleting a learned person (privacy)
+# ------------------------------------------------------------------------------------------------
+def test_forget_available_face_removes_it_and_its_table_column() -> None:
+    rng = np.random.default_rng(30)
+    m = _manager_with_faces(3, rng, min_observations=3)
+    _feed(m, 10, 1, rng, 0.0)  # an unassigned track with evidence for face 2
+    assert m.posterior_of(10)[2] > 0.5
+    assert m.forget_face(2) is True
+    assert m.face_ids() == [1, 3] and m.available_face_ids() == [1, 3]
+    assert 2 not in m.posterior_of(10) and m.posterior_table()[2] == [1, 3]
+    assert [f.face_id for f in m.export_faces()] == [1, 3]
+    with pytest.raises(KeyError):
+        m.face_features(2)
+    assert m.forget_face(2) is False and m.forget_face(99) is False
+    assert m.stats.faces_forgotten == 1
+    # person 1 is now a stranger: a new id, never the forgotten one, holding only the new observations
+    events = _feed(m, 10, 1, rng, 0.1) + _feed(m, 10, 1, rng, 0.2)
+    assert _kinds(events) == [(NEW, 10, 4)]
+    assert len(m.face_features(4)) == 3
+    with pytest.raises(ValueError):
+        m.forget_face("2")  # type: ignore[arg-type]
+
+
+def test_forget_face_of_a_live_track_makes_the_track_unidentified_again() -> None:
+    rng = np.random.default_rng(31)
+    m = _manager_with_faces(3, rng, min_observations=3)
+    for i in range(3):
+        _feed(m, 10, 1, rng, 0.1 * i)
+    assert m.face_id_of(10) == 2
+    m.add_observations(10, _person(1, 2, rng), 0.5)  # queued before the forget: dropped with the face
+    assert m.forget_face(2)
+    assert m.face_id_of(10) is None and m.assigned_tracks() == {} and m.confidence_of(10) == 0.0
+    assert m.face_ids() == [1, 3] and m.available_face_ids() == [1, 3]
+    assert 10 in m.live_track_ids()
+    assert m.step(0.6) == []  # the queued observations were dropped: nothing to classify
+    assert m.posterior_of(10) == {}
+    events = []
+    for i in range(3):  # still in view: learned again, from scratch, under a new id
+        events += _feed(m, 10, 1, rng, 1.0 + 0.1 * i)
+    assert _kinds(events) == [(NEW, 10, 4)]
+    assert len(m.face_features(4)) == 3 and m.export_faces()[-1].n_observations == 3
+    m.track_deleted(10, 2.0)
+    assert _kinds(m.step(2.0)) == [(RELEASED, 10, 4)]
+    assert m.available_face_ids() == [1, 3, 4]
+
+
+def test_forget_face_of_a_track_being_deleted_emits_no_release() -> None:
+    rng = np.random.default_rng(32)
+    m = _manager_with_faces(1, rng, min_observations=2)
+    for i in range(2):
+        _feed(m, 10, 0, rng, 0.1 * i)
+    assert m.face_id_of(10) == 1
+    m.track_deleted(10, 1.0)
+    assert m.forget_face(1)
+    assert m.step(1.0) == [] and m.face_ids() == [] and m.live_track_ids() == []
+
+
+def test_threshold_forget_face_drops_votes_for_it() -> None:
+    rng = np.random.default_rng(33)
+    m = ThresholdIdentityManager(distance_threshold=0.6, n_votes=3)
+    m.import_faces([LearnedFace(j + 1, _person(j, 5, rng)) for j in range(3)])
+    for i in range(2):
+        m.add_observations(10, _person(1, 1, rng), 0.1 * i)
+        assert m.step(0.1 * i) == []
+    assert m.confidence_of(10) == 1.0  # 2 votes for face 2
+    assert m.forget_face(2)
+    assert m.confidence_of(10) == 0.0  # its votes are gone
+    events = []
+    for i in range(3):
+        m.add_observations(10, _person(1, 1, rng), 1.0 + 0.1 * i)
+        events += m.step(1.0 + 0.1 * i)
+    assert _kinds(events) == [(NEW, 10, 4)]
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    ops=st.lists(
+        st.one_of(
+            st.tuples(st.just("obs"), st.integers(0, 4), st.integers(0, 4)),
+            st.tuples(st.just("del"), st.integers(0, 4), st.just(0)),
+            st.tuples(st.just("forget"), st.integers(1, 6), st.just(0)),
+            st.tuples(st.just("step"), st.just(0), st.just(0)),
+        ),
+        min_size=1,
+        max_size=40,
+    ),
+    method=st.sampled_from(["bayes", "threshold"]),
+)
+def test_random_sequences_with_forget_keep_invariants(ops: list, method: str) -> None:
+    rng = np.random.default_rng(len(ops))
+    kw = {"min_observations": 2} if method == "bayes" else {"n_votes": 2}
+    m = make_identity_manager(method, max_features_per_face=4, **kw)
+    generation = dict.fromkeys(range(5), 0)
+    forgotten: set[int] = set()
+    t = 0.0
+    for op, a, b in [*ops, ("step", 0, 0)]:
+        t += 0.1
+        if op == "obs":
+            m.add_observations(a + 100 * generation[a], _person(b, 1, rng), t)
+        elif op == "del":
+            m.track_deleted(a + 100 * generation[a], t)
+            generation[a] += 1
+        elif op == "forget":
+            known = a in m.face_ids()
+            assert m.forget_face(a) is known
+            if known:
+                forgotten.add(a)
+        else:
+            m.step(t)
+        faces = list(m.assigned_tracks().values())
+        assert len(faces) == len(set(faces))
+        assert set(m.available_face_ids()) == set(m.face_ids()) - set(faces)
+        assert not forgotten & set(m.face_ids())  # a forgotten id never comes back
+        for f in m.face_ids():
+            assert 1 <= len(m.face_features(f)) <= 4
+        if isinstance(m, FaceIdentityManager):
+            p, rows, cols = m.posterior_table()
+            assert p.shape == (1 + len(rows), 1 + len(cols)) and cols == m.available_face_ids()
+            assert not set(rows) & set(m.assigned_tracks())
+
+
+def test_export_face_snapshots_one_face() -> None:
+    rng = np.random.default_rng(34)
+    m = FaceIdentityManager(min_observations=2)
+    for t in range(2):
+        _feed(m, 1, 0, rng, 10.0 + t)
+    one = m.export_face(1)
+    (all_,) = m.export_faces()
+    assert (one.face_id, one.name, one.created_s, one.last_seen_s, one.n_observations) == (1, None, 11.0, 11.0, 2)
+    assert one.features.tobytes() == all_.features.tobytes() and one.n_observations == all_.n_observations
+    one.features[:] = 0.0  # a copy: the manager is unaffected
+    assert np.any(m.face_features(1) != 0.0)
+    _feed(m, 1, 0, rng, 12.0)
+    assert m.export_face(1).n_observations == 3 and m.export_face(1).last_seen_s == 12.0
+    m.forget_face(1)
+    with pytest.raises(KeyError):
+        m.export_face(1)

@@ -132,3 +132,27 @@ def test_config_validation() -> None:
         MasterConfig(method="magic")
     with pytest.raises(ValueError):
         MasterConfig(max_stamp_age_s=-1)
+
+
+def test_faces_survive_a_restart_and_can_be_forgotten(embeddings, tmp_path) -> None:
+    from face_reid_master.face_store import FaceStore
+
+    db = tmp_path / "faces.db"
+    with FaceStore(db) as store:
+        core = MasterCore(_config(), store=store)
+        _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:5])}, 0.0, 3.0)
+        (face_a,) = {t.face_id for t in core.tracks()}
+        assert face_a != 0
+    # a new master process on the same database recognises the person at once
+    with FaceStore(db) as store:
+        core = MasterCore(_config(), store=store)
+        assert core.identity.face_ids() == [face_a]
+        _walk(core, {"a": (np.array([3.0, 1.0]), embeddings[IDS[0]][5:])}, 100.0, 103.0)
+        assert {t.face_id for t in core.tracks()} == {face_a}
+        # forgetting deletes the face from memory and disk; its id is never reused
+        assert core.forget_face(face_a)
+        assert store.load_faces() == [] and core.identity.face_ids() == []
+        _walk(core, {}, 103.0, 106.0)
+        _walk(core, {"a": (np.array([3.0, 1.0]), embeddings[IDS[0]][5:])}, 106.0, 109.0)
+        (again,) = {t.face_id for t in core.tracks()}
+        assert again not in (0, face_a)

@@ -1,0 +1,509 @@
+"""Tests of the persistent face memory: round trip, permissions, secure forgetting, retention, corruption
+recovery, kill -9 durability, process lock and the ``face-reid-faces`` CLI."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import sqlite3
+import stat
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from face_reid_master.face_store import (
+    FaceStore,
+    FaceStoreError,
+    FaceStoreLockedError,
+    FaceSummary,
+    default_db_path,
+)
+from face_reid_master.face_table import FaceIdentityManager, LearnedFace
+from face_reid_master.faces_cli import main as cli_main
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DIM = 128
+
+
+def _mode(path: Path) -> int:
+    return stat.S_IMODE(path.stat().st_mode)
+
+
+def _feats(seed: int, k: int = 50) -> np.ndarray:
+    return np.random.default_rng(seed).normal(0.0, 0.1, (k, DIM)).astype(np.float32)
+
+
+def _distinctive(tag: float, k: int = 50) -> np.ndarray:
+    """Vectors whose raw bytes cannot occur by chance in the file."""
+    return (tag + np.arange(k * DIM, dtype=np.float64).reshape(k, DIM) * 1e-3).astype(np.float32)
+
+
+def _raw_files(db: Path) -> dict[str, bytes]:
+    out = {}
+    for suffix in ("", "-wal", "-shm"):
+        p = Path(str(db) + suffix)
+        if p.exists():
+            out[p.name] = p.read_bytes()
+    return out
+
+
+def _contains_any(db: Path, feats: np.ndarray) -> list[str]:
+    """Names of the database files holding the bytes of any row of ``feats``."""
+    rows = [np.ascontiguousarray(r, dtype="<f4").tobytes() for r in feats]
+    return [name for name, data in _raw_files(db).items() if any(r in data for r in rows)]
+
+
+@pytest.fixture
+def db(tmp_path: Path) -> Path:
+    return tmp_path / "store" / "faces.db"
+
+
+# ------------------------------------------------------------------------------------------------
+# Round trip
+# ------------------------------------------------------------------------------------------------
+def test_round_trip_is_exact_and_survives_reopening(db: Path) -> None:
+    special = _feats(3, 4)
+    special[0, :4] = [np.float32(1e-45), -0.0, np.finfo(np.float32).max, np.float32(0.1)]  # subnormal, -0
+    faces = [
+        LearnedFace(1, _feats(1), None, 1_700_000_000.123456, 1_700_000_100.654321, 57),
+        LearnedFace(2, special, "Zoë Ünicode 名前", 12.5, 99.25, 3),
+        LearnedFace(7, _feats(7, 1), "Ada", 0.0, 0.0, 0),
+    ]
+    with FaceStore(db) as store:
+        assert store.recovered_from is None
+        store.save_face(faces[0])
+        assert store.save_faces(faces[1:]) == 2
+        assert store.save_faces([]) == 0
+    with FaceStore(db) as store:
+        loaded = store.load_faces()
+        summaries = store.list_faces()
+    assert [f.face_id for f in loaded] == [1, 2, 7]
+    for a, b in zip(faces, loaded, strict=True):
+        assert b.features.dtype == np.float32 and b.features.shape == a.features.shape
+        assert b.features.tobytes() == a.features.tobytes()  # bit-exact, -0.0 and subnormals included
+        assert (b.name, b.created_s, b.last_seen_s, b.n_observations) == (
+            a.name,
+            a.created_s,
+            a.last_seen_s,
+            a.n_observations,
+        )
+    assert summaries == [
+        FaceSummary(1, None, 50, 57, 1_700_000_000.123456, 1_700_000_100.654321),
+        FaceSummary(2, "Zoë Ünicode 名前", 4, 3, 12.5, 99.25),
+        FaceSummary(7, "Ada", 1, 0, 0.0, 0.0),
+    ]
+
+
+def test_save_face_replaces_row_and_all_features(db: Path) -> None:
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(3, _feats(1, 50), None, 1.0, 2.0, 10))
+        store.save_face(LearnedFace(3, _feats(2, 20), "Bob", 1.0, 5.0, 30))
+        (face,) = store.load_faces()
+        assert face.features.tobytes() == _feats(2, 20).tobytes()
+        assert (face.name, face.last_seen_s, face.n_observations) == ("Bob", 5.0, 30)
+        assert store.list_faces()[0].n_features == 20
+
+
+def test_identity_manager_export_import_through_the_store(db: Path) -> None:
+    rng = np.random.default_rng(5)
+    centre = np.zeros(DIM, np.float32)
+    centre[0] = 0.7
+    m = FaceIdentityManager(min_observations=2)
+    for t in range(2):
+        m.add_observations(1, (centre + rng.normal(0, 0.02, (1, DIM))).astype(np.float32), t)
+        m.step(t)
+    m.set_face_name(1, "Eve")
+    with FaceStore(db) as store:
+        store.save_faces(m.export_faces())
+    fresh = FaceIdentityManager(min_observations=2)
+    with FaceStore(db) as store:
+        fresh.import_faces(store.load_faces())
+    assert fresh.face_ids() == [1] and fresh.face_name(1) == "Eve"
+    assert fresh.face_features(1).tobytes() == m.face_features(1).tobytes()
+
+
+def test_bad_input_raises_clear_errors(db: Path) -> None:
+    with FaceStore(db) as store:
+        with pytest.raises(ValueError, match="dim 64"):
+            store.save_face(LearnedFace(1, np.zeros((2, 64), np.float32)))
+        with pytest.raises(ValueError, match="LearnedFace"):
+            store.save_face((1, np.zeros((2, DIM))))  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="duplicate"):
+            store.save_faces([LearnedFace(1, _feats(1, 2)), LearnedFace(1, _feats(2, 2))])
+        assert store.load_faces() == []  # nothing of the failed batch was written
+        with pytest.raises(ValueError):
+            store.set_name(True, "x")  # type: ignore[arg-type]
+        with pytest.raises(ValueError):
+            store.set_name(1, 5)  # type: ignore[arg-type]
+        with pytest.raises(ValueError):
+            store.forget_name("")
+        with pytest.raises(ValueError):
+            store.prune_unnamed(float("nan"))
+    with pytest.raises(ValueError):
+        FaceStore(db, retention_unnamed_s=0.0)
+    with pytest.raises(ValueError):
+        FaceStore(db, synchronous="OFF")
+    with pytest.raises(ValueError):
+        FaceStore("")
+    store = FaceStore(db)
+    store.close()
+    store.close()  # idempotent
+    with pytest.raises(FaceStoreError, match="closed"):
+        store.load_faces()
+
+
+def test_embedding_dim_mismatch_is_an_error_not_a_recovery(db: Path) -> None:
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(1, _feats(1, 3)))
+    with pytest.raises(FaceStoreError, match="128-dimensional"):
+        FaceStore(db, embedding_dim=64)
+    with FaceStore(db, embedding_dim=None) as store:  # adopt the stored dimension (CLI)
+        assert store.embedding_dim == DIM and store.recovered_from is None
+        assert len(store.load_faces()) == 1
+
+
+def test_store_is_single_thread(db: Path) -> None:
+    with FaceStore(db) as store:
+        errors: list[BaseException] = []
+
+        def other_thread() -> None:
+            try:
+                store.save_face(LearnedFace(1, _feats(1, 2)))
+            except BaseException as exc:
+                errors.append(exc)
+
+        t = threading.Thread(target=other_thread)
+        t.start()
+        t.join()
+        assert len(errors) == 1 and isinstance(errors[0], (FaceStoreError, sqlite3.ProgrammingError))
+        assert store.load_faces() == []
+
+
+# ------------------------------------------------------------------------------------------------
+# Permissions and the process lock
+# ------------------------------------------------------------------------------------------------
+def test_files_are_private_even_with_a_permissive_umask(db: Path) -> None:
+    old = os.umask(0)
+    try:
+        with FaceStore(db) as store:
+            store.save_face(LearnedFace(1, _feats(1)))
+            wal = Path(str(db) + "-wal")
+            shm = Path(str(db) + "-shm")
+            assert wal.exists() and shm.exists()
+            assert _mode(db) == 0o600 and _mode(wal) == 0o600 and _mode(shm) == 0o600
+            assert _mode(db.parent) == 0o700
+    finally:
+        os.umask(old)
+
+
+def test_broader_permissions_are_fixed_with_a_warning(db: Path, caplog: pytest.LogCaptureFixture) -> None:
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(1, _feats(1)))
+    os.chmod(db, 0o644)
+    with caplog.at_level(logging.WARNING, logger="face_reid_master.face_store"), FaceStore(db) as store:
+        assert _mode(db) == 0o600
+        assert len(store.load_faces()) == 1 and store.recovered_from is None
+    assert any("644" in r.getMessage() and r.levelno == logging.WARNING for r in caplog.records)
+
+
+def test_second_process_or_instance_is_locked_out(db: Path) -> None:
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(1, _feats(1, 2)))
+        with pytest.raises(FaceStoreLockedError, match="in use"):
+            FaceStore(db)
+        assert cli_main(["--db", str(db), "forget", "1"]) == 3
+        assert store.face_ids() == [1]
+    with FaceStore(db) as store:  # released on close
+        assert store.face_ids() == [1]
+
+
+# ------------------------------------------------------------------------------------------------
+# Forgetting: rows and bytes gone
+# ------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("how", ["forget", "forget_name", "prune"])
+def test_forgotten_vectors_are_gone_from_every_file(db: Path, how: str) -> None:
+    versions = [_distinctive(1000.0 + v) for v in range(3)]
+    with FaceStore(db, retention_unnamed_s=10.0) as store:
+        for i in range(1, 31):
+            if i != 7:
+                store.save_face(LearnedFace(i, _feats(i), f"p{i}", 0.0, 100.0, 5))
+        for v in versions:  # updated several times: old versions sit in WAL frames / freed cells
+            store.save_face(LearnedFace(7, v, None if how == "prune" else "Target", 0.0, 50.0, 9))
+        assert _contains_any(db, versions[-1])  # sanity: the grep finds stored vectors
+        if how == "forget":
+            assert store.forget(7) is True
+            assert store.forget(7) is False
+        elif how == "forget_name":
+            assert store.forget_name("Target") == [7]
+            assert store.forget_name("Target") == []
+        else:
+            assert store.prune_unnamed(100.0) == [7]
+        assert 7 not in store.face_ids() and len(store.face_ids()) == 29
+        raw = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        try:
+            assert raw.execute("SELECT COUNT(*) FROM features WHERE face_id = 7").fetchone()[0] == 0
+        finally:
+            raw.close()
+        for v in versions:
+            assert _contains_any(db, v) == []
+        assert Path(str(db) + "-wal").stat().st_size == 0
+        assert _contains_any(db, _feats(8)) == ["faces.db"]  # the others are intact (in the main file)
+        assert store.integrity_ok()
+        assert store.max_face_id() == 30  # the high-water mark survives the deletion
+    with FaceStore(db) as store:
+        assert 7 not in store.face_ids() and len(store.load_faces()) == 29
+
+
+def test_forget_name_deletes_all_faces_with_exactly_that_name(db: Path) -> None:
+    with FaceStore(db) as store:
+        store.save_faces(
+            [
+                LearnedFace(1, _feats(1, 2), "Ann"),
+                LearnedFace(2, _feats(2, 2), "ann"),
+                LearnedFace(3, _feats(3, 2), "Ann"),
+                LearnedFace(4, _feats(4, 2)),
+            ]
+        )
+        assert store.forget_name("Ann") == [1, 3]
+        assert store.face_ids() == [2, 4]
+        assert store.set_name(4, "Ann") is True and store.set_name(9, "x") is False
+        assert store.set_name(2, None) is True
+        assert [(s.face_id, s.name) for s in store.list_faces()] == [(2, None), (4, "Ann")]
+
+
+# ------------------------------------------------------------------------------------------------
+# Retention
+# ------------------------------------------------------------------------------------------------
+def test_retention_prunes_only_old_unnamed_faces(db: Path) -> None:
+    faces = [
+        LearnedFace(1, _feats(1, 2), None, 0.0, 800.0),  # unnamed, not seen for 200 s: pruned
+        LearnedFace(2, _feats(2, 2), None, 0.0, 950.0),  # unnamed, recent: kept
+        LearnedFace(3, _feats(3, 2), "Named", 0.0, 0.0),  # named: kept forever
+        LearnedFace(4, _feats(4, 2), None, 0.0, 10.0),  # old but carried by a live track: kept
+        LearnedFace(5, _feats(5, 2), None, 0.0, 899.0),  # just past the limit: pruned
+        LearnedFace(6, _feats(6, 2), None, 0.0, 900.0),  # exactly at the limit: kept
+    ]
+    with FaceStore(db, retention_unnamed_s=100.0) as store:
+        store.save_faces(faces)
+        assert store.prune_unnamed(1000.0, keep=[4]) == [1, 5]
+        assert store.face_ids() == [2, 3, 4, 6]
+        assert store.prune_unnamed(1000.0, keep=[4]) == []
+    with FaceStore(db) as store:  # retention None: keep forever
+        assert store.prune_unnamed(1e12) == [] and store.face_ids() == [2, 3, 4, 6]
+
+
+# ------------------------------------------------------------------------------------------------
+# Corruption: backed up, fresh store, never a crash
+# ------------------------------------------------------------------------------------------------
+def _assert_recovered(db: Path, store: FaceStore, original: bytes, caplog: pytest.LogCaptureFixture) -> None:
+    backup = store.recovered_from
+    assert backup is not None and backup.parent == db.parent
+    assert backup.name.startswith("faces.db.corrupt-") and backup.name.endswith("Z")
+    assert backup.read_bytes() == original and _mode(backup) == 0o600
+    assert store.load_faces() == [] and store.integrity_ok()
+    store.save_face(LearnedFace(1, _feats(1, 2)))  # the fresh store works
+    assert [f.face_id for f in store.load_faces()] == [1]
+    assert _mode(db) == 0o600
+    assert any(r.levelno == logging.ERROR and "CORRUPT" in r.getMessage() for r in caplog.records)
+
+
+def test_garbage_file_is_moved_aside(db: Path, caplog: pytest.LogCaptureFixture) -> None:
+    db.parent.mkdir(parents=True)
+    garbage = b"this is not an SQLite database \x00\xff" * 300
+    db.write_bytes(garbage)
+    os.chmod(db, 0o644)
+    Path(str(db) + "-wal").write_bytes(b"stale wal")  # must move with it, never be replayed
+    with caplog.at_level(logging.WARNING), FaceStore(db) as store:
+        _assert_recovered(db, store, garbage, caplog)
+        assert Path(str(store.recovered_from) + "-wal").read_bytes() == b"stale wal"
+
+
+def test_truncated_database_is_moved_aside(db: Path, caplog: pytest.LogCaptureFixture) -> None:
+    with FaceStore(db) as store:
+        store.save_faces(LearnedFace(i, _feats(i)) for i in range(1, 41))
+    size = db.stat().st_size
+    assert size > 500_000
+    with open(db, "r+b") as fh:
+        fh.truncate(size // 2)
+    truncated = db.read_bytes()
+    with caplog.at_level(logging.WARNING), FaceStore(db) as store:
+        _assert_recovered(db, store, truncated, caplog)
+
+
+@pytest.mark.parametrize("kind", ["schema_version", "foreign_tables"])
+def test_unknown_schema_is_moved_aside(db: Path, kind: str, caplog: pytest.LogCaptureFixture) -> None:
+    if kind == "schema_version":
+        with FaceStore(db) as store:
+            store.save_face(LearnedFace(1, _feats(1, 2)))
+        conn = sqlite3.connect(db)
+        conn.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
+    else:
+        db.parent.mkdir(parents=True)
+        conn = sqlite3.connect(db)
+        conn.execute("CREATE TABLE something_else (x INTEGER)")
+    conn.commit()
+    conn.close()
+    original = db.read_bytes()
+    with caplog.at_level(logging.WARNING), FaceStore(db) as store:
+        _assert_recovered(db, store, original, caplog)
+
+
+def test_empty_existing_file_is_a_valid_new_store(db: Path) -> None:
+    db.parent.mkdir(parents=True)
+    db.touch(mode=0o600)
+    with FaceStore(db) as store:
+        assert store.recovered_from is None and store.load_faces() == []
+
+
+# ------------------------------------------------------------------------------------------------
+# kill -9 durability
+# ------------------------------------------------------------------------------------------------
+_WRITER = """
+import sys
+import numpy as np
+from face_reid_master.face_store import FaceStore
+from face_reid_master.face_table import LearnedFace
+
+store = FaceStore(sys.argv[1], synchronous=sys.argv[2])
+for i in range(1, 100_000):
+    feats = np.random.default_rng(i).normal(0.0, 0.1, (50, 128)).astype(np.float32)
+    store.save_face(LearnedFace(i, feats, f"p{i}", float(i), float(i) + 0.5, i))
+    print(f"saved {i}", flush=True)
+"""
+
+
+@pytest.mark.parametrize("synchronous", ["FULL", "NORMAL"])
+def test_everything_committed_survives_kill_9(db: Path, synchronous: str) -> None:
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _WRITER, str(db), synchronous],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    watchdog = threading.Timer(60.0, proc.kill)
+    watchdog.start()
+    try:
+        assert proc.stdout is not None
+        acknowledged = 0
+        while acknowledged < 5:
+            line = proc.stdout.readline()
+            assert line, f"writer died early: {proc.stderr.read() if proc.stderr else ''}"
+            acknowledged = int(line.split()[1])
+        proc.send_signal(signal.SIGKILL)  # mid-write: the writer keeps saving in a tight loop
+        proc.wait(timeout=30)
+    finally:
+        watchdog.cancel()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    raw = sqlite3.connect(db)
+    try:
+        assert raw.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
+    finally:
+        raw.close()
+    with FaceStore(db) as store:
+        assert store.recovered_from is None
+        faces = store.load_faces()
+    ids = [f.face_id for f in faces]
+    assert len(ids) >= acknowledged and ids == list(range(1, len(ids) + 1))  # every acknowledged save
+    for f in faces:
+        expected = np.random.default_rng(f.face_id).normal(0.0, 0.1, (50, 128)).astype(np.float32)
+        assert f.features.tobytes() == expected.tobytes()
+        assert (f.name, f.created_s, f.n_observations) == (f"p{f.face_id}", float(f.face_id), f.face_id)
+
+
+# ------------------------------------------------------------------------------------------------
+# Default path and CLI
+# ------------------------------------------------------------------------------------------------
+def test_default_db_path(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("FACE_REID_DB", str(tmp_path / "x.db"))
+    assert default_db_path() == tmp_path / "x.db"
+    monkeypatch.delenv("FACE_REID_DB")
+    monkeypatch.delenv("XDG_DATA_HOME", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert default_db_path() == tmp_path / ".local" / "share" / "face_reid" / "faces.db"
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    assert default_db_path() == tmp_path / "xdg" / "face_reid" / "faces.db"
+
+
+def _cli_store(db: Path) -> None:
+    with FaceStore(db) as store:
+        store.save_faces(
+            [
+                LearnedFace(1, _feats(1, 3), "Ann", 1_700_000_000.0, 1_700_000_060.0, 12),
+                LearnedFace(2, _feats(2, 5), None, 1_700_000_100.0, 1_700_000_200.0, 40),
+                LearnedFace(3, _feats(3, 1), "Ann", 1_700_000_300.0, 1_700_000_300.0, 1),
+            ]
+        )
+
+
+def test_cli_list(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _cli_store(db)
+    assert cli_main(["--db", str(db), "list"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert lines[1].split() == ["1", "Ann", "3", "12", "2023-11-14T22:13:20Z", "2023-11-14T22:14:20Z"]
+    assert lines[2].split()[:4] == ["2", "-", "5", "40"]
+    assert "3 face(s)" in out
+    assert cli_main(["--db", str(db), "list", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [d["face_id"] for d in data] == [1, 2, 3]
+    assert data[1] == {
+        "face_id": 2,
+        "name": None,
+        "n_features": 5,
+        "n_observations": 40,
+        "created_s": 1_700_000_100.0,
+        "last_seen_s": 1_700_000_200.0,
+    }
+    assert all("vector" not in d and "features" not in d for d in data)
+
+
+def test_cli_forget_and_rename(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _cli_store(db)
+    assert cli_main(["--db", str(db), "forget", "2"]) == 0
+    assert "forgot face 2" in capsys.readouterr().out
+    assert cli_main(["--db", str(db), "forget", "2"]) == 1
+    assert "no face 2" in capsys.readouterr().err
+    assert cli_main(["--db", str(db), "rename", "3", "Bea"]) == 0
+    assert cli_main(["--db", str(db), "forget", "--name", "Ann"]) == 0
+    assert "forgot face(s) 1 named 'Ann'" in capsys.readouterr().out
+    assert cli_main(["--db", str(db), "forget", "--name", "Ann"]) == 1
+    assert cli_main(["--db", str(db), "rename", "3", "--clear"]) == 0
+    assert cli_main(["--db", str(db), "rename", "9", "X"]) == 1
+    assert cli_main(["--db", str(db), "rename", "3", "  "]) == 2
+    with FaceStore(db) as store:
+        assert [(s.face_id, s.name) for s in store.list_faces()] == [(3, None)]
+
+
+def test_cli_errors(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "nope" / "faces.db"
+    assert cli_main(["--db", str(missing), "list"]) == 4
+    assert "no face store" in capsys.readouterr().err
+    assert not missing.exists() and not missing.parent.exists()  # the CLI never creates a store
+    assert cli_main(["--db", str(db), "forget"]) == 2  # neither an id nor --name
+    assert cli_main(["--db", str(db), "forget", "1", "--name", "x"]) == 2
+    assert cli_main(["--db", str(db), "bogus"]) == 2
+    assert cli_main(["--help"]) == 0
+
+
+def test_an_invalid_stored_face_is_skipped_not_fatal(db: Path, caplog: pytest.LogCaptureFixture) -> None:
+    with FaceStore(db) as store:
+        store.save_faces([LearnedFace(1, _feats(1, 2)), LearnedFace(2, _feats(2, 2))])
+    raw = sqlite3.connect(db)
+    raw.execute("UPDATE features SET vector = x'0000' WHERE face_id = 1 AND idx = 1")
+    raw.commit()
+    raw.close()
+    with caplog.at_level(logging.ERROR), FaceStore(db) as store:
+        assert store.recovered_from is None
+        assert [f.face_id for f in store.load_faces()] == [2]
+    assert any("skipping invalid stored face 1" in r.getMessage() for r in caplog.records)
