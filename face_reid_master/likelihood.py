@@ -93,10 +93,10 @@ class SkewNormal:
 
 
 # Development fit (see models/face_likelihood.json for provenance): used only when that file is absent.
-_DEFAULT_POSITIVE = SkewNormal(alpha=1.5953616149672, xi=0.3653460778515, omega=0.0945412297176)
-_DEFAULT_NEGATIVE = SkewNormal(alpha=1.9193746448819, xi=0.7068673156970, omega=0.1239175933732)
-_DEFAULT_K_EXPONENT_POSITIVE = 0.581
-_DEFAULT_K_EXPONENT_NEGATIVE = 0.366
+_DEFAULT_POSITIVE = SkewNormal(alpha=1.61611087301098, xi=0.361333461700579, omega=0.09734399476886718)
+_DEFAULT_NEGATIVE = SkewNormal(alpha=1.7292112301308897, xi=0.7100754616322138, omega=0.12228723774733188)
+_DEFAULT_K_EXPONENT_POSITIVE = 0.538
+_DEFAULT_K_EXPONENT_NEGATIVE = 0.339
 
 
 def _log_survival_grid(sn: SkewNormal, lo: float, hi: float, n: int) -> npt.NDArray[np.float64]:

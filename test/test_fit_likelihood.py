@@ -1,0 +1,194 @@
+"""Tests of face-reid-fit-likelihood (face_reid_master.fit_likelihood_cli): pairs, min-of-K queries, the
+command on real fixture photos, and that it regenerates the shipped models/face_likelihood.json."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+from math import comb
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from face_reid_camera.face_photos import PhotoEmbedder
+from face_reid_master.fit_likelihood_cli import (
+    build_pair_distances,
+    decision_distance,
+    identity_source,
+    main,
+    sample_min_of_k_distances,
+)
+from face_reid_master.likelihood import DEFAULT_LIKELIHOOD_PATH, LikelihoodModel, fit_likelihood_model
+
+DATA_DIR = Path(__file__).parent / "data"
+FACES_DIR = DATA_DIR / "faces"
+DESK_FRAME = sorted((DATA_DIR / "rgbd" / "pcl_desk").glob("*_rgb.png"))[0]
+SUBSET = (  # 6 identities, 54 photos: 4 x 10 lfw, 8 deepface, 6 facerec
+    "lfw_Tony_Blair",
+    "lfw_Colin_Powell",
+    "lfw_Hugo_Chavez",
+    "lfw_Ariel_Sharon",
+    "deepface_id01",
+    "facerec_obama",
+)
+
+
+def _count(identity: str) -> int:
+    return len(list((FACES_DIR / identity).glob("*.jpg")))
+
+
+@pytest.fixture(scope="module")
+def subset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The 6 identities, plus one corrupt jpg and one face-less photo (a PCL desk crop)."""
+    root = tmp_path_factory.mktemp("faces")
+    for identity in SUBSET:
+        shutil.copytree(FACES_DIR / identity, root / identity)
+    (root / "lfw_Tony_Blair" / "zz_corrupt.jpg").write_bytes(b"\xff\xd8\xff\xe0 this is no jpeg")
+    cv2.imwrite(str(root / "facerec_obama" / "zz_desk.jpg"), cv2.imread(str(DESK_FRAME))[80:400, 120:520])
+    return root
+
+
+@pytest.fixture(scope="module")
+def subset_embeddings(subset_dir: Path) -> dict[str, np.ndarray]:
+    result = PhotoEmbedder().embed_folder_tree(subset_dir)
+    return {name: np.stack([e.embedding for e in embs]) for name, embs in result.identities.items()}
+
+
+@pytest.fixture(scope="module")
+def cli_run(subset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path, Path, str]:
+    out_dir = tmp_path_factory.mktemp("out")
+    out, plot = out_dir / "sub" / "model.json", out_dir / "fit.png"  # parent folders are created
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = main([str(subset_dir), "--out", str(out), "--plot", str(plot), "--seed", "3"])
+    return rc, out, plot, buf.getvalue()
+
+
+def _mode(sn: object) -> float:
+    grid = np.linspace(0.0, 2.0, 20001)
+    return float(grid[np.argmax(sn.pdf(grid))])  # type: ignore[attr-defined]
+
+
+N_SUBSET_PHOTOS = sum(_count(i) for i in SUBSET)
+N_SUBSET_POSITIVE = sum(comb(_count(i), 2) for i in SUBSET)
+
+
+def test_fit_command_writes_a_loadable_discriminative_model(cli_run: tuple[int, Path, Path, str]) -> None:
+    rc, out, _, stdout = cli_run
+    assert rc == 0
+    model = LikelihoodModel.default(out)
+    assert _mode(model.positive) < 0.55 < 0.65 < _mode(model.negative)
+    assert model.log_likelihood_ratio(0.4) > 0 > model.log_likelihood_ratio(0.8)
+    assert 0.0 < model.k_exponent_positive <= 1.0 and 0.0 < model.k_exponent_negative <= 1.0
+    meta = model.metadata
+    assert meta["n_images"] == N_SUBSET_PHOTOS == 54 and meta["n_identities"] == 6
+    assert meta["n_positive_pairs"] == N_SUBSET_POSITIVE
+    assert meta["n_negative_pairs"] == comb(N_SUBSET_PHOTOS, 2) - N_SUBSET_POSITIVE  # all, below 20000
+    assert meta["n_skipped_unreadable"] == 1 and meta["skipped_unreadable"] == ["lfw_Tony_Blair/zz_corrupt.jpg"]
+    assert meta["n_skipped_no_face"] == 1 and meta["skipped_no_face"] == ["facerec_obama/zz_desk.jpg"]
+    assert "4 ids / 40 photos" in meta["data"] and "5 identities with >= 8 photos" in meta["min_of_k_exponents"]
+    assert "skipped 1 unreadable, 1 without a detectable face" in stdout
+    assert 0.5 < decision_distance(model) < 0.7
+
+
+def test_plot_is_written(cli_run: tuple[int, Path, Path, str]) -> None:
+    _, _, plot, _ = cli_run
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    image = cv2.imread(str(plot))
+    assert image.shape == (500, 800, 3)
+    assert image.std() > 20  # not blank: histograms and curves drawn
+
+
+def test_pairs_counts_same_source_and_seeded_sampling(subset_embeddings: dict[str, np.ndarray]) -> None:
+    n = {k: len(v) for k, v in subset_embeddings.items()}
+    assert n == {i: _count(i) for i in SUBSET}
+    all_pairs = build_pair_distances(subset_embeddings, 20000, np.random.default_rng(0))
+    assert all_pairs.positive.size == N_SUBSET_POSITIVE
+    assert all_pairs.negative.size == all_pairs.n_negative_available == comb(54, 2) - N_SUBSET_POSITIVE
+    # positive pairs: exactly the within-identity distances
+    tb = subset_embeddings["lfw_Tony_Blair"].astype(np.float64)
+    tb_d = np.linalg.norm(tb[:, None] - tb[None], axis=2)[np.triu_indices(len(tb), 1)]
+    assert np.all(np.isin(np.round(tb_d, 6), np.round(all_pairs.positive, 6)))
+    assert np.median(all_pairs.positive) < 0.55 < np.median(all_pairs.negative)
+    # same source: only lfw x lfw negatives (deepface_id01 and facerec_obama have no partner)
+    same = build_pair_distances(subset_embeddings, 20000, np.random.default_rng(0), same_source_negatives=True)
+    assert same.n_negative_available == comb(40, 2) - 4 * comb(10, 2)
+    sampled = build_pair_distances(subset_embeddings, 100, np.random.default_rng(5), same_source_negatives=True)
+    again = build_pair_distances(subset_embeddings, 100, np.random.default_rng(5), same_source_negatives=True)
+    assert sampled.negative.size == 100 and sampled.n_negative_available == same.n_negative_available
+    np.testing.assert_array_equal(sampled.negative, again.negative)
+    assert np.all(np.isin(sampled.negative, same.negative))
+    assert len(np.unique(sampled.negative)) == 100  # without replacement
+    with pytest.raises(ValueError, match="at least 2 identities"):
+        build_pair_distances({"solo": subset_embeddings["lfw_Tony_Blair"]}, 10, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="max_negative_pairs"):
+        build_pair_distances(subset_embeddings, 0, np.random.default_rng(0))
+
+
+def test_min_of_k_queries(subset_embeddings: dict[str, np.ndarray]) -> None:
+    samples = sample_min_of_k_distances(subset_embeddings, np.random.default_rng(1), queries_per_k=500)
+    assert samples is not None
+    assert samples.identities == sorted(i for i in SUBSET if _count(i) >= 8)
+    assert sorted(samples.positive) == [1, 2, 3, 5, 7]
+    assert all(v.shape == (500,) for v in [*samples.positive.values(), *samples.negative.values()])
+    # the minimum over more features is smaller, for the same and for other people
+    assert np.median(samples.positive[7]) < np.median(samples.positive[1]) - 0.03
+    assert np.median(samples.negative[7]) < np.median(samples.negative[1]) - 0.03
+    assert np.median(samples.positive[7]) < 0.5 < np.median(samples.negative[7])
+    # too few identities with max(K) + 1 photos: nothing to fit
+    small = {k: v[:5] for k, v in subset_embeddings.items()}
+    assert sample_min_of_k_distances(small, np.random.default_rng(1)) is None
+    # same source: only lfw identities have partners; deepface_id01 queries never get negatives
+    same = sample_min_of_k_distances(
+        subset_embeddings, np.random.default_rng(1), queries_per_k=200, same_source_negatives=True
+    )
+    assert same is not None and same.negative[1].shape == (200,)
+    assert identity_source("lfw_George_W_Bush") == "lfw" and identity_source("alice") == "alice"
+
+
+def test_decision_distance_is_where_the_densities_cross(subset_embeddings: dict[str, np.ndarray]) -> None:
+    pairs = build_pair_distances(subset_embeddings, 20000, np.random.default_rng(0))
+    model = fit_likelihood_model(pairs.positive, pairs.negative)
+    d = decision_distance(model)
+    assert float(model.positive.pdf(d)) == pytest.approx(float(model.negative.pdf(d)), rel=1e-6)
+
+
+def test_unusable_folders_exit_2_with_a_message(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], subset_dir: Path
+) -> None:
+    out = tmp_path / "m.json"
+    (tmp_path / "empty").mkdir()
+    assert main([str(tmp_path / "empty"), "--out", str(out)]) == 2
+    assert "has no photos" in capsys.readouterr().err
+    assert main([str(tmp_path / "missing"), "--out", str(out)]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    (tmp_path / "solo").mkdir()
+    shutil.copytree(subset_dir / "facerec_obama", tmp_path / "solo" / "obama")
+    assert main([str(tmp_path / "solo"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "at least 2 identities" in err and "no face:" in err  # the desk crop is reported too
+    assert not out.exists()
+    with pytest.raises(SystemExit) as exc:
+        main([str(subset_dir), "--max-negative-pairs", "0"])
+    assert exc.value.code == 2
+
+
+def test_command_regenerates_the_shipped_model(tmp_path: Path) -> None:
+    """`face-reid-fit-likelihood test/data/faces --same-source-negatives` reproduces models/face_likelihood.json."""
+    out = tmp_path / "face_likelihood.json"
+    assert main([str(FACES_DIR), "--same-source-negatives", "--out", str(out)]) == 0
+    fresh = json.loads(out.read_text())
+    shipped = json.loads(DEFAULT_LIKELIHOOD_PATH.read_text())
+    for kind in ("positive", "negative"):
+        assert fresh[kind]["xi"] == pytest.approx(shipped[kind]["xi"], abs=2e-3)
+        assert fresh[kind]["omega"] == pytest.approx(shipped[kind]["omega"], abs=2e-3)
+        assert fresh[kind]["alpha"] == pytest.approx(shipped[kind]["alpha"], abs=0.1)
+    for key in ("k_exponent_positive", "k_exponent_negative"):
+        assert fresh[key] == pytest.approx(shipped[key], abs=0.02)
+    for key in ("n_positive_pairs", "n_negative_pairs", "n_images", "n_identities", "n_skipped_no_face"):
+        assert fresh["metadata"][key] == shipped["metadata"][key]
+    assert fresh["metadata"]["n_images"] == 177 and fresh["metadata"]["n_skipped_no_face"] == 0
