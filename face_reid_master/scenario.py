@@ -409,8 +409,8 @@ def plan_trajectory(
     The person starts inside (random spot, facing anywhere) with ``start_inside_probability``, else
     outside a random door, entering within ``initial_outside_max_s``. Then, repeatedly: with
     ``exit_probability`` leave through a random door, wait outside ``outside_range_s`` and come back
-    through a random door; otherwise walk to a random waypoint and, with ``pause_probability``, pause
-    there looking around.
+    through the same door (walking outside between doors would cross the room's footprint); otherwise
+    walk to a random waypoint and, with ``pause_probability``, pause there looking around.
     """
     cfg = config if config is not None else MotionConfig()
     if not (_finite(duration_s) and 0 < duration_s <= 7 * 24 * 3600.0):
@@ -420,7 +420,8 @@ def plan_trajectory(
     height = float(rng.uniform(*cfg.height_range_m)) if height_m is None else float(height_m)
     end = float(start_s) + float(duration_s)
     doors = world.doors
-    if rng.uniform() < cfg.start_inside_probability or not doors:
+    door = doors[0] if doors else None
+    if rng.uniform() < cfg.start_inside_probability or door is None:
         half = world.room.half_extents - cfg.waypoint_margin_m
         plan = _Planner(world, rng, cfg, float(start_s), rng.uniform(-half, half), float(rng.uniform(-np.pi, np.pi)))
         inside = True
@@ -431,16 +432,13 @@ def plan_trajectory(
         plan.hold(float(rng.uniform(0.0, cfg.initial_outside_max_s)))
         inside = False
     while plan.now < end:
-        if not inside:
-            door = doors[int(rng.integers(len(doors)))]
+        if not inside:  # back in through the door last used (``door``)
             speed = plan.speed()
-            if np.linalg.norm(plan.xy[-1] - door.outside_xy) > 1e-6:  # teleport-free: walk round outside
-                plan.walk_to(door.outside_xy, speed)
             plan.walk_to(door.centre_xy, speed)
             plan.walk_to(door.inside_xy, speed)
             inside = True
             continue
-        if doors and rng.uniform() < cfg.exit_probability:
+        if door is not None and rng.uniform() < cfg.exit_probability:
             door = doors[int(rng.integers(len(doors)))]
             speed = plan.speed()
             plan.walk_to(door.inside_xy, speed)
@@ -500,7 +498,8 @@ class VisibilityConfig:
 @dataclass(frozen=True)
 class Visibility:
     """Per (time, person) for one camera: detectable, face visible, range (m, camera to head), face angle
-    (deg, between facing and the direction to the camera), occluded (line of sight to the head blocked)."""
+    (deg, between facing and the direction to the camera), occluded (line of sight to the shoulders
+    blocked: the depth detector needs the upper body; the face needs the line to the head clear too)."""
 
     detectable: BoolArray
     face_visible: BoolArray
@@ -565,20 +564,25 @@ def camera_visibility(
         in_fov &= _in_image(camera, pts, cfg.image_margin_px)
     depth = camera.pose.to_camera(shoulders.reshape(-1, 3))[:, 2].reshape(n_t, n_p)
     in_range = (depth >= cfg.min_range_m) & (range_m <= cfg.max_range_m)
-    occluded = _occluded(cam, head, pos, heights, inside, cfg.occluder_radius_m)
+    occluded = _occluded(cam, shoulders, pos, heights, inside, cfg.occluder_radius_m)
+    face_occluded = _occluded(cam, head, pos, heights, inside, cfg.occluder_radius_m)
     detectable = inside & in_fov & in_range & ~occluded
     facing_vec = np.stack([np.cos(facing), np.sin(facing)], axis=-1)
     cos_angle = (facing_vec * to_cam).sum(axis=-1) / np.maximum(horiz, 1e-9)
     face_angle = np.degrees(np.arccos(np.clip(cos_angle, -1.0, 1.0)))
-    face_visible = detectable & (face_angle <= cfg.max_face_angle_deg) & (range_m <= cfg.max_face_range_m)
+    face_visible = detectable & ~face_occluded & (face_angle <= cfg.max_face_angle_deg)
+    face_visible &= range_m <= cfg.max_face_range_m
     return Visibility(detectable, face_visible, range_m, face_angle, occluded)
 
 
 def _occluded(
     cam: FloatArray, head: FloatArray, pos: FloatArray, heights: FloatArray, inside: BoolArray, radius_m: float
 ) -> BoolArray:
-    """Whether the line of sight camera -> head of person a passes through person b (a vertical cylinder of
-    ``radius_m`` up to b's height) in front of a, for any b. (T, P)."""
+    """Whether the line of sight camera -> point ``head`` (T, P, 3) of person a passes through another
+    person b (a vertical cylinder of ``radius_m`` up to b's height) in front of a. (T, P).
+
+    A high camera sees over the head of someone well in front: the ray's height is tested where it
+    passes b."""
     n_p = pos.shape[1]
     if n_p < 2:
         return np.zeros(pos.shape[:2], dtype=bool)

@@ -1,0 +1,121 @@
+"""Benchmark: master core time per camera-frame update, one thread.
+
+For (tracks, learned faces) = (5, 20), (20, 200), (50, 2000) with 50 features per face: every
+camera frame carries all tracks' detections, each with a face embedding; 10 % of the tracks (>= 1)
+are strangers still being classified against every learned face, the others are re-identified
+people (steady state). Reports median / p95 per update, sustained detections per second, and the
+ratio to a reference workload timed in the same run (eq. 4 brute force: one observation against
+all stored features), so numbers from a loaded machine stay comparable. Prints one JSON object.
+
+Usage: python bench/master_update.py [--frames N]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from face_reid_master.face_table import LearnedFace  # noqa: E402
+from face_reid_master.master_core import MasterConfig, MasterCore  # noqa: E402
+from face_reid_master.records import CameraFrameRecord, PersonRecord  # noqa: E402
+
+DIM = 128
+CENTRE_SCALE = 0.8 / np.sqrt(2 * DIM)  # different people ~0.8 apart (dlib-like)
+NOISE_SCALE = 0.45 / np.sqrt(2 * DIM)  # same person ~0.45 apart
+TARGET_MS = {(5, 20): 1.0, (20, 200): 2.0, (50, 2000): 10.0}
+CAMERAS = ("cam_0", "cam_1", "cam_2")
+
+
+def _scenario(n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator) -> dict[str, float]:
+    centres = rng.normal(0.0, CENTRE_SCALE, (n_faces + n_tracks, DIM)).astype(np.float32)
+    core = MasterCore(MasterConfig())
+    core.identity.import_faces(
+        LearnedFace(j + 1, (centres[j] + rng.normal(0.0, NOISE_SCALE, (50, DIM))).astype(np.float32))
+        for j in range(n_faces)
+    )
+    n_strangers = max(1, n_tracks // 10)
+    # track k shows learned face k (known) or, for the first n_strangers, a person never seen
+    person = [n_faces + k if k < n_strangers else k % n_faces for k in range(n_tracks)]
+    grid = np.array([[1.0 * (k % 10), 1.0 * (k // 10)] for k in range(n_tracks)])
+
+    def frame(i: int) -> CameraFrameRecord:
+        people = tuple(
+            PersonRecord(
+                np.array([*(grid[k] + rng.normal(0, 0.02, 2)), 0.0]), 0.05, 1.75,
+                (centres[person[k]] + rng.normal(0.0, NOISE_SCALE, DIM)).astype(np.float32), 0.9, 0.9,
+            )
+            for k in range(n_tracks)
+        )
+        return CameraFrameRecord(CAMERAS[i % len(CAMERAS)], i / 30.0, people)
+
+    i = 0
+    for _ in range(300):  # warm-up: tracks confirmed, known people re-identified
+        core.process_frame(frame(i))
+        i += 1
+        known = [t for t in core.tracks() if t.face_id]
+        if len(known) >= n_tracks - n_strangers:
+            break
+    core.identity.min_observations = 10**9  # keep the strangers pending: same work every frame
+    times = []
+    t_all = time.perf_counter()
+    for _ in range(frames):
+        f = frame(i)
+        t0 = time.perf_counter()
+        core.process_frame(f)
+        times.append((time.perf_counter() - t0) * 1e3)
+        i += 1
+    wall = time.perf_counter() - t_all
+    assert len(core.tracks()) == n_tracks, "tracks were lost during the benchmark"
+    arr = np.asarray(times)
+    return {
+        "median_ms": round(float(np.median(arr)), 3),
+        "p95_ms": round(float(np.percentile(arr, 95)), 3),
+        "detections_per_s": round(n_tracks * frames / wall, 1),
+        "identified_tracks": len([t for t in core.tracks() if t.face_id]),
+    }
+
+
+def _reference_ms(n_features: int, rng: np.random.Generator) -> float:
+    """Eq. 4 brute force for ONE observation against ``n_features`` stored features (numpy, median)."""
+    feats = rng.normal(0.0, CENTRE_SCALE, (n_features, DIM)).astype(np.float32)
+    obs = rng.normal(0.0, CENTRE_SCALE, DIM).astype(np.float32)
+    times = []
+    for _ in range(30):
+        t0 = time.perf_counter()
+        float(np.sqrt(((feats - obs) ** 2).sum(axis=1)).min())
+        times.append((time.perf_counter() - t0) * 1e3)
+    return float(np.median(times))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=200)
+    args = parser.parse_args()
+    rng = np.random.default_rng(0)
+    out: dict[str, object] = {"threads": 1, "features_per_face": 50}
+    for (n_tracks, n_faces), target in TARGET_MS.items():
+        res = _scenario(n_tracks, n_faces, args.frames, rng)
+        ref = _reference_ms(n_faces * 50, rng)
+        res["reference_eq4_brute_force_ms"] = round(ref, 3)
+        res["ratio_to_reference"] = round(res["median_ms"] / ref, 2)
+        res["target_ms"] = target
+        res["meets_target"] = res["median_ms"] <= target
+        out[f"tracks_{n_tracks}_faces_{n_faces}"] = res
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
