@@ -113,6 +113,7 @@ class FrameOutcome:
 
     accepted: bool
     reason: str = ""
+    track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> track id
     tracks_created: tuple[int, ...] = ()
     tracks_deleted: tuple[int, ...] = ()
     identity_events: tuple[Any, ...] = ()
@@ -199,7 +200,7 @@ class MasterCore:
                 st.frames_rejected_future += 1
                 return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)")
 
-        detections, embeddings = self._detections(frame)
+        detections, embeddings, person_index = self._detections(frame)
         result = self.tracker.update(detections, stamp, frame.camera_id)
         if result.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             st.frames_rejected_tracker_late += 1
@@ -223,7 +224,10 @@ class MasterCore:
             if fid is not None:
                 self._dirty_faces.setdefault(fid, stamp)
         self._maintain_faces(stamp)
-        return FrameOutcome(True, "", tuple(result.created), tuple(result.deleted), tuple(events))
+        track_of_person = {person_index[det]: tid for tid, det in result.associations}
+        return FrameOutcome(
+            True, "", track_of_person, tuple(result.created), tuple(result.deleted), tuple(events)
+        )
 
     def tick(self, now_s: float) -> None:
         """Advance time without a frame (tracks time out, released faces are saved)."""
@@ -234,11 +238,15 @@ class MasterCore:
         self._identity_step(result.deleted, now_s)
         self._maintain_faces(now_s)
 
-    def _detections(self, frame: CameraFrameRecord) -> tuple[list[Detection], dict[int, NDArray[np.float32]]]:
+    def _detections(
+        self, frame: CameraFrameRecord
+    ) -> tuple[list[Detection], dict[int, NDArray[np.float32]], list[int]]:
+        """Valid detections, their usable embeddings by detection index, and detection -> person index."""
         cfg, st = self.config, self.stats
         detections: list[Detection] = []
         embeddings: dict[int, NDArray[np.float32]] = {}
-        for person in frame.people:
+        person_index: list[int] = []
+        for p_index, person in enumerate(frame.people):
             st.detections_received += 1
             pos = np.asarray(person.position_world, dtype=np.float64).reshape(-1)
             std = float(person.position_std_m)
@@ -246,6 +254,7 @@ class MasterCore:
                 st.detections_rejected_position += 1
                 continue
             index = len(detections)
+            person_index.append(p_index)
             detections.append(
                 Detection(pos[:2], frame.camera_id, std, float(person.height_m), payload_index=index)
             )
@@ -263,7 +272,7 @@ class MasterCore:
                 st.embeddings_skipped_quality += 1
             else:
                 embeddings[index] = vec
-        return detections, embeddings
+        return detections, embeddings, person_index
 
     # ------------------------------------------------------------------------------ identities
     def _identity_step(self, deleted: Iterable[int], stamp: float) -> list[Any]:
