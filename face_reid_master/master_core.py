@@ -241,37 +241,50 @@ class MasterCore:
     def _detections(
         self, frame: CameraFrameRecord
     ) -> tuple[list[Detection], dict[int, NDArray[np.float32]], list[int]]:
-        """Valid detections, their usable embeddings by detection index, and detection -> person index."""
+        """Valid detections, their usable embeddings by detection index, and detection -> person index.
+
+        Positions and embeddings are validated in one vectorised pass over the frame (this runs for
+        every person of every camera frame).
+        """
         cfg, st = self.config, self.stats
-        detections: list[Detection] = []
-        embeddings: dict[int, NDArray[np.float32]] = {}
-        person_index: list[int] = []
-        for p_index, person in enumerate(frame.people):
-            st.detections_received += 1
+        people = frame.people
+        n = len(people)
+        st.detections_received += n
+        if n == 0:
+            return [], {}, []
+        xy = np.full((n, 2), np.nan)
+        std = np.full(n, np.nan)
+        for i, person in enumerate(people):
             pos = np.asarray(person.position_world, dtype=np.float64).reshape(-1)
-            std = float(person.position_std_m)
-            if pos.size < 2 or not np.all(np.isfinite(pos[:2])) or not (math.isfinite(std) and std > 0):
-                st.detections_rejected_position += 1
-                continue
-            index = len(detections)
-            person_index.append(p_index)
-            detections.append(
-                Detection(pos[:2], frame.camera_id, std, float(person.height_m), payload_index=index)
-            )
-            emb = person.embedding
-            if emb is None:
-                continue
-            vec = np.asarray(emb, dtype=np.float32).reshape(-1)
-            if vec.size == 0:
-                continue
-            if vec.size != EMBEDDING_DIM:
-                st.embeddings_rejected_length += 1
-            elif not np.all(np.isfinite(vec)):
-                st.embeddings_rejected_nonfinite += 1
-            elif person.face_quality < cfg.min_face_quality:
-                st.embeddings_skipped_quality += 1
-            else:
-                embeddings[index] = vec
+            if pos.size >= 2:
+                xy[i] = pos[:2]
+            std[i] = person.position_std_m
+        valid = np.isfinite(xy).all(axis=1) & np.isfinite(std) & (std > 0)
+        st.detections_rejected_position += int(n - np.count_nonzero(valid))
+        person_index = [int(i) for i in np.flatnonzero(valid)]
+        detections = [
+            Detection(xy[i], frame.camera_id, float(std[i]), float(people[i].height_m), payload_index=k)
+            for k, i in enumerate(person_index)
+        ]
+        with_face = [
+            (k, i) for k, i in enumerate(person_index)
+            if people[i].embedding is not None and np.size(people[i].embedding) > 0
+        ]
+        embeddings: dict[int, NDArray[np.float32]] = {}
+        if not with_face:
+            return detections, embeddings, person_index
+        good_len = [(k, i) for k, i in with_face if np.size(people[i].embedding) == EMBEDDING_DIM]
+        st.embeddings_rejected_length += len(with_face) - len(good_len)
+        if not good_len:
+            return detections, embeddings, person_index
+        stacked = np.stack([np.asarray(people[i].embedding, dtype=np.float32).reshape(-1) for _, i in good_len])
+        finite = np.isfinite(stacked).all(axis=1)
+        quality = np.array([people[i].face_quality for _, i in good_len], dtype=np.float64)
+        good_quality = quality >= cfg.min_face_quality
+        st.embeddings_rejected_nonfinite += int(np.count_nonzero(~finite))
+        st.embeddings_skipped_quality += int(np.count_nonzero(finite & ~good_quality))
+        for row in np.flatnonzero(finite & good_quality):
+            embeddings[good_len[row][0]] = stacked[row]
         return detections, embeddings, person_index
 
     # ------------------------------------------------------------------------------ identities
