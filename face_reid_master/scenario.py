@@ -277,8 +277,8 @@ class MotionConfig:
     look_hold_range_s: tuple[float, float] = (0.4, 2.0)
     look_around_max_rad: float = 2.1
     turn_rate_rad_s: float = 3.5
-    exit_probability: float = 0.1
-    outside_range_s: tuple[float, float] = (2.0, 25.0)
+    exit_probability: float = 0.12
+    outside_range_s: tuple[float, float] = (2.0, 15.0)
     start_inside_probability: float = 0.6
     initial_outside_max_s: float = 15.0
     waypoint_margin_m: float = 1.0
@@ -563,7 +563,7 @@ def camera_visibility(
     for pts in (top, shoulders, left, right):
         in_fov &= _in_image(camera, pts, cfg.image_margin_px)
     depth = camera.pose.to_camera(shoulders.reshape(-1, 3))[:, 2].reshape(n_t, n_p)
-    in_range = (depth >= cfg.min_range_m) & (range_m <= cfg.max_range_m)
+    in_range = (depth >= cfg.min_range_m) & (depth <= cfg.max_range_m)  # depth (camera z), as a Kinect cuts off
     occluded = _occluded(cam, shoulders, pos, heights, inside, cfg.occluder_radius_m)
     face_occluded = _occluded(cam, head, pos, heights, inside, cfg.occluder_radius_m)
     detectable = inside & in_fov & in_range & ~occluded

@@ -29,7 +29,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--people", type=int, default=6, help="people per day (default 6)")
     p.add_argument("--cameras", type=int, default=3, help="number of cameras (default 3)")
     p.add_argument("--duration", type=float, default=None,
-                   help="seconds per day (default 200 at feature level, 30 at pixel level)")
+                   help="seconds per day (default 200 at feature level, 60 at pixel level)")
     p.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives identical files")
     p.add_argument("--level", choices=LEVELS, default="feature",
                    help="feature: camera messages from photo embeddings (fast); pixel: rendered RGB-D frames "
@@ -61,7 +61,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
     log = None if args.quiet else sys.stderr
-    duration = args.duration if args.duration is not None else (200.0 if args.level == "feature" else 30.0)
+    duration = args.duration if args.duration is not None else (200.0 if args.level == "feature" else 60.0)
     try:
         config = SimConfig(
             num_people=args.people, num_cameras=args.cameras, duration_s=duration, seed=args.seed, level=args.level,

@@ -1,0 +1,258 @@
+"""Tests of the simulator's world model: room and cameras, motion, visibility geometry, losses, glances."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_master.scenario import (
+    MotionConfig,
+    Room,
+    SimCamera,
+    Trajectory,
+    VisibilityConfig,
+    camera_visibility,
+    count_losses,
+    coverage_fraction,
+    glance_ids,
+    make_world,
+    plan_trajectory,
+    room_size_for,
+    sample_trajectories,
+)
+
+K = CameraIntrinsics.kinect_default()
+
+
+def _camera(x: float = 0.0, y: float = 0.0, z: float = 2.4, tilt_deg: float = 20.0, yaw_deg: float = 0.0) -> SimCamera:
+    xyz_rpy = (x, y, z, 0.0, math.radians(tilt_deg), math.radians(yaw_deg))
+    return SimCamera("c", K, CameraPose.from_xyz_rpy(*xyz_rpy), xyz_rpy)
+
+
+def _vis(camera: SimCamera, people: list[tuple[float, float, float]], heights: list[float] | None = None,
+         config: VisibilityConfig | None = None):
+    """Visibility of people (x, y, facing_deg) at one instant."""
+    xy = np.array([[p[0], p[1]] for p in people], dtype=float)[None]
+    facing = np.radians(np.array([p[2] for p in people], dtype=float))[None]
+    h = np.array(heights if heights is not None else [1.75] * len(people))
+    return camera_visibility(camera, xy, facing, h, np.ones((1, len(people)), dtype=bool), config)
+
+
+# --- room, cameras, doors
+
+
+def test_reference_room_is_10_by_8_and_scales_with_cameras() -> None:
+    room = room_size_for(3)
+    assert (room.width_m, room.depth_m) == (10.0, 8.0)
+    big = room_size_for(6)
+    assert big.width_m * big.depth_m == pytest.approx(160.0, rel=0.03)
+    with pytest.raises(ValueError, match="num_cameras"):
+        room_size_for(0)
+    with pytest.raises(ValueError, match="width_m"):
+        Room(1.0, 8.0)
+
+
+def test_world_cameras_hang_on_walls_and_look_into_the_room() -> None:
+    world = make_world(3, np.random.default_rng(5))
+    half = world.room.half_extents
+    assert len(world.cameras) == 3 and len(world.doors) == 2
+    for cam in world.cameras:
+        x, y, z, roll, pitch, yaw = cam.xyz_rpy
+        on_wall = min(half[0] - abs(x), half[1] - abs(y))
+        assert 0.0 <= on_wall <= 0.06
+        assert 2.2 <= z <= 2.6 and math.radians(15) <= pitch <= math.radians(25) and roll == 0.0
+        # the optical axis points into the room: 2 m ahead is inside
+        ahead = np.array([x, y]) + 2.0 * np.array([math.cos(yaw), math.sin(yaw)])
+        assert world.room.contains(ahead)
+        # the camera sees part of the room
+        assert coverage_fraction(type(world)(world.room, (cam,), world.doors)) > 0.1
+    for door in world.doors:
+        assert not world.room.contains(door.outside_xy) and world.room.contains(door.inside_xy)
+        # doors keep away from the cameras
+        assert min(np.linalg.norm(door.centre_xy - c.position[:2]) for c in world.cameras) > 1.5
+    assert 0.45 <= coverage_fraction(world) <= 0.9
+    again = make_world(3, np.random.default_rng(5))
+    assert [c.xyz_rpy for c in again.cameras] == [c.xyz_rpy for c in world.cameras]
+
+
+# --- motion
+
+
+def test_motion_stays_in_the_room_except_through_doors() -> None:
+    world = make_world(3, np.random.default_rng(1))
+    cfg = MotionConfig()
+    t = np.arange(0.0, 300.0, 0.05)
+    outside_seen = 0
+    for seed in range(8):
+        traj = plan_trajectory(world, np.random.default_rng(seed), 300.0, cfg)
+        assert traj.t_s[-1] >= 300.0
+        xy, facing = traj.sample(t)
+        assert world.allowed(xy).all(), "a person left the room other than through a door"
+        outside = ~world.room.contains(xy)
+        outside_seen += int(outside.sum())
+        for k in np.flatnonzero(outside):
+            assert any(d.in_corridor(xy[k]) for d in world.doors)
+        # speed never above the maximum walking speed
+        step = np.linalg.norm(np.diff(xy, axis=0), axis=1) / 0.05
+        assert step.max() <= cfg.speed_range_mps[1] + 1e-6
+        # while walking, people face where they go
+        moving = step > 0.3
+        heading = np.arctan2(*np.diff(xy, axis=0)[moving][:, ::-1].T)
+        diff = np.angle(np.exp(1j * (heading - facing[1:][moving])))
+        assert np.mean(np.abs(diff) < 0.2) > 0.95
+        assert 1.55 <= traj.height_m <= 1.90
+    assert outside_seen > 0, "nobody ever went out: exits are not simulated"
+
+
+def test_trajectory_validation_and_sampling() -> None:
+    traj = Trajectory(np.array([0.0, 2.0]), np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.0, 0.0]), 1.7)
+    xy, _ = traj.sample(np.array([-1.0, 1.0, 5.0]))
+    np.testing.assert_allclose(xy, [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    with pytest.raises(ValueError, match="strictly increasing"):
+        Trajectory(np.array([0.0, 0.0]), np.zeros((2, 2)), np.zeros(2), 1.7)
+    with pytest.raises(ValueError, match="finite"):
+        Trajectory(np.array([0.0, 1.0]), np.array([[0.0, np.nan], [0.0, 0.0]]), np.zeros(2), 1.7)
+    with pytest.raises(ValueError, match="height_m"):
+        Trajectory(np.array([0.0, 1.0]), np.zeros((2, 2)), np.zeros(2), 3.0)
+    with pytest.raises(ValueError, match="exit_probability"):
+        MotionConfig(exit_probability=1.5)
+    with pytest.raises(ValueError, match="speed_range_mps"):
+        MotionConfig(speed_range_mps=(1.4, 0.6))
+    world = make_world(1, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="duration_s"):
+        plan_trajectory(world, np.random.default_rng(0), float("nan"))
+
+
+def test_default_scenario_has_about_fifty_losses_in_200_s() -> None:
+    # the tuning target: 6 people, 3 cameras, 200 s -> ~50 track losses (the paper: 49 and 58)
+    totals = []
+    for seed in range(4):
+        world = make_world(3, np.random.default_rng([seed, 0]))
+        trajs = [plan_trajectory(world, np.random.default_rng([seed, 1, p]), 200.0) for p in range(6)]
+        t = np.arange(0.0, 200.0, 0.1)
+        xy, facing = sample_trajectories(trajs, t)
+        heights = np.array([tr.height_m for tr in trajs])
+        in_room = world.room.contains(xy)
+        seen = np.zeros(in_room.shape, dtype=bool)
+        for cam in world.cameras:
+            seen |= camera_visibility(cam, xy, facing, heights, in_room).detectable
+        totals.append(count_losses(t, seen.T).total_losses)
+    assert 35 <= np.mean(totals) <= 70, totals
+
+
+# --- visibility
+
+
+def test_person_in_front_facing_the_camera_is_detected_with_face() -> None:
+    vis = _vis(_camera(), [(3.0, 0.0, 180.0)])
+    assert vis.detectable[0, 0] and vis.face_visible[0, 0] and not vis.occluded[0, 0]
+    assert vis.face_angle_deg[0, 0] == pytest.approx(0.0, abs=1e-6)
+    assert vis.range_m[0, 0] == pytest.approx(math.hypot(3.0, 2.4 - 1.63), rel=1e-6)
+
+
+def test_facing_away_or_too_far_hides_the_face_only() -> None:
+    cam = _camera()
+    away = _vis(cam, [(3.0, 0.0, 0.0)])
+    assert away.detectable[0, 0] and not away.face_visible[0, 0]
+    assert away.face_angle_deg[0, 0] == pytest.approx(180.0)
+    # angle limit: 49 deg visible, 51 deg not
+    assert _vis(cam, [(3.0, 0.0, 180.0 - 49.0)]).face_visible[0, 0]
+    assert not _vis(cam, [(3.0, 0.0, 180.0 - 51.0)]).face_visible[0, 0]
+    far = _vis(cam, [(5.0, 0.0, 180.0)])
+    assert far.detectable[0, 0] and not far.face_visible[0, 0]  # beyond max_face_range_m = 4.5
+    assert _vis(cam, [(5.0, 0.0, 180.0)], config=VisibilityConfig(max_face_range_m=6.0)).face_visible[0, 0]
+
+
+def test_out_of_fov_too_close_or_too_far_is_not_detected() -> None:
+    cam = _camera()
+    half_fov = math.degrees(math.atan2(320.0, 525.0))  # 31.4 deg
+    inside = math.radians(half_fov - 8.0)
+    outside = math.radians(half_fov + 3.0)
+    assert _vis(cam, [(3.0 * math.cos(inside), 3.0 * math.sin(inside), 180.0)]).detectable[0, 0]
+    assert not _vis(cam, [(3.0 * math.cos(outside), 3.0 * math.sin(outside), 180.0)]).detectable[0, 0]
+    assert not _vis(cam, [(-2.0, 0.0, 0.0)]).detectable[0, 0]  # behind the camera
+    assert not _vis(cam, [(0.6, 0.0, 180.0)]).detectable[0, 0]  # under the camera: head above the image
+    assert not _vis(cam, [(6.5, 0.0, 180.0)]).detectable[0, 0]  # beyond max_range_m = 6
+    # partly outside the image (head edge past the border) is not detected
+    edge = math.radians(half_fov - 0.5)
+    assert not _vis(cam, [(3.0 * math.cos(edge), 3.0 * math.sin(edge), 180.0)]).detectable[0, 0]
+    # nobody outside the room is seen
+    vis = camera_visibility(cam, np.array([[[3.0, 0.0]]]), np.array([[math.pi]]), np.array([1.75]),
+                            np.array([[False]]))
+    assert not vis.detectable[0, 0]
+
+
+def test_occlusion_by_a_person_in_front() -> None:
+    cam = _camera()  # 2.4 m high
+    # just in front: the line of sight to the shoulders and to the head passes through B
+    vis = _vis(cam, [(4.0, 0.0, 180.0), (3.5, 0.0, 180.0)])
+    assert vis.occluded[0, 0] and not vis.detectable[0, 0] and not vis.face_visible[0, 0]
+    assert vis.detectable[0, 1] and vis.face_visible[0, 1] and not vis.occluded[0, 1]
+    # a step aside clears the line of sight
+    side = _vis(cam, [(4.0, 0.0, 180.0), (3.5, 0.5, 180.0)])
+    assert side.detectable[0, 0] and side.face_visible[0, 0]
+    # B behind A hides nothing
+    behind = _vis(cam, [(4.0, 0.0, 180.0), (4.6, 0.0, 180.0)])
+    assert behind.detectable[0, 0] and not behind.detectable[0, 1]
+    # a high camera sees over the head of someone far in front (the ray passes B at 2.0 m > 1.75 m)
+    over = _vis(cam, [(4.0, 0.0, 180.0), (2.0, 0.0, 180.0)])
+    assert over.detectable[0, 0] and over.face_visible[0, 0]
+    # ... but not over a tall person there
+    tall = _vis(cam, [(4.0, 0.0, 180.0), (2.0, 0.0, 180.0)], heights=[1.75, 2.1])
+    assert not tall.detectable[0, 0]
+    # a short person (1.2 m) 0.4 m in front of a tall one (1.9 m) hides neither shoulders nor face
+    short = _vis(cam, [(4.0, 0.0, 180.0), (3.6, 0.0, 180.0)], heights=[1.9, 1.2])
+    assert short.detectable[0, 0] and short.face_visible[0, 0]
+    # someone outside the room hides nobody
+    xy = np.array([[[4.0, 0.0], [2.0, 0.0]]])
+    vis = camera_visibility(cam, xy, np.full((1, 2), math.pi), np.array([1.75, 1.75]), np.array([[True, False]]))
+    assert vis.detectable[0, 0]
+
+
+def test_visibility_rejects_bad_shapes() -> None:
+    cam = _camera()
+    with pytest.raises(ValueError, match="xy"):
+        camera_visibility(cam, np.zeros((3, 2)), np.zeros((3,)), np.ones(1), np.ones((3,), dtype=bool))
+    with pytest.raises(ValueError, match="do not match"):
+        camera_visibility(cam, np.zeros((1, 2, 2)), np.zeros((1, 3)), np.ones(2), np.ones((1, 2), dtype=bool))
+    with pytest.raises(ValueError, match="max_face_angle_deg"):
+        VisibilityConfig(max_face_angle_deg=120.0)
+
+
+# --- losses and glances
+
+
+def test_loss_counting() -> None:
+    t = np.arange(0.0, 20.0, 0.1)
+    vis = np.zeros((4, t.size), dtype=bool)
+    vis[0, (t < 5) | ((t >= 6.0) & (t < 10)) | (t >= 13)] = True  # 1 s gap (kept), 3 s gap (a loss)
+    vis[1, t < 8] = True  # leaves for good: a loss at the end
+    vis[2, (t >= 4) & (t < 6)] = True  # first seen late: the time before does not count
+    summary = count_losses(t, vis, min_gap_s=1.5)
+    assert summary.losses == (1, 1, 1, 0)
+    assert summary.total_losses == 3
+    assert len(summary.segments[0]) == 2
+    assert summary.segments[0][0] == pytest.approx((0.0, 9.9))
+    assert summary.segments[3] == ()
+    assert summary.total_segments == 2 + 1 + 1
+    with pytest.raises(ValueError, match="visible"):
+        count_losses(t, vis[:, :-1])
+    with pytest.raises(ValueError, match="increasing"):
+        count_losses(t[::-1], vis)
+
+
+def test_glance_numbering_bridges_short_gaps() -> None:
+    t = np.arange(0.0, 5.0, 0.1)
+    vis = np.zeros(t.size, dtype=bool)
+    vis[5:10] = True
+    vis[12:15] = True  # 0.3 s gap: same glance
+    vis[30:35] = True  # 1.6 s gap: a new glance
+    ids, n = glance_ids(t, vis, max_gap_s=0.5)
+    assert n == 2
+    assert set(ids[5:15][vis[5:15]]) == {0}
+    assert set(ids[30:35]) == {1}
+    assert (ids[~vis] == -1).all()
+    assert glance_ids(t, np.zeros(t.size, dtype=bool))[1] == 0

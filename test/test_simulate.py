@@ -1,0 +1,289 @@
+"""Tests of the scenario simulator on the project's licensed face fixtures, with the real models.
+
+Feature level (3 people, 2 cameras, 20 s), a second day, a tiny pixel-level run through the real camera
+pipeline, determinism, the directory format and bad faces folders."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from face_reid_master.records import CameraFrameRecord, PersonRecord
+from face_reid_master.sim_cli import main
+from face_reid_master.simulate import (
+    NUM_VARIANTS,
+    InsufficientFacesError,
+    PhotoBank,
+    ScenarioFormatError,
+    SimConfig,
+    load_scenario,
+    simulate,
+    write_scenario,
+)
+
+FACES = Path(__file__).parent / "data" / "faces"
+# identities with >= 4 photos, copied into a small faces folder so the tests embed few photos
+IDENTITIES = ("lfw_Colin_Powell", "lfw_Tony_Blair", "deepface_id02", "deepface_id03", "facerec_obama")
+PHOTOS_PER_IDENTITY = 4
+
+
+@pytest.fixture(scope="module")
+def faces(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("faces")
+    for ident in IDENTITIES:
+        (root / ident).mkdir()
+        for photo in sorted((FACES / ident).glob("*.jpg"))[:PHOTOS_PER_IDENTITY]:
+            shutil.copy(photo, root / ident / photo.name)
+    return root
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("cache") / "embeddings.npz"
+
+
+@pytest.fixture(scope="module")
+def feature_dir(faces: Path, cache: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=20.0, seed=3, second_day=True, new_people=1)
+    out = tmp_path_factory.mktemp("scenario")
+    write_scenario(simulate(faces, cfg, cache_path=cache), out)
+    return out
+
+
+def _true_xy(scenario, gt_id: int, stamp: float) -> np.ndarray:
+    g = scenario.ground_truth
+    day = g.day[int(np.argmin(np.abs(g.t_s - stamp)))]
+    sel = g.day == day
+    return np.array([np.interp(stamp, g.t_s[sel], g.xy[gt_id, sel, k]) for k in range(2)])
+
+
+def test_feature_level_scenario_matches_its_ground_truth(feature_dir: Path, faces: Path, cache: Path) -> None:
+    s = load_scenario(feature_dir)
+    doc = s.document
+    assert doc["level"] == "feature" and doc["seed"] == 3
+    assert [c.camera_id for c in s.cameras] == ["camera1", "camera2"]
+    assert len(s.frames) == doc["summary"]["frames"] == 2 * 2 * 20 * 15  # 2 days, 2 cameras, 20 s, 15 Hz
+    stamps = np.array([f.stamp_s for f in s.frames])
+    assert np.all(np.diff(stamps) >= 0)
+    assert all(isinstance(f, CameraFrameRecord) and all(isinstance(p, PersonRecord) for p in f.people)
+               for f in s.frames)
+    assert len(s.frame_gt_ids) == len(s.frames)
+    n_det = sum(len(f.people) for f in s.frames)
+    assert n_det == doc["summary"]["detections"] > 100
+    # positions: noisy measurements of the true positions
+    errors = []
+    for f, gts in zip(s.frames, s.frame_gt_ids, strict=True):
+        assert len(gts) == len(f.people)
+        for p, gt in zip(f.people, gts, strict=True):
+            assert p.position_world.shape == (3,) and 0.03 < p.position_std_m < 0.15
+            if gt >= 0:
+                errors.append(np.linalg.norm(p.position_world[:2] - _true_xy(s, int(gt), f.stamp_s)))
+    errors_a = np.array(errors)
+    assert np.median(errors_a) < 0.15 and errors_a.max() < 0.6
+    # faces: real embeddings, nearest to a photo of the right identity
+    bank = PhotoBank(faces, cache)
+    photos = {p["index"]: p for p in doc["photos"]}
+    base = {}
+    for ident in doc["identities"]:
+        loaded = bank.load_identity(ident["name"])
+        assert loaded is not None
+        for ph in loaded.photos:
+            index = next(i for i, p in photos.items() if p["path"] == ph.rel_path)
+            base[index] = (ident["gt_id"], ph.embeddings[0])
+    keys = sorted(base)
+    matrix = np.array([base[k][1] for k in keys])
+    owners = np.array([base[k][0] for k in keys])
+    right, total = 0, 0
+    for f, gts, photo_ids in zip(s.frames, s.frame_gt_ids, s.frame_face_photos, strict=True):
+        for p, gt, ph in zip(f.people, gts, photo_ids, strict=True):
+            if p.embedding is None:
+                assert ph == -1 and p.face_score == 0.0
+                continue
+            assert p.embedding.shape == (128,) and p.embedding.dtype == np.float32
+            assert 0.6 <= p.face_score <= 1.0 and 0.0 <= p.face_quality <= 1.0
+            assert photos[int(ph)]["identity"] == doc["identities"][int(gt)]["name"]
+            total += 1
+            right += int(owners[np.argmin(np.linalg.norm(matrix - p.embedding, axis=1))] == gt)
+    assert total >= 20
+    assert right / total > 0.8
+
+
+def test_glances_reuse_one_photo_and_days_use_their_own_photos(feature_dir: Path) -> None:
+    s = load_scenario(feature_dir)
+    with np.load(feature_dir / "frames.npz") as a:
+        offsets, cams, stamps = a["frame_offsets"], a["frame_camera"], a["frame_stamp_s"]
+        det_face, det_gt = a["det_face"], a["det_gt_id"]
+        f_photo, f_glance, f_variant = a["face_photo"], a["face_glance"], a["face_variant"]
+    frame_of_det = np.repeat(np.arange(stamps.size), np.diff(offsets))
+    has = det_face >= 0
+    glance = f_glance[det_face[has]]
+    photo = f_photo[det_face[has]]
+    gt = det_gt[has]
+    cam = cams[frame_of_det[has]]
+    t = stamps[frame_of_det[has]]
+    assert np.all(glance >= 0) and np.all((f_variant >= 0) & (f_variant < NUM_VARIANTS))
+    multi = 0
+    for g in np.unique(glance):
+        sel = glance == g
+        assert len(set(photo[sel])) == 1, "a glance switched photos"
+        assert len(set(gt[sel])) == 1 and len(set(cam[sel])) == 1
+        multi += int(sel.sum() > 1)
+        if sel.sum() > 1:  # consecutive frames of one camera, and not all the same embedding
+            assert np.diff(np.sort(t[sel])).max() < 1.0
+    assert multi >= 3
+    # frames within one glance differ a little (variants + noise), less than other people's faces do
+    emb = {}
+    with np.load(feature_dir / "frames.npz") as a:
+        e = a["face_embedding"]
+    for g in np.unique(glance):
+        rows = det_face[has][glance == g]
+        if rows.size > 2:
+            emb[int(g)] = e[rows]
+    within = np.median([np.median(np.linalg.norm(v - v.mean(0), axis=1)) for v in emb.values()])
+    assert 0.02 < within < 0.35
+    # photos per day: day-2 faces come from day-2 photos, never from day-1 ones
+    doc = s.document
+    day2_start = doc["days"][1]["start_s"]
+    for ident in doc["identities"]:
+        used = {d: set(photo[(gt == ident["gt_id"]) & ((t >= day2_start) == (d == 2))].tolist()) for d in (1, 2)}
+        for d in ident["days"]:
+            assert used[d] <= set(ident["photos"][str(d)])
+        if ident["days"] == [1, 2]:
+            assert not set(ident["photos"]["1"]) & set(ident["photos"]["2"])
+
+
+def test_second_day_brings_back_some_people_and_new_ones(feature_dir: Path) -> None:
+    s = load_scenario(feature_dir)
+    days = s.days
+    assert [d["day"] for d in days] == [1, 2]
+    assert days[1]["start_s"] == pytest.approx(20.0 + 600.0)
+    assert days[0]["gt_ids"] == [0, 1, 2]
+    back = [g for g in days[1]["gt_ids"] if g in days[0]["gt_ids"]]
+    assert len(back) == 2 and days[1]["gt_ids"][-1] == 3 and len(s.identities) == 4
+    g = s.ground_truth
+    assert g.xy.shape == (4, g.t_s.size, 2) and g.in_view.shape == (4, g.t_s.size, 2)
+    assert np.isnan(g.xy[3, g.day == 1]).all() and np.isfinite(g.xy[3, g.day == 2]).all()
+    gts_day2 = {int(x) for f, gts in zip(s.frames, s.frame_gt_ids, strict=True) if f.stamp_s >= 620.0 for x in gts}
+    assert 3 in gts_day2 and not gts_day2 - set(days[1]["gt_ids"]) - {-1}
+    summary = s.summary
+    assert summary["losses"] == sum(d["losses"] for d in summary["per_day"])
+
+
+def test_same_seed_gives_identical_files_other_seed_differs(faces: Path, cache: Path, tmp_path: Path) -> None:
+    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=10.0, seed=11)
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    write_scenario(simulate(faces, cfg, cache_path=cache), a)
+    write_scenario(simulate(faces, cfg, cache_path=cache), b)
+    write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=10.0, seed=12),
+                            cache_path=cache), c)
+    for name in ("frames.npz", "ground_truth.npz", "scenario.json"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    assert (a / "frames.npz").read_bytes() != (c / "frames.npz").read_bytes()
+
+
+def test_pixel_level_runs_the_real_camera_pipeline(faces: Path, cache: Path, tmp_path: Path) -> None:
+    # 2 people, 1 camera, 2 s at 2 Hz; with this seed both people are in view most of the time
+    cfg = SimConfig(num_people=2, num_cameras=1, duration_s=2.0, rate_hz=2.0, seed=13, level="pixel",
+                    room_size_m=(7.0, 5.0))
+    write_scenario(simulate(faces, cfg, cache_path=cache), tmp_path / "px")
+    s = load_scenario(tmp_path / "px")
+    assert s.level == "pixel" and len(s.frames) == 4
+    g = s.ground_truth
+    expected, found, faces_found = 0, 0, 0
+    for f, gts, photos in zip(s.frames, s.frame_gt_ids, s.frame_face_photos, strict=True):
+        k = int(np.argmin(np.abs(g.t_s - f.stamp_s)))
+        in_view = set(np.flatnonzero(g.in_view[:, k, 0]).tolist())
+        expected += len(in_view)
+        for p, gt, ph in zip(f.people, gts, photos, strict=True):
+            if gt < 0:
+                continue
+            found += int(gt) in in_view
+            assert np.linalg.norm(p.position_world[:2] - _true_xy(s, int(gt), f.stamp_s)) < 0.3
+            if p.embedding is not None and ph >= 0:
+                faces_found += 1
+                assert s.document["photos"][int(ph)]["identity"] == s.identities[int(gt)]["name"]
+    assert expected >= 6
+    assert found >= 0.75 * expected  # the real depth detector finds the people the world model says are in view
+    assert faces_found >= 1
+    with np.load(tmp_path / "px" / "frames.npz") as a:
+        assert (a["face_variant"] == -1).all()
+
+
+def test_cli_reports_skipped_photos_and_rejects_unusable_folders(
+    faces: Path, cache: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad"
+    for ident in IDENTITIES[:3]:
+        shutil.copytree(faces / ident, bad / ident)
+    (bad / IDENTITIES[0] / "corrupt.jpg").write_bytes(b"not a jpeg at all")
+    cv2.imwrite(str(bad / IDENTITIES[1] / "wall.jpg"), np.full((120, 120, 3), 128, np.uint8))
+    (bad / IDENTITIES[1] / "notes.txt").write_text("ignored")
+    out = tmp_path / "out"
+    code = main(["--faces", str(bad), "--people", "3", "--cameras", "1", "--duration", "5", "--seed", "2",
+                 "--out", str(out), "--cache", str(cache)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "skipped 1 unreadable files and 1 photos without a detectable face" in captured.err
+    summary = json.loads(captured.out)
+    assert summary["skipped_unreadable"] == 1 and summary["skipped_no_face"] == 1
+    doc = json.loads((out / "scenario.json").read_text())
+    assert doc["summary"]["skipped_unreadable"] == [f"{IDENTITIES[0]}/corrupt.jpg"]
+    assert doc["summary"]["skipped_no_face"] == [f"{IDENTITIES[1]}/wall.jpg"]
+    assert load_scenario(out).summary["frames"] == 5 * 15
+    # more people than usable identities
+    code = main(["--faces", str(bad), "--people", "4", "--out", str(tmp_path / "o2"), "--cache", str(cache)])
+    assert code == 2
+    assert "only 3 usable identities" in capsys.readouterr().err
+    # an empty folder, and one that does not exist
+    (tmp_path / "empty").mkdir()
+    assert main(["--faces", str(tmp_path / "empty"), "--out", str(tmp_path / "o3")]) == 2
+    assert "has no photos" in capsys.readouterr().err
+    assert main(["--faces", str(tmp_path / "nope"), "--out", str(tmp_path / "o4")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    # bad arguments
+    assert main(["--faces", str(bad), "--people", "0", "--out", str(tmp_path / "o5")]) == 2
+    assert "num_people" in capsys.readouterr().err
+    with pytest.raises(InsufficientFacesError):
+        simulate(tmp_path / "empty", SimConfig())
+
+
+def test_load_scenario_rejects_broken_directories(feature_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(ScenarioFormatError, match=r"no scenario\.json"):
+        load_scenario(tmp_path)
+    broken = tmp_path / "broken"
+    shutil.copytree(feature_dir, broken)
+    (broken / "frames.npz").write_bytes((feature_dir / "frames.npz").read_bytes()[:1000])
+    with pytest.raises(ScenarioFormatError, match=r"frames\.npz"):
+        load_scenario(broken)
+    shutil.copy(feature_dir / "frames.npz", broken / "frames.npz")
+    doc = json.loads((broken / "scenario.json").read_text())
+    doc["version"] = 99
+    (broken / "scenario.json").write_text(json.dumps(doc))
+    with pytest.raises(ScenarioFormatError, match="version"):
+        load_scenario(broken)
+    doc["version"] = 1
+    doc["cameras"] = doc["cameras"][:1]  # frames refer to camera index 1
+    (broken / "scenario.json").write_text(json.dumps(doc))
+    with pytest.raises(ScenarioFormatError, match="frame_camera"):
+        load_scenario(broken)
+
+
+def test_config_validation() -> None:
+    with pytest.raises(ValueError, match="level"):
+        SimConfig(level="voxel")
+    with pytest.raises(ValueError, match="duration_s"):
+        SimConfig(duration_s=0.0)
+    with pytest.raises(ValueError, match="new_people"):
+        SimConfig(num_people=3, new_people=4)
+    with pytest.raises(ValueError, match="miss_probability"):
+        SimConfig(miss_probability=float("nan"))
+    with pytest.raises(ValueError, match="rate_hz"):
+        SimConfig(rate_hz=-1.0)
+    assert SimConfig(level="pixel").frame_rate_hz == 5.0 and SimConfig().frame_rate_hz == 15.0
+    assert SimConfig(num_people=6, second_day=True).num_new_people == 2
+    assert SimConfig(num_people=6).num_new_people == 0
