@@ -39,3 +39,18 @@ def config_dir() -> Path:
 def model_path(file_name: str) -> Path:
     """Path of one file in the models directory (existence is checked by the loader)."""
     return models_dir() / file_name
+
+
+def demo_faces_dir() -> Path:
+    """Folder of licensed face photos (one sub-folder per identity) played by ``face-reid-demo``.
+
+    ``FACE_REID_DEMO_FACES_DIR`` if set, else ``test/data/faces`` of a source checkout, else
+    ``<prefix>/share/face_reid/demo_faces`` installed by ``pip install .``.
+    """
+    override = os.environ.get("FACE_REID_DEMO_FACES_DIR")
+    if override:
+        return Path(override).expanduser()
+    in_checkout = _SOURCE_ROOT / "test" / "data" / "faces"
+    if in_checkout.is_dir():
+        return in_checkout
+    return Path(sys.prefix) / "share" / "face_reid" / "demo_faces"

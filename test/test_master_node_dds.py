@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import time
 from pathlib import Path
 
 import cv2
@@ -73,17 +74,23 @@ def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Pa
         ros_domain_id, tmp_path / "master.log",
     )
     collector = procs.start(
-        [str(procs.PROCS / "collect_tracks.py"), "--duration-s", "35"], ros_domain_id, tmp_path / "collector.log"
+        [str(procs.PROCS / "collect_tracks.py"), "--duration-s", "120", "--barrier-dir", str(tmp_path / "barrier")],
+        ros_domain_id, tmp_path / "collector.log",
     )
     cams = [
         procs.start([str(procs.PROCS / "publish_camera_frames.py"), "--camera-id", cid, "--topic",
-                     f"/{cid}/face_reid/frames", "--plan", str(plan)], ros_domain_id, tmp_path / f"{cid}.log")
+                     f"/{cid}/face_reid/frames", "--plan", str(plan), "--wait-s", "60",
+                     "--barrier-dir", str(tmp_path / "barrier"), "--barrier-count", "3"],
+                    ros_domain_id, tmp_path / f"{cid}.log")
         for cid, plan in (("cam_a", plan_a), ("cam_b", plan_b))
     ]
     try:
         for cam in cams:
-            cam.wait(timeout=60)
-        out, _ = collector.communicate(timeout=60)
+            cam.wait(timeout=90)
+        assert all(cam.returncode == 0 for cam in cams), [cam.stdout.read() for cam in cams if cam.stdout]
+        time.sleep(2.0)  # the last frames reach the master and its last /tracks_named reaches the collector
+        collector.send_signal(signal.SIGTERM)
+        out, _ = collector.communicate(timeout=30)
         assert master.poll() is None, (tmp_path / "master.log").read_text()
         os.killpg(master.pid, signal.SIGKILL)  # no clean shutdown: nothing learned may be lost
         master.wait(timeout=10)

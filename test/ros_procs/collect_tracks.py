@@ -1,20 +1,26 @@
 """Test helper process: subscribe to /tracks_named and print one JSON line per message.
 
 Usage: python test/ros_procs/collect_tracks.py --topic /tracks_named --duration-s S
+Stops after S seconds or, earlier, on SIGTERM (so a test can stop it once its publishers are done).
+With --barrier-dir D it writes D/collector.ready once the topic has a publisher (see
+publish_camera_frames.py), so that camera plans start only when the collector listens.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
+from pathlib import Path
 
 
 def main() -> int:
     parser = argparse.ArgumentParser()
     parser.add_argument("--topic", default="/tracks_named")
     parser.add_argument("--duration-s", type=float, default=30.0)
+    parser.add_argument("--barrier-dir", default="")
     args = parser.parse_args()
 
     import rclpy
@@ -40,9 +46,17 @@ def main() -> int:
 
     qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     node.create_subscription(NamedTrackArray, args.topic, on_tracks, qos)
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
     deadline = time.monotonic() + args.duration_s
-    while time.monotonic() < deadline:
+    ready = not args.barrier_dir
+    while time.monotonic() < deadline and not stop:
         rclpy.spin_once(node, timeout_sec=0.1)
+        if not ready and node.count_publishers(args.topic) > 0:
+            folder = Path(args.barrier_dir)
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / "collector.ready").write_text(repr(time.time()))
+            ready = True
     node.destroy_node()
     rclpy.try_shutdown()
     return 0

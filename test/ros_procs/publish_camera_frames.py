@@ -5,6 +5,9 @@ PLAN.json: {"rate_hz": 10, "embeddings": "E.npz", "segments": [{"t0": 0, "t1": 4
   {"x": 0, "y": 0, "vx": 0.5, "vy": 0, "identity": "a", "photos": [0, 1, 2]}]}]}
 Times are seconds after the first subscriber matched; E.npz holds identity -> (n, 128) embeddings.
 Stamps are the publisher's clock (the master checks them against its own).
+With --barrier-dir D --barrier-count N, N publishers start their plans together: each marks itself
+ready in D once its subscriber matched and all start at the same wall-clock time (so plans of
+different cameras stay aligned however slowly each process started).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -23,6 +27,8 @@ def main() -> int:
     parser.add_argument("--topic", required=True)
     parser.add_argument("--plan", required=True)
     parser.add_argument("--wait-s", type=float, default=30.0)
+    parser.add_argument("--barrier-dir", default="")
+    parser.add_argument("--barrier-count", type=int, default=1)
     args = parser.parse_args()
     with open(args.plan, encoding="utf-8") as fh:
         plan = json.load(fh)
@@ -44,6 +50,12 @@ def main() -> int:
             return 1
         rclpy.spin_once(node, timeout_sec=0.05)
     start = time.monotonic() + float(plan.get("start_delay_s", 1.0))
+    if args.barrier_dir:
+        start = _barrier(Path(args.barrier_dir), args.camera_id, args.barrier_count, deadline, node)
+        if start is None:
+            print(json.dumps({"error": "barrier timeout"}), flush=True)
+            return 1
+        start += float(plan.get("start_delay_s", 1.0))
     end = max(seg["t1"] for seg in plan["segments"])
     period = 1.0 / float(plan.get("rate_hz", 10.0))
     k = 0
@@ -78,6 +90,26 @@ def main() -> int:
     node.destroy_node()
     rclpy.try_shutdown()
     return 0
+
+
+def _barrier(folder: Path, name: str, count: int, deadline: float, node: object) -> float | None:
+    """Mark ``name`` ready in ``folder``; wait for ``count`` marks; return the common start (monotonic)."""
+    import rclpy
+
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.ready").write_text(repr(time.time()))
+    while True:
+        marks = list(folder.glob("*.ready"))
+        if len(marks) >= count:
+            try:
+                last_wall = max(float(m.read_text() or "nan") for m in marks)
+            except ValueError:  # a mark being written right now
+                last_wall = float("nan")
+            if last_wall == last_wall:
+                return time.monotonic() + max(0.0, last_wall - time.time())
+        if time.monotonic() > deadline:
+            return None
+        rclpy.spin_once(node, timeout_sec=0.05)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,357 @@
+"""Benchmark: camera message -> /tracks_named over real DDS, and the master's sustained throughput.
+
+Separate processes on a private ROS domain (discovery on loopback only), the real ``face-reid-master`` node:
+
+- ``baseline``: raw DDS one-way latency of a CameraFrame (2 people with embeddings) between two processes,
+  no master: what any node-to-node hop costs on this machine;
+- ``latency``: one simulated camera at 30 Hz -> master -> /tracks_named: send -> receive latency (median,
+  p99) and its ratio to the baseline (the master's own cost);
+- ``throughput_6`` / ``throughput_20``: 6 and 20 simulated cameras at 30 Hz, ~2 people with embeddings per
+  frame (people stay in their camera's own area, each with a stable face): frames offered vs frames the master
+  received / applied (its stats log) and /tracks_named messages published per second, and the latency under
+  that load (a lag that grows or a p99 far above the median means it does not keep up).
+
+Send and receive times are ``time.time()`` in both processes (one machine clock). Each CameraFrame carries its
+send time in ``header.stamp`` (quantised to 0.1 ms + 37 us, a marker that tells frame-driven /tracks_named
+messages, which carry the frame's stamp, from the master's timer ones). A warm-up (tracks and faces created)
+is excluded. Prints ONE JSON object.
+
+Usage: python bench/end_to_end.py [--seconds 10] [--domain-id N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import math
+import os
+import random
+import re
+import shutil
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+DIM = 128
+CENTRE_SCALE = 0.8 / math.sqrt(2 * DIM)  # different people ~0.8 apart (dlib-like)
+NOISE_SCALE = 0.35 / math.sqrt(2 * DIM)  # one person's frames ~0.35 apart
+MARK_US = 37  # stamps are multiples of 100 us plus 37 us
+WARMUP_S = 2.0
+
+
+def _mark_stamp(t: float) -> tuple[int, int]:
+    sec = math.floor(t)
+    nsec = (int((t - sec) * 1e9) // 100_000) * 100_000 + MARK_US * 1000
+    return int(sec), int(nsec)
+
+
+def _is_marked(sec: int, nsec: int) -> bool:
+    return round(nsec / 1000) % 100 == MARK_US
+
+
+# ---------------------------------------------------------------------------------------------------
+# Roles (run as child processes)
+
+
+def role_publisher(args: argparse.Namespace) -> int:
+    """N simulated cameras at R Hz each (phases spread), 2 people per frame with face embeddings."""
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from face_reid_msgs.msg import CameraFrame, PersonObservation
+
+    rclpy.init()
+    node = rclpy.create_node("bench_cameras")
+    qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+    pubs = [node.create_publisher(CameraFrame, f"{args.prefix}/cam{c:02d}/face_reid/frames", qos)
+            for c in range(args.cameras)]
+    rng = np.random.default_rng(0)
+    centres = rng.normal(0.0, CENTRE_SCALE, (args.cameras, 2, DIM)).astype(np.float32)
+    noise = rng.normal(0.0, NOISE_SCALE, (64, DIM)).astype(np.float32)
+    deadline = time.monotonic() + 60.0
+    while min(p.get_subscription_count() for p in pubs) < 1:
+        if time.monotonic() > deadline:
+            print(json.dumps({"event": "error", "message": "not every camera topic got a subscriber in 60 s"}),
+                  flush=True)
+            return 1
+        rclpy.spin_once(node, timeout_sec=0.05)
+    time.sleep(0.5)
+    period = 1.0 / args.rate_hz
+    start = time.time() + 0.2
+    end = start + args.duration_s
+    print(json.dumps({"event": "start", "t": start}), flush=True)
+    sent = 0
+    late = 0
+    k = 0
+    while True:
+        # frame k of camera c is due at start + (k + c / N) * period
+        for c, pub in enumerate(pubs):
+            due = start + (k + c / args.cameras) * period
+            if due >= end:
+                break
+            wait = due - time.time()
+            if wait > 0:
+                time.sleep(wait)
+            elif wait < -period:
+                late += 1
+            now = time.time()
+            msg = CameraFrame()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = _mark_stamp(now)
+            msg.header.frame_id = "world"
+            msg.camera_id = f"cam{c:02d}"
+            t_rel = now - start
+            for j in range(2):
+                obs = PersonObservation()
+                # each person walks a slow circle in its camera's own 4 x 4 m area (areas 10 m apart)
+                angle = 0.3 * t_rel + j * math.pi
+                obs.position_world.x = float(10.0 * c + 1.2 * math.cos(angle))
+                obs.position_world.y = float(1.2 * math.sin(angle) + 3.0 * j)
+                obs.position_std_m, obs.height_m = 0.05, 1.75
+                obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
+                obs.embedding = (centres[c, j] + noise[(k + 7 * j + c) % len(noise)]).tolist()
+                msg.people.append(obs)
+            pub.publish(msg)
+            sent += 1
+        else:
+            k += 1
+            continue
+        break
+    print(json.dumps({"event": "done", "sent": sent, "late": late, "start": start, "end": end}), flush=True)
+    time.sleep(0.5)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+def role_subscriber(args: argparse.Namespace) -> int:
+    """Receive CameraFrame (baseline) or NamedTrackArray messages; on 'stop' (stdin) print (stamp, recv) pairs."""
+    import threading
+
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    if args.kind == "tracks":
+        from face_reid_msgs.msg import NamedTrackArray as Msg
+
+        topics = ["/tracks_named"]
+    else:
+        from face_reid_msgs.msg import CameraFrame as Msg
+
+        topics = [f"{args.prefix}/cam{c:02d}/face_reid/frames" for c in range(args.cameras)]
+    rclpy.init()
+    node = rclpy.create_node("bench_listener")
+    qos = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+    got: list[tuple[float, float]] = []
+    unmarked = [0]
+
+    def on_msg(msg: Any) -> None:
+        recv = time.time()
+        st = msg.header.stamp
+        if _is_marked(st.sec, st.nanosec):
+            got.append((st.sec + st.nanosec * 1e-9, recv))
+        else:
+            unmarked[0] += 1
+
+    for topic in topics:
+        node.create_subscription(Msg, topic, on_msg, qos)
+    stop = threading.Event()
+
+    def wait_stop() -> None:
+        sys.stdin.readline()
+        stop.set()
+
+    threading.Thread(target=wait_stop, daemon=True).start()
+    print(json.dumps({"event": "ready"}), flush=True)
+    while not stop.is_set():
+        rclpy.spin_once(node, timeout_sec=0.05)
+    print(json.dumps({"event": "result", "pairs": got, "unmarked": unmarked[0]}), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------------
+# Orchestration
+
+
+def _events(child: Any, timeout_s: float, until: str) -> dict[str, Any]:
+    """Read the child's JSON lines until an event named ``until`` (raises on error / timeout / exit)."""
+    import select
+
+    assert child.proc.stdout is not None
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([child.proc.stdout], [], [], 0.2)
+        if not ready:
+            if child.proc.poll() is not None:
+                raise RuntimeError(f"{child.name} exited ({child.proc.returncode}):\n{child.log_tail()}")
+            continue
+        line = child.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"{child.name} closed its output:\n{child.log_tail()}")
+        if line.startswith("{"):
+            event = json.loads(line)
+            if event.get("event") == "error":
+                raise RuntimeError(f"{child.name}: {event.get('message')}")
+            if event.get("event") == until:
+                return event
+    raise RuntimeError(f"{child.name}: no '{until}' within {timeout_s:g} s:\n{child.log_tail()}")
+
+
+def _master_stats(log_path: Path) -> list[tuple[float, dict[str, int]]]:
+    """(time, stats) from the master's periodic 'stats: {...}' log lines."""
+    out = []
+    for line in log_path.read_text(errors="replace").splitlines():
+        m = re.search(r"\[(\d+\.\d+)\].*stats: (\{.*\})", line)
+        if m:
+            out.append((float(m.group(1)), ast.literal_eval(m.group(2))))
+    return out
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) a live process has used so far (Linux /proc; 0 elsewhere)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _pct(values: np.ndarray, q: float) -> float | None:
+    return round(float(np.percentile(values, q)) * 1000.0, 2) if values.size else None
+
+
+def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_master: bool, domain_id: int,
+             work: Path) -> dict[str, Any]:
+    """One measurement with fresh processes; returns its JSON-ready results."""
+    from face_reid_master.demo import child_env, start_child, stop_children
+
+    env = child_env(domain_id, uuid.uuid4().hex[:12])
+    logs = work / name
+    logs.mkdir()
+    prefix = f"/bench_{name}"
+    me = [str(Path(__file__).resolve())]
+    children = []
+    try:
+        if with_master:
+            children.append(start_child("master", [
+                "-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={logs / 'faces.db'}",
+                "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0", "-p", "tick_rate_hz:=0.2",
+                "-p", f"camera_topic_regex:=^{prefix}/.*/face_reid/frames$"], env, logs))
+        listener = start_child("listener", [*me, "--role", "subscriber", "--kind",
+                                            "tracks" if with_master else "frames", "--cameras", str(cameras),
+                                            "--prefix", prefix], env, logs, talk=True)
+        children.append(listener)
+        _events(listener, 60.0, "ready")
+        publisher = start_child("cameras", [*me, "--role", "publisher", "--cameras", str(cameras), "--rate-hz",
+                                            str(rate_hz), "--duration-s", str(seconds + WARMUP_S), "--prefix", prefix],
+                                env, logs, talk=True)
+        children.append(publisher)
+        started = _events(publisher, 90.0, "start")
+        cpu0 = {c.name: _cpu_s(c.proc.pid) for c in children}
+        done = _events(publisher, seconds + WARMUP_S + 60.0, "done")
+        cpu1 = {c.name: _cpu_s(c.proc.pid) for c in children}
+        time.sleep(1.5)  # the last messages through the master
+        assert listener.proc.stdin is not None
+        listener.proc.stdin.write("stop\n")
+        listener.proc.stdin.flush()
+        result = _events(listener, 30.0, "result")
+    finally:
+        stop_children(children)
+    t_measure = float(started["t"]) + WARMUP_S
+    t_end = float(done["end"])
+    pairs = np.array(result["pairs"], dtype=np.float64).reshape(-1, 2)
+    window = pairs[(pairs[:, 0] >= t_measure) & (pairs[:, 0] < t_end)]
+    lat = window[:, 1] - window[:, 0]
+    span = t_end - t_measure
+    offered = cameras * rate_hz
+    out: dict[str, Any] = {
+        "cameras": cameras, "rate_hz": rate_hz, "measured_s": round(span, 2),
+        "offered_msgs_per_s": round(offered, 1),
+        "published_sent": int(done["sent"]), "publisher_late": int(done["late"]),
+        "received_msgs_per_s": round(window.shape[0] / span, 1),
+        "cpu_cores_used": {name: round((cpu1[name] - cpu0[name]) / (t_end - float(started["t"])), 2) for name in cpu0},
+        "latency_ms": {"median": _pct(lat, 50), "p90": _pct(lat, 90), "p99": _pct(lat, 99),
+                       "max": round(float(lat.max()) * 1000, 2) if lat.size else None},
+    }
+    if lat.size > 10:  # lag trend: latency of the last second vs the first second of the window
+        first = lat[window[:, 0] < t_measure + 1.0]
+        last = lat[window[:, 0] >= t_end - 1.0]
+        out["lag_growth_ms"] = round((float(np.median(last)) - float(np.median(first))) * 1000, 1) \
+            if first.size and last.size else None
+    if with_master:  # the master's own counters, from its stats log lines (every second) inside the window
+        stats = _master_stats(logs / "master.log")
+        inside = [(t, st) for t, st in stats if t_measure - 1.0 <= t <= t_end]
+        if len(inside) >= 2:
+            (ta, sa), (tb, sb) = inside[0], inside[-1]
+            for key in ("frames_received", "frames_applied", "frames_rejected_tracker_late", "frames_rejected_stale"):
+                out[f"master_{key}_per_s"] = round((sb.get(key, 0) - sa.get(key, 0)) / (tb - ta), 1)
+        if stats:
+            out["master_received_fraction_of_sent"] = round(stats[-1][1].get("frames_received", 0) / done["sent"], 3)
+        out["frame_driven_tracks_msgs_per_s"] = out.pop("received_msgs_per_s")
+        applied = out.get("master_frames_applied_per_s", out["frame_driven_tracks_msgs_per_s"])
+        median = out["latency_ms"]["median"]
+        # keeping up: (nearly) every frame applied, no backlog (latency far below a frame queue's worth)
+        out["keeps_up"] = bool(applied >= 0.95 * offered and median is not None and median < 100.0
+                               and (out.get("lag_growth_ms") or 0.0) < 100.0)
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--role", choices=("bench", "publisher", "subscriber"), default="bench")
+    parser.add_argument("--seconds", type=float, default=10.0, help="measured seconds per throughput case")
+    parser.add_argument("--domain-id", type=int, default=None)
+    # role options
+    parser.add_argument("--cameras", type=int, default=1)
+    parser.add_argument("--rate-hz", type=float, default=30.0)
+    parser.add_argument("--duration-s", type=float, default=10.0)
+    parser.add_argument("--prefix", default="/bench")
+    parser.add_argument("--kind", choices=("tracks", "frames"), default="tracks")
+    args = parser.parse_args()
+    if args.role == "publisher":
+        return role_publisher(args)
+    if args.role == "subscriber":
+        return role_subscriber(args)
+
+    domain_id = args.domain_id if args.domain_id is not None else random.randint(1, 100)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    work = Path(tempfile.mkdtemp(prefix="face-reid-bench-"))
+    t0 = time.monotonic()
+    try:
+        baseline = run_case("baseline", 1, 30.0, 5.0, False, domain_id, work)
+        latency = run_case("latency", 1, 30.0, 5.0, True, domain_id, work)
+        six = run_case("throughput_6", 6, 30.0, args.seconds, True, domain_id, work)
+        twenty = run_case("throughput_20", 20, 30.0, args.seconds, True, domain_id, work)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    base_med = baseline["latency_ms"]["median"]
+    lat_med = latency["latency_ms"]["median"]
+    result = {
+        "benchmark": "end_to_end",
+        "domain_id": domain_id,
+        "cpu_count": os.cpu_count(),
+        "latency_ms": {
+            "median": lat_med, "p99": latency["latency_ms"]["p99"],
+            "raw_dds_median": base_med, "raw_dds_p99": baseline["latency_ms"]["p99"],
+            "ratio_median_to_raw_dds": round(lat_med / base_med, 2) if base_med and lat_med else None,
+        },
+        "cases": {"baseline_raw_dds": baseline, "latency_1cam": latency, "throughput_6cams": six,
+                  "throughput_20cams": twenty},
+        "run_time_s": round(time.monotonic() - t0, 1),
+    }
+    print(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
