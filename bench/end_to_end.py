@@ -231,8 +231,11 @@ def _pct(values: np.ndarray, q: float) -> float | None:
 
 
 def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_master: bool, domain_id: int,
-             work: Path) -> dict[str, Any]:
-    """One measurement with fresh processes; returns its JSON-ready results."""
+             work: Path, master_params: tuple[str, ...] = ()) -> dict[str, Any]:
+    """One measurement with fresh processes; returns its JSON-ready results.
+
+    ``master_params``: extra ``name:=value`` parameters of the master node.
+    """
     from face_reid_master.demo import child_env, start_child, stop_children
 
     env = child_env(domain_id, uuid.uuid4().hex[:12])
@@ -246,7 +249,8 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
             children.append(start_child("master", [
                 "-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={logs / 'faces.db'}",
                 "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0", "-p", "tick_rate_hz:=0.2",
-                "-p", f"camera_topic_regex:=^{prefix}/.*/face_reid/frames$"], env, logs))
+                "-p", f"camera_topic_regex:=^{prefix}/.*/face_reid/frames$",
+                *(a for p in master_params for a in ("-p", p))], env, logs))
         listener = start_child("listener", [*me, "--role", "subscriber", "--kind",
                                             "tracks" if with_master else "frames", "--cameras", str(cameras),
                                             "--prefix", prefix], env, logs, talk=True)
@@ -332,6 +336,9 @@ def main() -> int:
         latency = run_case("latency", 1, 30.0, 5.0, True, domain_id, work)
         six = run_case("throughput_6", 6, 30.0, args.seconds, True, domain_id, work)
         twenty = run_case("throughput_20", 20, 30.0, args.seconds, True, domain_id, work)
+        # the same load with /tracks_named capped at 30 Hz (max_publish_rate_hz), as for a large network
+        twenty_capped = run_case("throughput_20_capped", 20, 30.0, args.seconds, True, domain_id, work,
+                                 ("max_publish_rate_hz:=30.0",))
     finally:
         shutil.rmtree(work, ignore_errors=True)
     base_med = baseline["latency_ms"]["median"]
@@ -346,7 +353,7 @@ def main() -> int:
             "ratio_median_to_raw_dds": round(lat_med / base_med, 2) if base_med and lat_med else None,
         },
         "cases": {"baseline_raw_dds": baseline, "latency_1cam": latency, "throughput_6cams": six,
-                  "throughput_20cams": twenty},
+                  "throughput_20cams": twenty, "throughput_20cams_publish_capped_30hz": twenty_capped},
         "run_time_s": round(time.monotonic() - t0, 1),
     }
     print(json.dumps(result))

@@ -171,6 +171,9 @@ def _make_node_class() -> type:
             self.tracks_pub = self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos)
             markers_topic = str(values["markers_topic"])
             self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
+            rate = float(values["max_publish_rate_hz"])
+            self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
+            self._last_publish = -float("inf")
             for topic in master_params.clean_list(values["camera_topics"]):
                 self._subscribe(topic)
             self._regex = re.compile(str(values["camera_topic_regex"])) if values["camera_topic_regex"] else None
@@ -254,6 +257,8 @@ def _make_node_class() -> type:
                 self.get_logger().info(
                     f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})"
                 )
+            if self._min_publish_interval_s and time.monotonic() - self._last_publish < self._min_publish_interval_s:
+                return  # rate cap: the next frame or tick publishes the (then newer) state
             self._publish(record.stamp_s)
 
         def _tick(self) -> None:
@@ -268,7 +273,9 @@ def _make_node_class() -> type:
             frame_id = str(self.values["world_frame_id"])
             msg = tracks_to_msg(NamedTrackArray, NamedTrack, tracks, stamp_s, frame_id)
             self.tracks_pub.publish(msg)
-            if self.markers_pub is not None:
+            self._last_publish = time.monotonic()
+            # Markers are for a person looking at RViz: building them for nobody costs the master time.
+            if self.markers_pub is not None and self.markers_pub.get_subscription_count() > 0:
                 self.markers_pub.publish(markers_for(tracks, msg.header.stamp, frame_id))
 
         def _reject(self, reason: str, message: str) -> None:

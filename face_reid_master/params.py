@@ -57,7 +57,14 @@ MASTER_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("topic_discovery_period_s", 2.0, "How often new camera topics are looked for (s)."),
     ParamSpec("known_camera_ids", [""], "Accepted camera ids (list; [''] = accept any camera)."),
     ParamSpec("tracks_topic", "/tracks_named", "Where face_reid_msgs/NamedTrackArray is published."),
-    ParamSpec("markers_topic", "/tracks_named/markers", "visualization_msgs/MarkerArray for RViz ('' = off)."),
+    ParamSpec(
+        "markers_topic", "/tracks_named/markers",
+        "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off).",
+    ),
+    ParamSpec(
+        "max_publish_rate_hz", 0.0,
+        "Cap on /tracks_named messages per second (0 = one per camera frame; set e.g. 30 for large networks).",
+    ),
     ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz)."),
     ParamSpec("method", _M.method, "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline)."),
     ParamSpec("max_stamp_age_s", _M.max_stamp_age_s, "Frames older than this vs the master clock are rejected (s)."),
