@@ -22,6 +22,7 @@ from face_reid_camera.camera_pipeline import CameraPipeline, FrameResult
 from face_reid_camera.errors import ModelLoadError
 from face_reid_camera.frame_sync import StampSynchronizer
 from face_reid_camera.image_codec import ImageDecodeError, decode_image, depth_to_metres, to_bgr
+from face_reid_camera.node_main import run_node
 
 USAGE = """usage: face-reid-camera [--ros-args --params-file config/camera.yaml -p name:=value ...]
 
@@ -54,32 +55,8 @@ def intrinsics_from_camera_info(msg: Any) -> CameraIntrinsics:
 
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point."""
-    argv = list(sys.argv if argv is None else argv)
-    if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv:
-        print(USAGE)
-        for spec in camera_params.CAMERA_PARAMS:
-            print(f"  {spec.name} (default {spec.default!r}): {spec.description}")
-        return 0
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    rclpy.init(args=argv)
-    node = None
-    try:
-        node = CameraNode()
-    except (ModelLoadError, FileNotFoundError, ValueError) as exc:
-        print(f"[face-reid-camera] FATAL: cannot start: {exc}", file=sys.stderr, flush=True)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("face-reid-camera", USAGE, camera_params.TABLE, CameraNode,
+                    (ModelLoadError, FileNotFoundError, ValueError), argv)
 
 
 def _make_node_class() -> type:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from face_reid_camera.node_main import run_node
 from face_reid_master import params as master_params
 from face_reid_master.master_core import MasterCore
 from face_reid_master.records import STATE_LOST, CameraFrameRecord, NamedTrackRecord, PersonRecord
@@ -113,29 +114,8 @@ def markers_for(tracks: list[NamedTrackRecord], stamp_msg: Any, frame_id: str) -
 
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point."""
-    argv = list(sys.argv if argv is None else argv)
-    if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv:
-        print(USAGE + master_params.TABLE.help_text())
-        return 0
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    rclpy.init(args=argv)
-    try:
-        node = _make_node_class()()
-    except (ValueError, FileNotFoundError, OSError) as exc:
-        print(f"[face-reid-master] FATAL: cannot start: {exc}", file=sys.stderr, flush=True)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("face-reid-master", USAGE, master_params.TABLE, lambda: _make_node_class()(),
+                    (ValueError, FileNotFoundError, OSError), argv)
 
 
 def _make_node_class() -> type:
