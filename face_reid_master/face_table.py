@@ -145,6 +145,7 @@ class IdentityStats:
     last_sinkhorn_iterations: int = 0
     shortlist_searches: int = 0
     faces_forgotten: int = 0
+    observations_not_learned_inconsistent: int = 0
 
 
 # ----------------------------------------------------------------------------------- pure functions
@@ -611,6 +612,12 @@ class IdentityManagerBase:
     while face_list holds at most ``exact_search_max_features`` features; beyond, only the
     ``shortlist_faces`` faces with the nearest centroids are compared per observation.  Track ids must not
     be reused after :meth:`track_deleted` (late observations of a deleted id are ignored).
+
+    ``feature_gate_distance`` (None = the paper: every observation of an identified track joins its face):
+    an observation farther than this from every feature of the track's face is not learned (counted in
+    ``stats.observations_not_learned_inconsistent``).  When the tracker swaps two people, the face then
+    does not absorb the other person's features, which would make that person's later tracks look like
+    this face.
     """
 
     _DEAD_TRACK_MEMORY = 4096  # ids of deleted tracks remembered to ignore late observations
@@ -622,8 +629,14 @@ class IdentityManagerBase:
         max_features_per_face: int = 50,
         exact_search_max_features: int = 20_000,
         shortlist_faces: int = 32,
+        feature_gate_distance: float | None = None,
     ) -> None:
         self.embedding_dim = _check_int("embedding_dim", embedding_dim, 1)
+        if feature_gate_distance is not None:
+            feature_gate_distance = _check_float(
+                "feature_gate_distance", feature_gate_distance, 0.0, math.inf, True, True
+            )
+        self.feature_gate_distance = feature_gate_distance
         self.max_features_per_face = _check_int("max_features_per_face", max_features_per_face, 1)
         self.exact_search_max_features = _check_int("exact_search_max_features", exact_search_max_features, 0)
         self.shortlist_faces = _check_int("shortlist_faces", shortlist_faces, 1)
@@ -708,6 +721,10 @@ class IdentityManagerBase:
                 slot: int | None = face.slot
                 face.n_observations += obs.shape[0]
                 face.last_seen_s = max(face.last_seen_s, stamp)
+                if self.feature_gate_distance is not None:
+                    obs = self._consistent(obs, face.slot)
+                    if obs.shape[0] == 0:
+                        continue
             else:
                 slot = track.slot
                 if slot is None:
@@ -732,6 +749,16 @@ class IdentityManagerBase:
                 events.append(ev)
         self._pending_deleted.clear()
         return events
+
+    def _consistent(self, obs: F32Array, slot: int) -> F32Array:
+        """The observations within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
+        feats = self._bank.features(slot)
+        d2 = (np.einsum("ij,ij->i", obs, obs)[:, None] - 2.0 * (obs @ feats.T)
+              + np.einsum("ij,ij->i", feats, feats)[None, :])
+        assert self.feature_gate_distance is not None
+        keep = d2.min(axis=1) <= self.feature_gate_distance**2
+        self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
+        return obs if keep.all() else obs[keep]
 
     # ------------------------------------------------------------------------------ queries
     def face_id_of(self, track_id: int) -> int | None:
@@ -977,12 +1004,14 @@ class FaceIdentityManager(IdentityManagerBase):
         max_features_per_face: int = 50,
         exact_search_max_features: int = 20_000,
         shortlist_faces: int = 32,
+        feature_gate_distance: float | None = None,
     ) -> None:
         super().__init__(
             embedding_dim=embedding_dim,
             max_features_per_face=max_features_per_face,
             exact_search_max_features=exact_search_max_features,
             shortlist_faces=shortlist_faces,
+            feature_gate_distance=feature_gate_distance,
         )
         if likelihood is None:
             likelihood = LikelihoodModel.default()
@@ -1169,12 +1198,14 @@ class ThresholdIdentityManager(IdentityManagerBase):
         max_features_per_face: int = 50,
         exact_search_max_features: int = 20_000,
         shortlist_faces: int = 32,
+        feature_gate_distance: float | None = None,
     ) -> None:
         super().__init__(
             embedding_dim=embedding_dim,
             max_features_per_face=max_features_per_face,
             exact_search_max_features=exact_search_max_features,
             shortlist_faces=shortlist_faces,
+            feature_gate_distance=feature_gate_distance,
         )
         self.distance_threshold = _check_float(
             "distance_threshold", distance_threshold, 0.0, math.inf, True, True

@@ -135,6 +135,7 @@ class LikelihoodModel:
     k_exponent_negative: float = 0.0
     metadata: Mapping[str, Any] = field(default_factory=dict, compare=False, hash=False)
     _monotone_range: tuple[float, float] = field(init=False, repr=False, compare=False, hash=False)
+    _decision_distance: float = field(init=False, repr=False, compare=False, hash=False)
     _grid: tuple[float, float, Any, Any] = field(init=False, repr=False, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -154,8 +155,9 @@ class LikelihoodModel:
                 raise ValueError(f"{name} must be in [0, 1], got {e!r}")
             object.__setattr__(self, name, float(e))
         object.__setattr__(self, "metadata", dict(self.metadata))
-        lo, hi = self._find_monotone_range()
+        lo, cross, hi = self._find_monotone_range()
         object.__setattr__(self, "_monotone_range", (lo, hi))
+        object.__setattr__(self, "_decision_distance", cross)
         n = _SURVIVAL_GRID_POINTS
         object.__setattr__(
             self,
@@ -168,8 +170,9 @@ class LikelihoodModel:
             ),
         )
 
-    def _find_monotone_range(self) -> tuple[float, float]:
-        """[d_lo, d_hi] where log N_p/N_n decreases; outside it the fitted tails are extrapolation.
+    def _find_monotone_range(self) -> tuple[float, float, float]:
+        """(d_lo, d_cross, d_hi): log N_p/N_n decreases on [d_lo, d_hi] (outside it the fitted tails are
+        extrapolation) and crosses 0 at d_cross.
 
         Two skew-normals with different scales give a log-ratio that turns back up far in a tail (a very
         distant face would look like a match).  Distances are clipped to this range before evaluation.
@@ -188,12 +191,17 @@ class LikelihoodModel:
         i_hi = i_cross + int(np.argmin(lr[i_cross:]))
         if np.any(np.diff(lr[i_lo : i_hi + 1]) > 1e-9):
             raise ValueError("log N_p/N_n is not monotone between its maximum and minimum: refit the model")
-        return float(grid[i_lo]), float(grid[i_hi])
+        return float(grid[i_lo]), float(grid[i_cross]), float(grid[i_hi])
 
     @property
     def monotone_distance_range(self) -> tuple[float, float]:
         """(d_lo, d_hi): distances are clipped to this range by :meth:`log_likelihood_ratio`."""
         return self._monotone_range
+
+    @property
+    def decision_distance(self) -> float:
+        """The pair distance where N_p = N_n: below it one observation is evidence for "same person"."""
+        return self._decision_distance
 
     def log_likelihood_ratio(
         self, d: npt.ArrayLike, n_features: npt.ArrayLike = 1

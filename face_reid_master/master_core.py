@@ -57,6 +57,7 @@ class MasterConfig:
     min_observations: int = 3
     new_person_scale_c: float = 1.0
     max_features_per_face: int = 50
+    learn_only_consistent_features: bool = True
     # identity (threshold baseline)
     threshold_distance: float = 0.6
     threshold_votes: int = 5
@@ -153,11 +154,13 @@ class MasterCore:
                 "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
                 prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
                 max_features_per_face=cfg.max_features_per_face,
+                feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             )
         else:
             self.identity = make_identity_manager(
                 "threshold", distance_threshold=cfg.threshold_distance, n_votes=cfg.threshold_votes,
                 max_features_per_face=cfg.max_features_per_face,
+                feature_gate_distance=cfg.threshold_distance if cfg.learn_only_consistent_features else None,
             )
         self.people = PredefinedPeople(
             gallery or {}, name_threshold=cfg.name_threshold, min_face_features=cfg.min_face_features_for_name

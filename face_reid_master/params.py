@@ -77,6 +77,11 @@ MASTER_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("min_observations", _M.min_observations, "Face observations needed before a decision (count)."),
     ParamSpec("new_person_scale_c", _M.new_person_scale_c, "The paper's c: larger = readier to call a face new."),
     ParamSpec("max_features_per_face", _M.max_features_per_face, "Embeddings kept per face, a diverse subset (count)."),
+    ParamSpec(
+        "learn_only_consistent_features", _M.learn_only_consistent_features,
+        "An identified track's embedding joins its face only if within the decision distance (guards "
+        "faces against tracker swaps; false = the paper).",
+    ),
     ParamSpec("threshold_distance", _M.threshold_distance, "Threshold method: same face below this L2 distance."),
     ParamSpec("threshold_votes", _M.threshold_votes, "Threshold method: observations per majority vote (count)."),
     ParamSpec("name_threshold", _M.name_threshold, "A face gets a predefined name below this L2 distance."),
@@ -121,6 +126,7 @@ def master_config(params: dict[str, ParamValue]) -> MasterConfig:
         min_observations=int(params["min_observations"]),  # type: ignore[arg-type]
         new_person_scale_c=float(params["new_person_scale_c"]),  # type: ignore[arg-type]
         max_features_per_face=int(params["max_features_per_face"]),  # type: ignore[arg-type]
+        learn_only_consistent_features=bool(params["learn_only_consistent_features"]),
         threshold_distance=float(params["threshold_distance"]),  # type: ignore[arg-type]
         threshold_votes=int(params["threshold_votes"]),  # type: ignore[arg-type]
         name_threshold=float(params["name_threshold"]),  # type: ignore[arg-type]

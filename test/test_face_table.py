@@ -874,3 +874,37 @@ def test_export_face_snapshots_one_face() -> None:
     m.forget_face(1)
     with pytest.raises(KeyError):
         m.export_face(1)
+
+
+@pytest.mark.parametrize("method", ["bayes", "threshold"])
+def test_feature_gate_keeps_a_swapped_persons_features_out_of_the_face(method: str) -> None:
+    """A track identified as person 0 that the tracker then puts on person 1: with the gate, face 1
+    learns nothing of person 1 (and person 1's later track is not mistaken for it); without, it does."""
+    learned = {}
+    for gate in (None, 0.6):
+        rng = np.random.default_rng(11)
+        m = make_identity_manager(method, min_observations=1, feature_gate_distance=gate) if method == "bayes" \
+            else make_identity_manager(method, n_votes=1, feature_gate_distance=gate)
+        m.import_faces([LearnedFace(1, _person(0, 5, rng))])
+        _feed(m, 10, 0, rng, 0.0)
+        assert m.face_id_of(10) == 1
+        for i in range(6):  # swapped: the track now follows person 1
+            _feed(m, 10, 1, rng, 0.1 * (i + 1))
+        feats = m.face_features(1)
+        learned[gate] = feats
+        far = np.linalg.norm(feats - CENTRES[1][None, :], axis=1) < np.linalg.norm(feats - CENTRES[0][None, :], axis=1)
+        if gate is None:
+            assert far.sum() == 6  # the paper: the face absorbed person 1
+        else:
+            assert far.sum() == 0 and m.stats.observations_not_learned_inconsistent == 6
+            assert len(feats) == 5 + 1
+    assert len(learned[None]) == 5 + 1 + 6
+
+
+def test_default_gate_is_the_likelihood_crossing() -> None:
+    model = LikelihoodModel.default()
+    d = model.decision_distance
+    lr = model.log_likelihood_ratio([d - 0.01, d + 0.01])
+    assert lr[0] > 0 > lr[1]
+    with pytest.raises(ValueError, match="feature_gate_distance"):
+        FaceIdentityManager(feature_gate_distance=0.0)
