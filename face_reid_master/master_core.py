@@ -40,6 +40,9 @@ class MasterConfig:
     quality are not used for identity. ``save_interval_s``: how often faces that learned new
     features are written to the store (new faces and re-identifications are written at once).
     ``name_update_interval_s``: how often a live face's predefined-name match is re-evaluated.
+    ``learn_only_consistent_features``: an identified track's embedding joins its face only within the
+    decision distance (bayes: where N_p = N_n; threshold: ``threshold_distance``), so a track the tracker
+    swapped onto another person does not teach the face that person (our extension; False = the paper).
     """
 
     method: str = "bayes"
