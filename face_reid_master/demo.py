@@ -17,24 +17,19 @@ people (gallery photos never shown in the scene), so names appear.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import ctypes
-import ctypes.util
 import json
 import math
 import os
-import queue
 import random
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
 import time
 import uuid
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -42,6 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.rgbd_player import PhotoSpan, PlayedPerson, PlayerSpec
+from face_reid_master.children import ChildProcess, child_env, read_events, start_child, stop_children
+from face_reid_master.published_tracks import TrackMessage, nearest_person, run_log_from_messages, track_from_msg
 from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, NamedTrackRecord
 from face_reid_master.scenario import (
     Door,
@@ -87,7 +84,6 @@ _LEGS = ((50, 40, 35), (70, 60, 50), (40, 40, 60), (60, 50, 45), (30, 30, 30), (
 _HAIR = ((30, 40, 55), (20, 20, 25), (60, 70, 90), (40, 50, 60), (25, 30, 40), (90, 100, 110))
 _ROOM_FOR_CAMERAS = {1: (5.0, 4.0), 2: (6.0, 5.0), 3: (7.0, 5.5), 4: (8.0, 6.0)}
 _GT_RATE_HZ = 10.0
-_MATCH_RADIUS_M = 1.0  # a track is at a true person when within this distance
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -474,77 +470,11 @@ def build_scenario(faces_dir: Path, seed: int = DEFAULT_SEED, num_cameras: int =
 # What the master published, and the summary
 
 
-@dataclass(frozen=True)
-class TrackMessage:
-    """One /tracks_named message: its stamp (scene seconds) and the tracks."""
-
-    stamp_s: float
-    tracks: tuple[NamedTrackRecord, ...]
-
-
-def _nearest_person(xy: NDArray[np.float64], true_xy: NDArray[np.float64], inside: NDArray[np.bool_]) -> int:
-    """Index of the in-room true person nearest to ``xy`` within the match radius, -1 if none."""
-    if not inside.any():
-        return -1
-    d = np.where(inside, np.linalg.norm(true_xy - xy[None, :], axis=1), np.inf)
-    k = int(np.argmin(d))
-    return k if d[k] <= _MATCH_RADIUS_M else -1
-
-
 def build_run_log(scenario: DemoScenario, messages: Sequence[TrackMessage], method: str = "bayes") -> Any:
-    """An :class:`face_reid_master.evaluate.RunLog` from the published tracks: each confirmed track in each
-    message is a sample attributed to the nearest true person (the track's person is the majority); face
-    ids and names are taken as published (a face id first shown on a track is "new", later "known")."""
-    from face_reid_master.evaluate import RunLog, TrackLog
-
-    tracks: dict[int, TrackLog] = {}
-    faces: dict[int, tuple[float, int]] = {}
-    current_face: dict[int, int] = {}
-    rows: list[tuple[int, float, int, int, int]] = []
-    msgs = sorted(messages, key=lambda m: m.stamp_s)
-    stamps = np.array([m.stamp_s for m in msgs])
-    true_xy, inside = scenario.true_xy(stamps) if msgs else (np.zeros((0, len(scenario.people), 2)), None)
-    for i, msg in enumerate(msgs):
-        present = set()
-        for tr in msg.tracks:
-            tid = int(tr.track_id)
-            present.add(tid)
-            log = tracks.get(tid)
-            if log is None:
-                birth = tr.first_seen_s if math.isfinite(tr.first_seen_s) and tr.first_seen_s > -1e6 else msg.stamp_s
-                log = tracks[tid] = TrackLog(tid, min(birth, msg.stamp_s), msg.stamp_s, confirmed=True)
-            log.last_seen_s = max(log.last_seen_s, tr.last_seen_s)
-            log.face_detections = max(log.face_detections, int(tr.face_observations))
-            if tr.face_observations > 0 and log.first_face_s is None:
-                log.first_face_s = msg.stamp_s
-            fid = int(tr.face_id)
-            if fid and current_face.get(tid) != fid:
-                kind = "known" if fid in faces else "new"
-                faces.setdefault(fid, (msg.stamp_s, tid))
-                log.assignments.append((msg.stamp_s, fid, kind))
-            elif not fid and current_face.get(tid):
-                log.released_s = msg.stamp_s
-            current_face[tid] = fid
-            if fid and tr.name and tr.name not in log.names:
-                log.names[tr.name] = msg.stamp_s
-            if tr.state == STATE_CONFIRMED and inside is not None:
-                gt = _nearest_person(np.asarray(tr.position_xy, dtype=np.float64), true_xy[i], inside[i])
-                log.gt_counts[gt] = log.gt_counts.get(gt, 0) + 1
-                log.path.append((msg.stamp_s, float(tr.position_xy[0]), float(tr.position_xy[1])))
-                rows.append((i, msg.stamp_s, gt, tid, fid))
-        for tid, fid in list(current_face.items()):
-            if tid not in present:
-                if fid and tracks[tid].released_s is None:
-                    tracks[tid].released_s = msg.stamp_s
-                del current_face[tid]
-    cols = list(zip(*rows, strict=True)) if rows else [(), (), (), (), ()]
-    return RunLog(
-        method=method, tracks=tracks, faces=faces,
-        det_frame=np.array(cols[0], dtype=np.int64), det_stamp_s=np.array(cols[1], dtype=np.float64),
-        det_gt=np.array(cols[2], dtype=np.int64), det_track=np.array(cols[3], dtype=np.int64),
-        det_face=np.array(cols[4], dtype=np.int64), n_frames=len(msgs),
-        days=((1, 0.0, scenario.duration_s, tuple(p.gt_id for p in scenario.people)),),
-    )
+    """An :class:`face_reid_master.evaluate.RunLog` from the published tracks (each confirmed track attributed
+    to the nearest true person: :func:`face_reid_master.published_tracks.run_log_from_messages`)."""
+    return run_log_from_messages(messages, scenario.true_xy, len(scenario.people),
+                                 ((1, 0.0, scenario.duration_s, tuple(p.gt_id for p in scenario.people)),), method)
 
 
 def summarize(scenario: DemoScenario, messages: Sequence[TrackMessage], method: str = "bayes") -> dict[str, Any]:
@@ -620,7 +550,7 @@ def format_table(scenario: DemoScenario, msg: TrackMessage | None, elapsed_s: fl
     xy, inside = scenario.true_xy(np.array([msg.stamp_s]))
     rows = []
     for tr in sorted(msg.tracks, key=lambda r: r.track_id):
-        gt = _nearest_person(np.asarray(tr.position_xy, dtype=np.float64), xy[0], inside[0])
+        gt = nearest_person(np.asarray(tr.position_xy, dtype=np.float64), xy[0], inside[0])
         truth = scenario.people[gt].name if gt >= 0 else "-"
         rows.append((tr, truth))
     if compact:
@@ -663,112 +593,6 @@ def format_summary(summary: dict[str, Any]) -> str:
 # Processes
 
 
-def _libc_prctl() -> Any:
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True).prctl
-    except OSError:
-        return None
-
-
-_PRCTL = _libc_prctl()
-_PR_SET_PDEATHSIG = 1
-
-
-def _die_with_parent(parent_pid: int) -> Any:
-    """preexec_fn: the child gets SIGTERM when the demo dies, even by SIGKILL (Linux), so nothing is orphaned."""
-    def set_up() -> None:
-        if _PRCTL is not None:
-            _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-        if os.getppid() != parent_pid:  # the demo died before prctl took effect
-            os._exit(1)
-    return set_up
-
-
-@dataclass
-class ChildProcess:
-    """A process of the demo (own process group), its log and, for players, the events it printed."""
-
-    name: str
-    proc: subprocess.Popen[str]
-    log_path: Path
-    events: queue.Queue[dict[str, Any]] = field(default_factory=queue.Queue)
-
-    def log_tail(self, lines: int = 15) -> str:
-        try:
-            text = self.log_path.read_text(errors="replace").splitlines()
-        except OSError:
-            return ""
-        return "\n".join(f"    {line}" for line in text[-lines:])
-
-
-def child_env(domain_id: int, run_id: str) -> dict[str, str]:
-    """Environment of a child: the given ROS domain, discovery on loopback only, this checkout importable,
-    ``FACE_REID_DEMO_RUN`` marking it as ours."""
-    env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env.pop("ROS_STATIC_PEERS", None)
-    env["PYTHONUNBUFFERED"] = "1"
-    env["OMP_NUM_THREADS"] = "1"
-    env["RCUTILS_COLORIZED_OUTPUT"] = "0"
-    env["FACE_REID_DEMO_RUN"] = run_id
-    root = str(Path(__file__).resolve().parents[1])
-    env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    return env
-
-
-def start_child(name: str, args: list[str], env: dict[str, str], log_dir: Path, talk: bool = False) -> ChildProcess:
-    """``python ARGS`` in its own process group (dies with this process), stderr (and stdout unless ``talk``:
-    then stdin/stdout are pipes) to ``log_dir/NAME.log``. Start children before any thread (preexec_fn)."""
-    log_path = log_dir / f"{name}.log"
-    log = open(log_path, "w")  # handed to the child, closed below
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, *args], env=env, stdin=subprocess.PIPE if talk else subprocess.DEVNULL,
-            stdout=subprocess.PIPE if talk else log, stderr=log, text=True, start_new_session=True,
-            preexec_fn=_die_with_parent(os.getpid()),  # safe: started before any thread of ours
-        )
-    finally:
-        log.close()
-    return ChildProcess(name, proc, log_path)
-
-
-def _read_events(child: ChildProcess) -> None:
-    """Thread: the player's JSON lines on stdout -> its event queue."""
-    assert child.proc.stdout is not None
-    for line in child.proc.stdout:
-        line = line.strip()
-        if line.startswith("{"):
-            with contextlib.suppress(json.JSONDecodeError):
-                child.events.put(json.loads(line))
-
-
-def stop_children(children: Sequence[ChildProcess], timeout_s: float = 5.0) -> None:
-    """SIGINT every process group, then SIGKILL what is still there after ``timeout_s``."""
-    for child in children:
-        if child.proc.poll() is None:
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(child.proc.pid, signal.SIGINT)
-    deadline = time.monotonic() + timeout_s
-    for child in children:
-        try:
-            child.proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            pass
-    for child in children:
-        if child.proc.poll() is None:  # still there (not reaped: its pid, the group id, cannot have been reused)
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(child.proc.pid, signal.SIGKILL)
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                child.proc.wait(timeout=2.0)
-        for stream in (child.proc.stdin, child.proc.stdout):
-            if stream is not None:
-                with contextlib.suppress(OSError):
-                    stream.close()
-
-
 class DemoError(RuntimeError):
     """The demo could not run (a process failed to start or died): the message says which and why."""
 
@@ -786,18 +610,6 @@ def _make_gallery(scenario: DemoScenario, folder: Path) -> None:
         target.mkdir(parents=True)
         for photo in person.gallery_photos:
             shutil.copyfile(photo, target / photo.name)
-
-
-def _track_from_msg(t: Any, t0: float) -> NamedTrackRecord:
-    def secs(stamp: Any) -> float:
-        return stamp.sec + stamp.nanosec * 1e-9 - t0
-
-    return NamedTrackRecord(
-        int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence), int(t.face_observations),
-        np.array([t.position.x, t.position.y]), np.array([t.velocity.x, t.velocity.y]),
-        np.asarray(t.covariance, dtype=np.float64).reshape(4, 4), float(t.height_m), int(t.state),
-        secs(t.first_seen), secs(t.last_seen), tuple(t.cameras),
-    )
 
 
 class _Run:
@@ -838,7 +650,7 @@ class _Run:
                 "--truth", str(self.work / f"{cam.camera_id}_truth.npz"),
                 "--ros-args", "-r", f"__ns:=/{cam.camera_id}"], env, logs, talk=True))
         for child in self.players:
-            threading.Thread(target=_read_events, args=(child,), daemon=True).start()
+            threading.Thread(target=read_events, args=(child,), daemon=True).start()
 
     @property
     def players(self) -> list[ChildProcess]:
@@ -873,7 +685,8 @@ class _Run:
                 if not math.isfinite(self.t0):
                     return
                 stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - self.t0
-                self.messages.append(TrackMessage(stamp, tuple(_track_from_msg(t, self.t0) for t in msg.tracks)))
+                tracks = tuple(track_from_msg(t, lambda s: s - self.t0) for t in msg.tracks)
+                self.messages.append(TrackMessage(stamp, tracks))
 
             node.create_subscription(NamedTrackArray, "/tracks_named", on_tracks, qos)
             self._wait_ready(node, rclpy, got_any)

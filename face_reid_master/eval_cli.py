@@ -2,8 +2,10 @@
 
 Example: ``face-reid-eval S --method bayes --plot S/bayes`` after ``face-reid-sim ... --out S``.
 The metrics are defined in ``docs/evaluation.md`` (computed by :mod:`face_reid_master.evaluate`).
-One JSON object goes to stdout (and to ``--out``); progress to stderr. Exit status: 0 done, 2 bad
-arguments / unreadable scenario / ``--live`` (not implemented), 1 other errors (e.g. missing models).
+One JSON object goes to stdout (and to ``--out``); progress to stderr. ``--live`` replays the scenario
+through the real master node over DDS instead (:mod:`face_reid_master.eval_live`). Exit status: 0 done,
+2 bad arguments / unreadable scenario, 1 other errors (e.g. missing models, the master node failed),
+130 interrupted.
 """
 
 from __future__ import annotations
@@ -63,7 +65,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=None, metavar="JSON", help="also write the JSON to this file")
     p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
     p.add_argument("--live", action="store_true",
-                   help="run the whole DDS pipeline (camera messages published, the master node subscribed)")
+                   help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
+                        "database, the same gallery, --method) gets the recorded camera frames as CameraFrame "
+                        "messages in real time (takes the scenario's duration); metrics from what it publishes "
+                        "on /tracks_named (each track attributed to the nearest true person; no MOT metrics). "
+                        "Later days are replayed after a 5 s pause with the master kept running")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="--live: ROS_DOMAIN_ID of the run (default: random in 1..100; discovery on localhost only)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 
@@ -116,9 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
     log = None if args.quiet else sys.stderr
-    if args.live:
-        print("face-reid-eval: error: --live is not implemented yet: use the end-to-end DDS test "
-              "(test/test_master_node_dds.py) to run the camera and master nodes over DDS", file=sys.stderr)
+    if args.domain_id is not None and not 0 <= args.domain_id <= 101:
+        print(f"face-reid-eval: error: --domain-id must be in 0..101, got {args.domain_id}", file=sys.stderr)
         return 2
     if not (math.isfinite(args.tick_period) and args.tick_period > 0):
         print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
@@ -150,6 +157,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     likelihood = LikelihoodModel.default() if args.method == "bayes" else None
     days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
             for d in scenario.days]
+    if args.live:
+        return _main_live(args, scenario, gallery, config, likelihood, days, t0, log)
     if log:
         print(f"running the master core ({args.method}) over {len(scenario.frames)} frames", file=log)
     run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
@@ -173,11 +182,88 @@ def main(argv: Sequence[str] | None = None) -> int:
         if log:
             print(f"plots saved in {time.perf_counter() - t2:.1f} s: {', '.join(map(str, paths))}", file=log)
     result["total_time_s"] = round(time.perf_counter() - t0, 2)
+    _emit(result, args.out)
+    return 0
+
+
+def _emit(result: dict[str, Any], out: Path | None) -> None:
     text = json.dumps(result, indent=1, sort_keys=False)
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n", encoding="utf-8")
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n", encoding="utf-8")
     print(text)
+
+
+def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, config: MasterConfig,
+               likelihood: LikelihoodModel | None, days: list[tuple[int, float, float, list[int]]], t0: float,
+               log: Any) -> int:
+    """``--live``: the scenario through the master node over DDS; the metrics of what it published."""
+    import os
+    import random
+    import signal
+    import uuid
+
+    from face_reid_master.eval_live import LiveError, run_live, scenario_truth
+    from face_reid_master.published_tracks import MATCH_RADIUS_M, run_log_from_messages
+
+    domain_id = args.domain_id if args.domain_id is not None else random.randint(1, 100)
+    # this process joins the same private, loopback-only domain before rclpy is imported
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_STATIC_PEERS", None)
+    day_of = {int(d["day"]): (float(d["start_s"]), float(d["end_s"])) for d in scenario.days}
+    day_of_frame = [next((d for d, (a, b) in day_of.items() if a - 1e-6 <= f.stamp_s <= b + 1e-6), 0)
+                    for f in scenario.frames]
+    if log:
+        print(f"live run on ROS_DOMAIN_ID={domain_id} (localhost only): {len(scenario.frames)} frames over "
+              f"{len(days)} day(s), method {args.method}", file=log)
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous = signal.signal(signal.SIGTERM, on_term)
+    t1 = time.perf_counter()
+    try:
+        live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
+                        log=log)
+    except LiveError as exc:
+        print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("face-reid-eval: interrupted; every process stopped", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    play_s = time.perf_counter() - t1
+    run = run_log_from_messages(live.messages, scenario_truth(scenario.ground_truth, days),
+                                len(scenario.identities), days, args.method)
+    metrics = evaluate_run(run, gallery_people=gallery.gt_of_name or None, scenario_summary=scenario.summary,
+                           with_mot=False)
+    for key in ("method", "master_stats", "frames", "frames_rejected", "detections", "run_time_s"):
+        metrics.pop(key, None)
+    transport = live.transport
+    result: dict[str, Any] = {
+        "mode": "live",
+        "scenario": _scenario_json(scenario),
+        "method": args.method,
+        "parameters": {**_parameters(config, likelihood, 1.0 / 5.0), "master": "face_reid_master.node, default "
+                       "parameters but method, db_path (temporary) and gallery_path (the gallery below, .npz)"},
+        "gallery": gallery.as_json(),
+        **metrics,
+        "frames": transport["frames_sent"],
+        "frames_rejected": transport["frames_sent"] - transport["frames_answered"],
+        "detections": transport["detections_sent"],
+        "attribution": {"match_radius_m": MATCH_RADIUS_M, "published_track_samples": int(run.det_gt.size),
+                        "samples_near_nobody": int((run.det_gt < 0).sum())},
+        "transport": {"domain_id": domain_id, **transport},
+        "run_time_s": round(play_s, 2),
+    }
+    if args.plot:
+        paths = save_plots(run, scenario, args.plot, title=f"{args.scenario.name} / {args.method} (live)")
+        result["plots"] = [str(p) for p in paths]
+    result["total_time_s"] = round(time.perf_counter() - t0, 2)
+    _emit(result, args.out)
     return 0
 
 

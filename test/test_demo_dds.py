@@ -29,17 +29,7 @@ pytestmark = pytest.mark.ros
 
 def _demo_pids(domain_id: int) -> list[int]:
     """Processes started by a demo (marked FACE_REID_DEMO_RUN) on ``domain_id``."""
-    pids = []
-    for env_file in Path("/proc").glob("[0-9]*/environ"):
-        try:
-            env = env_file.read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if b"ROS_DOMAIN_ID=%d" % domain_id in env and any(e.startswith(b"FACE_REID_DEMO_RUN=") for e in env):
-            status = (env_file.parent / "status").read_text() if (env_file.parent / "status").exists() else ""
-            if "\nState:\tZ" not in status:
-                pids.append(int(env_file.parent.name))
-    return pids
+    return procs.run_pids(domain_id)
 
 
 def _demo_cmd(domain_id: int, *extra: str) -> list[str]:

@@ -45,3 +45,19 @@ def stop(proc: subprocess.Popen[str], timeout_s: float = 5.0) -> None:
             except ProcessLookupError:
                 pass
             proc.wait(timeout=timeout_s)
+
+
+def run_pids(domain_id: int) -> list[int]:
+    """Live processes started by ``face_reid_master.children.start_child`` (marked FACE_REID_DEMO_RUN) on
+    ``domain_id`` (Linux /proc), zombies excluded."""
+    pids = []
+    for env_file in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            env = env_file.read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"ROS_DOMAIN_ID=%d" % domain_id in env and any(e.startswith(b"FACE_REID_DEMO_RUN=") for e in env):
+            status = (env_file.parent / "status").read_text() if (env_file.parent / "status").exists() else ""
+            if "\nState:\tZ" not in status:
+                pids.append(int(env_file.parent.name))
+    return pids
