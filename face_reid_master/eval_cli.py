@@ -28,6 +28,7 @@ from face_reid_master.evaluate import (
     RunLog,
     default_gallery_people,
     evaluate_run,
+    paired_reid_times,
     progress_to,
     run_master,
     scenario_gallery,
@@ -51,8 +52,9 @@ def _parser() -> argparse.ArgumentParser:
                     "predefined people, IDF1 / MOTA (definitions: docs/evaluation.md).",
     )
     p.add_argument("scenario", type=Path, metavar="SCENARIO_DIR", help="directory written by face-reid-sim")
-    p.add_argument("--method", choices=("bayes", "threshold"), default="bayes",
-                   help="face classification: the paper's Bayesian inference (default) or the threshold baseline")
+    p.add_argument("--method", choices=("bayes", "threshold", "both"), default="bayes",
+                   help="face classification: the paper's Bayesian inference (default) or the threshold baseline; "
+                        "both: run each (offline) and compare their re-identification times on the same tracks")
     p.add_argument("--gallery-people", type=int, default=None, metavar="K",
                    help="predefined people: K day-1 identities (default: half of them; 0 = no gallery), each "
                         "with the photos of their folder the scenario did not use")
@@ -127,6 +129,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.domain_id is not None and not 0 <= args.domain_id <= 101:
         print(f"face-reid-eval: error: --domain-id must be in 0..101, got {args.domain_id}", file=sys.stderr)
         return 2
+    if args.live and args.method == "both":
+        print("face-reid-eval: error: --live runs one method: use --method bayes or threshold", file=sys.stderr)
+        return 2
     if not (math.isfinite(args.tick_period) and args.tick_period > 0):
         print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
         return 2
@@ -153,14 +158,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     if log and gallery.people:
         print(f"gallery of {len(gallery.people)} people built in {time.perf_counter() - t1:.1f} s", file=log)
 
-    config = MasterConfig(method=args.method)
-    likelihood = LikelihoodModel.default() if args.method == "bayes" else None
     days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
             for d in scenario.days]
-    if args.live:
-        return _main_live(args, scenario, gallery, config, likelihood, days, t0, log)
+    if args.method == "both":
+        runs = {m: _run_offline(args, m, scenario, gallery, days, log) for m in ("bayes", "threshold")}
+        result = {"scenario": runs["bayes"][0].pop("scenario"), "method": "both"}
+        for m, (res, _) in runs.items():
+            res.pop("scenario", None)
+            result[m] = res
+        result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
+    else:
+        config = MasterConfig(method=args.method)
+        likelihood = LikelihoodModel.default() if args.method == "bayes" else None
+        if args.live:
+            return _main_live(args, scenario, gallery, config, likelihood, days, t0, log)
+        result = _run_offline(args, args.method, scenario, gallery, days, log)[0]
+    result["total_time_s"] = round(time.perf_counter() - t0, 2)
+    _emit(result, args.out)
+    return 0
+
+
+def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
+                 days: list[tuple[int, float, float, list[int]]], log: Any) -> tuple[dict[str, Any], RunLog]:
+    """The master core with ``method`` over the scenario; (the JSON-ready metrics, the run's log)."""
+    config = MasterConfig(method=method)
+    likelihood = LikelihoodModel.default() if method == "bayes" else None
     if log:
-        print(f"running the master core ({args.method}) over {len(scenario.frames)} frames", file=log)
+        print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
     run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
                      gallery=gallery.people or None, tick_period_s=args.tick_period, days=days,
                      progress=progress_to(log) if log else None)
@@ -170,20 +194,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                            with_mot=not args.no_mot)
     result: dict[str, Any] = {
         "scenario": _scenario_json(scenario),
-        "method": args.method,
+        "method": method,
         "parameters": _parameters(config, likelihood, args.tick_period),
         "gallery": gallery.as_json(),
         **{k: v for k, v in metrics.items() if k != "method"},
     }
     if args.plot:
         t2 = time.perf_counter()
-        paths = save_plots(run, scenario, args.plot, title=f"{args.scenario.name} / {args.method}")
+        prefix = args.plot if args.method != "both" else f"{args.plot}_{method}"
+        paths = save_plots(run, scenario, prefix, title=f"{args.scenario.name} / {method}")
         result["plots"] = [str(p) for p in paths]
         if log:
             print(f"plots saved in {time.perf_counter() - t2:.1f} s: {', '.join(map(str, paths))}", file=log)
-    result["total_time_s"] = round(time.perf_counter() - t0, 2)
-    _emit(result, args.out)
-    return 0
+    return result, run
 
 
 def _emit(result: dict[str, Any], out: Path | None) -> None:

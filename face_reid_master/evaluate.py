@@ -396,6 +396,33 @@ def _ratio(num: int, den: int) -> float | None:
     return round(num / den, 4) if den else None
 
 
+def paired_reid_times(log_a: RunLog, log_b: RunLog, names: tuple[str, str] = ("a", "b")) -> dict[str, Any]:
+    """Re-identification times of two runs (e.g. bayes vs threshold) on the SAME tracks.
+
+    The tracker does not depend on the face method, so track ids match between runs of one scenario.
+    Compared: re-identification cases that both runs got right. Means over each run's own successes
+    mix different tracks (one method may succeed on the hard ones), this does not.
+    """
+    def successes(log: RunLog) -> dict[int, TrackOutcome]:
+        return {o.track_id: o for o in track_outcomes(log) if o.reid_case and o.outcome == "success"}
+
+    a, b = successes(log_a), successes(log_b)
+    common = sorted(set(a) & set(b))
+    da = np.array([a[t].decided_s - a[t].birth_s for t in common], dtype=np.float64)  # type: ignore[operator]
+    db = np.array([b[t].decided_s - b[t].birth_s for t in common], dtype=np.float64)  # type: ignore[operator]
+    na, nb = names
+    return {
+        "tracks_both_successful": len(common),
+        f"only_{na}_successful": len(set(a) - set(b)),
+        f"only_{nb}_successful": len(set(b) - set(a)),
+        f"mean_reid_time_{na}_s": _mean(da.tolist()),
+        f"mean_reid_time_{nb}_s": _mean(db.tolist()),
+        f"{na}_faster": int(np.count_nonzero(da < db - 1e-9)),
+        f"{nb}_faster": int(np.count_nonzero(db < da - 1e-9)),
+        "same_time": int(np.count_nonzero(np.abs(da - db) <= 1e-9)),
+    }
+
+
 def mot_metrics(log: RunLog, hypothesis: str = "track") -> dict[str, float | int]:
     """motmetrics over camera frames: GT = true people detected in the frame, hypotheses = the track
     ids (``hypothesis="track"``) or face ids (``"face"``) of the same detections, distance 0 between a

@@ -24,6 +24,7 @@ from face_reid_master.evaluate import (
     default_gallery_people,
     evaluate_run,
     mot_metrics,
+    paired_reid_times,
     run_master,
     scenario_gallery,
     track_outcomes,
@@ -325,3 +326,33 @@ def test_cli_errors(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     assert "no scenario.json" in capsys.readouterr().err
     assert main([str(scenario_dir), "--gallery-people", "9", "--quiet"]) == 2
     assert "--gallery-people" in capsys.readouterr().err
+
+
+def test_paired_reid_times_compare_the_same_tracks(embeddings) -> None:
+    a, b = embeddings[IDS[0]], embeddings[IDS[1]]
+    frames, gts = _frames([(0, 0.0, 4.0, 0.0, a[:5]), (1, 0.0, 4.0, 3.0, b[:5]),
+                           (0, 7.0, 11.0, 0.0, a[5:]), (1, 7.0, 11.0, 3.0, b[5:])])
+    days = [(1, 0.0, 11.0, (0, 1))]
+    bayes = run_master(frames, gts, _config("bayes"), days=days)
+    threshold = run_master(frames, gts, _config("threshold"), days=days)
+    paired = paired_reid_times(bayes, threshold, ("bayes", "threshold"))
+    assert paired["tracks_both_successful"] == 2
+    assert paired["only_bayes_successful"] == paired["only_threshold_successful"] == 0
+    assert paired["bayes_faster"] + paired["threshold_faster"] + paired["same_time"] == 2
+    # the paper's baseline needs 5 votes, the Bayesian table 3 observations: never slower here
+    assert paired["threshold_faster"] == 0
+    assert paired["mean_reid_time_bayes_s"] < paired["mean_reid_time_threshold_s"]
+    same = paired_reid_times(bayes, bayes)
+    assert same["same_time"] == 2 and same["mean_reid_time_a_s"] == same["mean_reid_time_b_s"]
+
+
+def test_cli_both_methods_adds_the_paired_comparison(scenario_dir: Path, capsys) -> None:
+    assert main([str(scenario_dir), "--method", "both", "--no-mot", "--quiet"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["method"] == "both" and printed["scenario"]["cameras"] == 2
+    assert printed["bayes"]["method"] == "bayes" and printed["threshold"]["method"] == "threshold"
+    paired = printed["paired"]
+    both = paired["tracks_both_successful"]
+    assert both + paired["only_bayes_successful"] == printed["bayes"]["reidentification"]["success"]
+    assert both + paired["only_threshold_successful"] == printed["threshold"]["reidentification"]["success"]
+    assert main([str(scenario_dir), "--method", "both", "--live", "--quiet"]) == 2
