@@ -1,7 +1,7 @@
 """``face-reid-eval``: run the master core on a recorded scenario and print the paper's metrics as JSON.
 
 Example: ``face-reid-eval S --method bayes --plot S/bayes`` after ``face-reid-sim ... --out S``.
-The metrics are defined in ``docs/evaluation.md`` (computed by :mod:`face_reid_master.evaluate`).
+The metrics are defined in ``README.md, "What is counted, exactly"`` (computed by :mod:`face_reid_master.evaluate`).
 One JSON object goes to stdout (and to ``--out``); progress to stderr. ``--live`` replays the scenario
 through the real master node over DDS instead (:mod:`face_reid_master.eval_live`). Exit status: 0 done,
 2 bad arguments / unreadable scenario, 1 other errors (e.g. missing models, the master node failed),
@@ -49,7 +49,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="face-reid-eval",
         description="Evaluate people re-identification on a scenario written by face-reid-sim: tracks "
                     "re-identified successfully / wrongly, re-identification time, recover rate, names of "
-                    "predefined people, IDF1 / MOTA (definitions: docs/evaluation.md).",
+                    "predefined people, IDF1 / MOTA (definitions: README.md, 'What is counted, exactly').",
     )
     p.add_argument("scenario", type=Path, metavar="SCENARIO_DIR", help="directory written by face-reid-sim")
     p.add_argument("--method", choices=("bayes", "threshold", "both"), default="bayes",

@@ -11,7 +11,7 @@ Two steps, both pure (no rclpy, no plotting):
    re-identification outcomes (success / failure / none), re-identification time, recover rate,
    predefined-people names, and tracker- and identity-level IDF1 / MOTA / switches (``motmetrics``).
 
-Every definition is written out in ``docs/evaluation.md``; the docstrings below only summarise.
+Every definition is written out in ``README.md, "What is counted, exactly"``; the docstrings below only summarise.
 :func:`scenario_gallery` builds the predefined people of a scenario from photos it did not use.
 """
 
@@ -308,7 +308,7 @@ def run_master(
 
 @dataclass(frozen=True)
 class TrackOutcome:
-    """The re-identification verdict of one evaluated track (see docs/evaluation.md)."""
+    """The re-identification verdict of one evaluated track (see README.md, "What is counted, exactly")."""
 
     track_id: int
     person: int
@@ -426,7 +426,7 @@ def paired_reid_times(log_a: RunLog, log_b: RunLog, names: tuple[str, str] = ("a
 def mot_metrics(log: RunLog, hypothesis: str = "track") -> dict[str, float | int]:
     """motmetrics over camera frames: GT = true people detected in the frame, hypotheses = the track
     ids (``hypothesis="track"``) or face ids (``"face"``) of the same detections, distance 0 between a
-    detection's true person and its own hypothesis and no match otherwise (docs/evaluation.md)."""
+    detection's true person and its own hypothesis and no match otherwise (README.md, "What is counted, exactly")."""
     import motmetrics as mm
 
     if hypothesis not in ("track", "face"):
@@ -477,7 +477,7 @@ def evaluate_run(
     scenario_summary: Mapping[str, Any] | None = None,
     with_mot: bool = True,
 ) -> dict[str, Any]:
-    """All metrics of one run as a JSON-ready dict (definitions: docs/evaluation.md).
+    """All metrics of one run as a JSON-ready dict (definitions: README.md, "What is counted, exactly").
 
     ``gallery_people``: predefined name -> true person (gt id). ``scenario_summary``: the scenario's
     summary (``losses``, ``visible_segments``, ``per_day`` segments) for the tracker-side comparison.
@@ -620,7 +620,7 @@ def evaluate_run(
 
 
 def _names(evaluated: Sequence[TrackLog], gallery_people: Mapping[str, int] | None) -> dict[str, Any]:
-    """Predefined-people outcome per track: right / wrong / no name (docs/evaluation.md)."""
+    """Predefined-people outcome per track: right / wrong / no name (README.md, "What is counted, exactly")."""
     if not gallery_people:
         return {"gallery_people": 0}
     person_name = {gt: name for name, gt in gallery_people.items()}
