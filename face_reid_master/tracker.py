@@ -124,8 +124,12 @@ class TrackerConfig:
     ``max_future_stamp_s``: frames further than this ahead of the newest stamp are rejected...
     ``clock_resync_frames``: ...unless this many consecutive frames are rejected in the same
     direction, which is taken as a clock jump (0 disables).
-    ``max_gate_distance_m``: additional Euclidean gate around the predicted position, so that a long
-    LOST track (whose covariance has grown to metres) cannot capture a newcomer far away (inf = off).
+    ``max_gate_distance_m``: additional Euclidean gate around the predicted position (and cap of the
+    second-pass reach), so that a coasting or LOST track, whose covariance grows to metres, cannot
+    capture someone else (inf = off).  In a crowd people are hidden behind each other all the time:
+    on simulated 20-person scenes ~80 % of the detections such tracks took more than 1 m from their
+    prediction were another person's (~40 % at 0.5-1 m), hence 1 m; a hidden person who reappears
+    further off gets a new track, whose identity the face table restores.
     ``min_person_separation_m``: two people are assumed never closer than this.  A detection that
     fails every gate but lies this close to the predicted position of an unmatched track, or within
     ``min_person_separation_m + max_speed_mps * (time since its last detection)`` of that last
@@ -149,7 +153,7 @@ class TrackerConfig:
     max_detection_delay_s: float = 0.3
     max_future_stamp_s: float = 2.0
     clock_resync_frames: int = 5
-    max_gate_distance_m: float = 2.0
+    max_gate_distance_m: float = 1.0
     min_person_separation_m: float = 0.4
     max_speed_mps: float = 2.0
     coast_after_s: float = 0.25

@@ -22,6 +22,7 @@ from trajectories import (
     SyntheticFrame,
     Walker,
     crossing_pair,
+    hidden_walker_and_bystander,
     min_pair_distance,
     overview_camera,
     person_reports,
@@ -425,6 +426,21 @@ def test_lost_track_does_not_capture_a_newcomer_far_away() -> None:
     assert snap(tracker, 1).state is TrackState.LOST
     res = tracker.update([det(4.5, 3.0)], 2.5, "cam")  # 3+ m from anything the lost track could be
     assert res.created == (2,) and res.associations == ((2, 0),)
+
+
+@pytest.mark.parametrize(("hidden_s", "offset_m"), [(0.9, 1.1), (1.2, 1.3), (1.6, 1.6)])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_hidden_persons_track_does_not_take_a_bystander_who_appears_next_to_it(
+    hidden_s: float, offset_m: float, seed: int
+) -> None:
+    # A person hidden for ~1 s (as behind others in a crowd) while someone steps out 1.1-1.6 m to
+    # their side: the coasting/LOST track's grown gate holds both, but it must wait for its person
+    # (who reappears on the predicted path) rather than swap to the bystander.
+    walkers = hidden_walker_and_bystander(hidden_s, offset_m)
+    frames = Scenario(walkers, (overview_camera(),), walkers[1].end_s, noise_std_m=0.05, seed=seed).frames()
+    tracker, results = run(frames)
+    assert_one_track_per_person(frames, results)
+    assert tracker.stats.tracks_confirmed == 2
 
 
 # ---------------------------------------------------------------------------------------------- lifecycle

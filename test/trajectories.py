@@ -204,6 +204,32 @@ def crossing_pair(
     return w1, w2
 
 
+def hidden_walker_and_bystander(
+    hidden_s: float = 1.2,
+    bystander_offset_m: float = 1.2,
+    speed_mps: float = 1.2,
+    hide_at_s: float = 3.0,
+) -> tuple[Walker, Walker, Walker]:
+    """Person 1 walks along +x and is hidden (occluded) for ``hidden_s`` from ``hide_at_s``; half-way
+    through, person 2 steps out from behind the occluder ``bystander_offset_m`` to the side of where
+    person 1 is, and stands there.
+
+    Person 1 is two walkers with the same id (an unseen gap on one straight path), so a tracker
+    sees a track coasting through the gap while a new person appears within a metre or two of it,
+    as in a crowd, where people are hidden behind each other all the time.
+    """
+    x0 = -speed_mps * hide_at_s
+    x_hide = 0.0
+    x_back = speed_mps * hidden_s
+    end = x_back + 3.0
+    before = Walker(1, ((x0, 0.0), (x_hide, 0.0)), speed_mps)
+    after = Walker(1, ((x_back, 0.0), (end, 0.0)), speed_mps, start_s=hide_at_s + hidden_s)
+    t_b = hide_at_s + hidden_s / 2
+    bx = speed_mps * hidden_s / 2
+    bystander = Walker(2, ((bx, bystander_offset_m), (bx, bystander_offset_m + 0.3)), 0.1, start_s=t_b)
+    return before, after, bystander
+
+
 def min_pair_distance(walkers: Sequence[Walker], step_s: float = 0.05) -> float:
     """Smallest distance between any two walkers present at the same time (inf if never)."""
     if len(walkers) < 2:
