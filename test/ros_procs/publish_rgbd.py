@@ -62,7 +62,9 @@ def main() -> int:
             print(json.dumps({"error": "no subscriber"}), flush=True)
             return 1
         rclpy.spin_once(node, timeout_sec=0.05)
-    time.sleep(0.5)
+    # The subscriber side may match our writers a little later than we see it (loaded machines): what
+    # is sent before is lost. Bad-input runs must not lose their few bad frames, so they wait longer.
+    time.sleep(2.0 if args.bad_first else 0.5)
 
     def send(color_img, color_enc, depth_img, depth_enc, info_size=(intr.width, intr.height), truncate=False):
         stamp = node.get_clock().now().to_msg()
@@ -89,13 +91,13 @@ def main() -> int:
 
     if args.bad_first:
         good = frames[0]
-        for _ in range(3):  # no CameraInfo yet
+        for _ in range(6):  # no CameraInfo yet
             send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, info_size=None)
-        for _ in range(3):  # unsupported colour encoding
+        for _ in range(6):  # unsupported colour encoding
             send(good.rgb_bgr, "yuv422", depth_of(good), args.depth_encoding)
-        for _ in range(3):  # truncated depth data
+        for _ in range(6):  # truncated depth data
             send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, truncate=True)
-        for _ in range(3):  # depth smaller than CameraInfo says
+        for _ in range(6):  # depth smaller than CameraInfo says
             send(good.rgb_bgr, "bgr8", depth_of(good)[::2, ::2], args.depth_encoding)
         nan_depth = np.full((intr.height, intr.width), np.nan, np.float32)
         for _ in range(6):  # all-NaN depth: a valid frame with nobody in it
