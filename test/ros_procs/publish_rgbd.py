@@ -91,7 +91,7 @@ def main() -> int:
 
     if args.bad_first:
         good = frames[0]
-        for _ in range(6):  # no CameraInfo yet
+        for _ in range(24):  # no CameraInfo yet (long: the first large images of a new reader can be lost)
             send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, info_size=None)
         for _ in range(6):  # unsupported colour encoding
             send(good.rgb_bgr, "yuv422", depth_of(good), args.depth_encoding)
