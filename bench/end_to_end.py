@@ -236,7 +236,7 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
 
     ``master_params``: extra ``name:=value`` parameters of the master node.
     """
-    from face_reid_master.demo import child_env, start_child, stop_children
+    from face_reid_master.children import child_env, start_child, stop_children
 
     env = child_env(domain_id, uuid.uuid4().hex[:12])
     logs = work / name

@@ -55,20 +55,15 @@ from face_reid_master.scenario import (
 
 __all__ = [
     "DEFAULT_IDENTITIES",
-    "ChildProcess",
     "DemoPerson",
     "DemoScenario",
-    "TrackMessage",
     "build_run_log",
     "build_scenario",
-    "child_env",
     "choose_identities",
     "display_name",
     "format_summary",
     "format_table",
     "main",
-    "start_child",
-    "stop_children",
     "summarize",
 ]
 

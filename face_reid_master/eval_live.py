@@ -26,11 +26,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_master.children import ChildProcess, child_env, start_child, stop_children
+from face_reid_master.node import frame_record_to_msg
 from face_reid_master.published_tracks import TrackMessage, TruthLookup, track_from_msg
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.tracker import TrackerConfig
 
-__all__ = ["LiveError", "LiveRun", "frame_record_to_msg", "run_live", "scenario_truth"]
+__all__ = ["LiveError", "LiveRun", "run_live", "scenario_truth"]
 
 _STAMP_QUANTUM_S = 1e-4  # sent stamps are multiples of this, so a reply's float stamp finds its frame exactly
 _TRUTH_MARGIN_S = 2.0  # ground truth is looked up this far beyond a day's ends (clamped to its first/last sample)
@@ -39,29 +40,6 @@ _TAIL_S = 1.5  # after the last frame: the last replies still arrive
 
 class LiveError(RuntimeError):
     """The live run failed (the master did not start or died): the message says why, with its log."""
-
-
-def frame_record_to_msg(frame_cls: type, person_cls: type, frame: CameraFrameRecord, stamp_s: float) -> Any:
-    """A core record -> face_reid_msgs/CameraFrame stamped ``stamp_s`` (the inverse of
-    :func:`face_reid_master.node.frame_from_msg`)."""
-    from face_reid_camera.ros_convert import stamp_from_seconds
-
-    msg = frame_cls()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_from_seconds(stamp_s)
-    msg.header.frame_id = frame.frame_id
-    msg.camera_id = frame.camera_id
-    for person in frame.people:
-        m = person_cls()
-        m.position_world.x, m.position_world.y, m.position_world.z = (float(v) for v in person.position_world)
-        m.position_std_m = float(person.position_std_m)
-        m.height_m = float(person.height_m)
-        if person.embedding is not None:
-            m.face_found = True
-            m.face_score = float(person.face_score)
-            m.face_quality = float(person.face_quality)
-            m.embedding = np.asarray(person.embedding, dtype=np.float32).tolist()
-        msg.people.append(m)
-    return msg
 
 
 def scenario_truth(ground_truth: Any, days: Sequence[tuple[int, float, float, Sequence[int]]]) -> TruthLookup:

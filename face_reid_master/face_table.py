@@ -752,11 +752,9 @@ class IdentityManagerBase:
 
     def _consistent(self, obs: F32Array, slot: int) -> F32Array:
         """The observations within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
-        feats = self._bank.features(slot)
-        d2 = (np.einsum("ij,ij->i", obs, obs)[:, None] - 2.0 * (obs @ feats.T)
-              + np.einsum("ij,ij->i", feats, feats)[None, :])
         assert self.feature_gate_distance is not None
-        keep = d2.min(axis=1) <= self.feature_gate_distance**2
+        d = self._bank.exact_min_distances(obs, np.array([slot], dtype=np.intp))[:, 0]
+        keep = d <= self.feature_gate_distance
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
         return obs if keep.all() else obs[keep]
 

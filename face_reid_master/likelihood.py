@@ -155,7 +155,7 @@ class LikelihoodModel:
                 raise ValueError(f"{name} must be in [0, 1], got {e!r}")
             object.__setattr__(self, name, float(e))
         object.__setattr__(self, "metadata", dict(self.metadata))
-        lo, cross, hi = self._find_monotone_range()
+        lo, cross, hi = self._find_decision_points()
         object.__setattr__(self, "_monotone_range", (lo, hi))
         object.__setattr__(self, "_decision_distance", cross)
         n = _SURVIVAL_GRID_POINTS
@@ -170,7 +170,7 @@ class LikelihoodModel:
             ),
         )
 
-    def _find_monotone_range(self) -> tuple[float, float, float]:
+    def _find_decision_points(self) -> tuple[float, float, float]:
         """(d_lo, d_cross, d_hi): log N_p/N_n decreases on [d_lo, d_hi] (outside it the fitted tails are
         extrapolation) and crosses 0 at d_cross.
 

@@ -44,6 +44,29 @@ def frame_from_msg(msg: Any) -> CameraFrameRecord:
     return CameraFrameRecord(msg.camera_id, float(stamp), tuple(people), msg.header.frame_id)
 
 
+def frame_record_to_msg(frame_cls: type, person_cls: type, frame: CameraFrameRecord, stamp_s: float) -> Any:
+    """A core record -> face_reid_msgs/CameraFrame stamped ``stamp_s`` (the inverse of :func:`frame_from_msg`;
+    replays recorded frames, e.g. ``face-reid-eval --live``)."""
+    from face_reid_camera.ros_convert import stamp_from_seconds
+
+    msg = frame_cls()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_from_seconds(stamp_s)
+    msg.header.frame_id = frame.frame_id
+    msg.camera_id = frame.camera_id
+    for person in frame.people:
+        m = person_cls()
+        m.position_world.x, m.position_world.y, m.position_world.z = (float(v) for v in person.position_world)
+        m.position_std_m = float(person.position_std_m)
+        m.height_m = float(person.height_m)
+        if person.embedding is not None:
+            m.face_found = True
+            m.face_score = float(person.face_score)
+            m.face_quality = float(person.face_quality)
+            m.embedding = np.asarray(person.embedding, dtype=np.float32).tolist()
+        msg.people.append(m)
+    return msg
+
+
 def _time_msg(stamp_s: float, time_cls: type) -> Any:
     from face_reid_camera.ros_convert import stamp_from_seconds
 

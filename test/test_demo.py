@@ -17,6 +17,8 @@ import pytest
 
 from face_reid_camera.rgbd_player import PlayerSpec, ScenePlayer
 from face_reid_master import demo
+from face_reid_master.children import start_child, stop_children
+from face_reid_master.published_tracks import TrackMessage
 from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
 
 FACES = Path(__file__).parent / "data" / "faces"
@@ -126,7 +128,7 @@ def test_player_spec_round_trip_and_rendering(scenario: demo.DemoScenario, tmp_p
 
 
 def _perfect_messages(scenario: demo.DemoScenario, *, return_face_offset: int = 0, name_for: dict[int, str]
-                      | None = None) -> list[demo.TrackMessage]:
+                      | None = None) -> list[TrackMessage]:
     """What an ideal master publishes: one track per visit at the true position, the person's face id on it
     (+ ``return_face_offset`` on the return visit: a new face id), gallery people named."""
     messages = []
@@ -144,7 +146,7 @@ def _perfect_messages(scenario: demo.DemoScenario, *, return_face_offset: int = 
             tracks.append(NamedTrackRecord(
                 10 * (p + 1) + visit, face if decided else 0, name if decided else "", 0.99 if decided else 0.3,
                 5, xy[0, p] + 0.05, np.zeros(2), np.eye(4), 1.75, STATE_CONFIRMED, first_seen, t, ("camera1",)))
-        messages.append(demo.TrackMessage(float(t), tuple(tracks)))
+        messages.append(TrackMessage(float(t), tuple(tracks)))
     return messages
 
 
@@ -211,11 +213,11 @@ def _gone(pid: int) -> bool:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process groups and PDEATHSIG: Linux")
 def test_stop_all_kills_stubborn_process_groups(tmp_path: Path) -> None:
     env = dict(os.environ)
-    polite = demo.start_child("polite", ["-c", "import time; time.sleep(60)"], env, tmp_path)
-    stubborn = demo.start_child("stubborn", ["-c", _IGNORES_SIGINT], env, tmp_path)
+    polite = start_child("polite", ["-c", "import time; time.sleep(60)"], env, tmp_path)
+    stubborn = start_child("stubborn", ["-c", _IGNORES_SIGINT], env, tmp_path)
     time.sleep(0.5)
     t0 = time.monotonic()
-    demo.stop_children([polite, stubborn], timeout_s=1.0)
+    stop_children([polite, stubborn], timeout_s=1.0)
     assert time.monotonic() - t0 < 5.0
     assert polite.proc.returncode is not None and stubborn.proc.returncode == -signal.SIGKILL
     assert polite.proc.pid != os.getpgid(0)  # each child had its own process group
@@ -224,8 +226,8 @@ def test_stop_all_kills_stubborn_process_groups(tmp_path: Path) -> None:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
 def test_children_die_with_the_demo(tmp_path: Path) -> None:
     script = (
-        "import os, sys; from pathlib import Path; from face_reid_master import demo; "
-        f"c = demo.start_child('orphan', ['-c', {_IGNORES_SIGINT!r}], dict(os.environ), Path({str(tmp_path)!r})); "
+        "import os, sys; from pathlib import Path; from face_reid_master.children import start_child; "
+        f"c = start_child('orphan', ['-c', {_IGNORES_SIGINT!r}], dict(os.environ), Path({str(tmp_path)!r})); "
         "print(c.proc.pid, flush=True); os._exit(0)"
     )
     env = dict(os.environ, PYTHONPATH=str(REPO))

@@ -21,8 +21,7 @@ from face_reid_master.records import CameraFrameRecord, PersonRecord
 
 def test_frame_record_round_trips_through_the_message() -> None:
     pytest.importorskip("face_reid_msgs.msg")
-    from face_reid_master.eval_live import frame_record_to_msg
-    from face_reid_master.node import frame_from_msg
+    from face_reid_master.node import frame_from_msg, frame_record_to_msg
     from face_reid_msgs.msg import CameraFrame, PersonObservation
 
     emb = np.linspace(-0.2, 0.2, 128).astype(np.float32)

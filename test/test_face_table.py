@@ -892,11 +892,12 @@ def test_feature_gate_keeps_a_swapped_persons_features_out_of_the_face(method: s
             _feed(m, 10, 1, rng, 0.1 * (i + 1))
         feats = m.face_features(1)
         learned[gate] = feats
-        far = np.linalg.norm(feats - CENTRES[1][None, :], axis=1) < np.linalg.norm(feats - CENTRES[0][None, :], axis=1)
+        of_person_1 = (np.linalg.norm(feats - CENTRES[1][None, :], axis=1)
+                       < np.linalg.norm(feats - CENTRES[0][None, :], axis=1))
         if gate is None:
-            assert far.sum() == 6  # the paper: the face absorbed person 1
+            assert of_person_1.sum() == 6  # the paper: the face absorbed person 1
         else:
-            assert far.sum() == 0 and m.stats.observations_not_learned_inconsistent == 6
+            assert of_person_1.sum() == 0 and m.stats.observations_not_learned_inconsistent == 6
             assert len(feats) == 5 + 1
     assert len(learned[None]) == 5 + 1 + 6
 
