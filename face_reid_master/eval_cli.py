@@ -34,7 +34,7 @@ from face_reid_master.evaluate import (
     scenario_gallery,
     track_outcomes,
 )
-from face_reid_master.likelihood import LikelihoodModel
+from face_reid_master.likelihood import LikelihoodModel, load_likelihood_model
 from face_reid_master.master_core import MasterConfig
 
 _IDENTITY_FIELDS = {
@@ -65,6 +65,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=str, default=None, metavar="PREFIX",
                    help="save PREFIX_timeline.png and PREFIX_map.png")
     p.add_argument("--out", type=Path, default=None, metavar="JSON", help="also write the JSON to this file")
+    p.add_argument("--likelihood", type=Path, default=None, metavar="JSON",
+                   help="bayes: the fitted likelihoods to use (default: models/face_likelihood.json); "
+                   "see face-reid-fit-likelihood")
     p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
     p.add_argument("--live", action="store_true",
                    help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
@@ -78,13 +81,17 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _dev_identity_overlap(names: Sequence[str]) -> list[str] | None:
-    """Scenario identities that are also development faces (test/data/faces, the likelihood fit data);
-    None when that folder is not present (installed package)."""
-    dev = Path(__file__).resolve().parents[1] / "test" / "data" / "faces"
-    if not dev.is_dir():
+def _identities_in_likelihood_fit(names: Sequence[str]) -> list[str] | None:
+    """Scenario identities the shipped likelihood may have been fitted on: those its fit did not exclude
+    (metadata ``excluded``: scenario identities and name patterns); None if the model does not say."""
+    import fnmatch
+
+    excluded = LikelihoodModel.default().metadata.get("excluded")
+    if not isinstance(excluded, dict):
         return None
-    return sorted(n for n in names if (dev / n).is_dir())
+    ids = set(excluded.get("scenario_identities", ()))
+    patterns = list(excluded.get("patterns", ()))
+    return sorted(n for n in names if n not in ids and not any(fnmatch.fnmatchcase(n, p) for p in patterns))
 
 
 def _scenario_json(scenario: Any) -> dict[str, Any]:
@@ -106,7 +113,7 @@ def _scenario_json(scenario: Any) -> dict[str, Any]:
         "gt_losses": summary.get("losses"),
         "gt_visible_segments": summary.get("visible_segments"),
         "faces_dir": doc.get("faces_dir"),
-        "identities_also_in_development_faces": _dev_identity_overlap(names),
+        "identities_in_likelihood_fit": _identities_in_likelihood_fit(names),
     }
 
 
@@ -135,6 +142,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not (math.isfinite(args.tick_period) and args.tick_period > 0):
         print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
         return 2
+    if args.likelihood is not None:
+        try:
+            load_likelihood_model(args.likelihood)
+        except (OSError, ValueError) as exc:
+            print(f"face-reid-eval: error: --likelihood: {exc}", file=sys.stderr)
+            return 2
     from face_reid_master.simulate import ScenarioFormatError, load_scenario
 
     t0 = time.perf_counter()
@@ -169,7 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
     else:
         config = MasterConfig(method=args.method)
-        likelihood = LikelihoodModel.default() if args.method == "bayes" else None
+        likelihood = _likelihood(args) if args.method == "bayes" else None
         if args.live:
             return _main_live(args, scenario, gallery, config, likelihood, days, t0, log)
         result = _run_offline(args, args.method, scenario, gallery, days, log)[0]
@@ -178,11 +191,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+def _likelihood(args: argparse.Namespace) -> LikelihoodModel:
+    """``--likelihood`` if given (checked in main), else the shipped model."""
+    return LikelihoodModel.default() if args.likelihood is None else load_likelihood_model(args.likelihood)
+
+
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
                  days: list[tuple[int, float, float, list[int]]], log: Any) -> tuple[dict[str, Any], RunLog]:
     """The master core with ``method`` over the scenario; (the JSON-ready metrics, the run's log)."""
     config = MasterConfig(method=method)
-    likelihood = LikelihoodModel.default() if method == "bayes" else None
+    likelihood = _likelihood(args) if method == "bayes" else None
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
     run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
@@ -249,7 +267,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     t1 = time.perf_counter()
     try:
         live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
-                        log=log)
+                        log=log, likelihood_path=args.likelihood)
     except LiveError as exc:
         print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
         return 1

@@ -97,7 +97,8 @@ def _segments_to_scene(segments: Sequence[tuple[float, float]]) -> Any:
 
 def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], gallery: Mapping[str, Any],
              method: str, domain_id: int, run_id: str, *, startup_timeout_s: float = 60.0,
-             log: TextIO | None = None, keep_dir: Path | None = None) -> LiveRun:
+             log: TextIO | None = None, keep_dir: Path | None = None,
+             likelihood_path: Path | None = None) -> LiveRun:
     """Start the master node, publish ``frames`` in real time (stamps = now), collect /tracks_named.
 
     ``day_of_frame[i]``: the day of ``frames[i]`` (a pause between days, see the module doc). ``gallery``:
@@ -120,6 +121,8 @@ def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], g
     if gallery:
         save_gallery_npz(gallery, work / "gallery.npz")
         master_args += ["-p", f"gallery_path:={work / 'gallery.npz'}"]
+    if likelihood_path is not None:
+        master_args += ["-p", f"likelihood_path:={Path(likelihood_path).resolve()}"]
     children: list[ChildProcess] = []
     try:
         children.append(start_child("master", master_args, child_env(domain_id, run_id), work))

@@ -41,6 +41,7 @@ __all__ = [
     "MinOfKSamples",
     "PairDistances",
     "build_pair_distances",
+    "camera_view_draws",
     "decision_distance",
     "identity_source",
     "main",
@@ -54,8 +55,11 @@ _MAX_LISTED_SKIPPED = 100  # skipped file names written into the JSON metadata
 
 
 def identity_source(identity: str) -> str:
-    """Source dataset of an identity folder name: the prefix before the first ``_`` (whole name if none)."""
-    return identity.split("_", 1)[0]
+    """Source dataset of an identity folder name: the prefix before the first ``_``; without ``_`` the name
+    without its trailing digits (``yaleB10`` -> ``yaleB``), or the whole name if that leaves nothing."""
+    if "_" in identity:
+        return identity.split("_", 1)[0]
+    return identity.rstrip("0123456789") or identity
 
 
 def _stack(identities: Mapping[str, npt.ArrayLike]) -> tuple[list[str], npt.NDArray[np.float64], npt.NDArray[np.intp]]:
@@ -185,6 +189,36 @@ def sample_min_of_k_distances(
     return MinOfKSamples(pos, neg, list(names))
 
 
+def camera_view_draws(
+    views: Mapping[str, npt.ArrayLike], draws: int, rng: np.random.Generator
+) -> list[dict[str, npt.NDArray[np.float64]]]:
+    """``draws`` data sets of one random usable view per photo: ``views[name]`` is (photos, views, dim) with
+    NaN rows for views without a detectable face (each photo needs at least one usable view).
+
+    One view per photo per draw keeps same-photo pairs out of the positives: two frames of one photo are
+    not two occasions of a person, and would make N_p far too tight.
+    """
+    if isinstance(draws, bool) or not isinstance(draws, int) or draws < 1:
+        raise ValueError(f"draws must be an int >= 1, got {draws!r}")
+    arrays = {name: np.asarray(v, dtype=np.float64) for name, v in views.items()}
+    usable = {}
+    for name, arr in arrays.items():
+        if arr.ndim != 3 or arr.shape[0] < 1:
+            raise ValueError(f"views of {name!r} must be (photos >= 1, views, dim), got {arr.shape}")
+        ok = np.all(np.isfinite(arr), axis=2)
+        if not ok.any(axis=1).all():
+            raise ValueError(f"every photo of {name!r} needs at least one usable view")
+        usable[name] = ok
+    out = []
+    for _ in range(draws):
+        draw = {}
+        for name in sorted(arrays):
+            keys = np.where(usable[name], rng.random(usable[name].shape), -1.0)  # unusable views never win
+            draw[name] = arrays[name][np.arange(len(keys)), np.argmax(keys, axis=1)]
+        out.append(draw)
+    return out
+
+
 def decision_distance(model: LikelihoodModel) -> float:
     """Single-pair distance where N_p = N_n (log-ratio crosses 0 inside the monotone range)."""
     from scipy import optimize
@@ -269,8 +303,8 @@ def _describe_data(faces_dir: Path, identities: Mapping[str, npt.NDArray[np.floa
 def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="face-reid-fit-likelihood",
-        description="Fit the skew-normal face-distance likelihoods (and min-of-K exponents) on a folder of "
-        "face photos with one sub-folder per identity, and write them as JSON.",
+        description="Fit the skew-normal face-distance likelihoods on a folder of face photos with one "
+        "sub-folder per identity, and write them as JSON.",
     )
     parser.add_argument("faces_dir", type=Path, metavar="FACES_DIR", help="folder with one sub-folder per identity")
     parser.add_argument("--out", type=Path, default=Path("models/face_likelihood.json"),
@@ -278,16 +312,35 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--plot", type=Path, default=None, metavar="PATH.png",
                         help="also save a plot of the distance histograms and fitted densities")
     parser.add_argument("--max-negative-pairs", type=int, default=20000, metavar="N",
-                        help="at most N negative pairs, sampled at random (default: 20000)")
+                        help="at most N negative pairs per draw, sampled at random (default: 20000)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the pair / query sampling (default: 0)")
     parser.add_argument("--same-source-negatives", action="store_true",
                         help="negative pairs only between identities of the same source (folder-name prefix "
-                        "before the first '_')")
+                        "before the first '_', or the name without trailing digits)")
+    parser.add_argument("--camera-views", type=int, default=0, metavar="DRAWS",
+                        help="fit on what a camera sees: each photo also embedded under the simulator's camera "
+                        "degradations (lighting, roll, JPEG, 14 / 10 / 9 px eye distance), DRAWS data sets of one "
+                        "random view per photo (default 0: the photos as they are)")
+    parser.add_argument("--cache", type=Path, default=None, metavar="NPZ",
+                        help="with --camera-views: embedding cache shared with face-reid-sim --cache")
+    parser.add_argument("--exclude", action="append", default=[], metavar="PATTERN",
+                        help="leave out identities whose folder name matches this glob (repeatable), "
+                        "e.g. 'celeba_*'")
+    parser.add_argument("--exclude-scenario", action="append", default=[], type=Path, metavar="DIR",
+                        help="leave out the identities of this face-reid-sim scenario (repeatable): keeps the "
+                        "fit independent of the scenarios used to report results")
+    parser.add_argument("--fit-min-of-k", action="store_true",
+                        help="also fit the min-of-K exponents (assumes the stored features of a face are "
+                        "independent photos; default: 0, the paper's pair likelihoods)")
     args = parser.parse_args(argv)
     if args.max_negative_pairs < 1:
         parser.error("--max-negative-pairs must be >= 1")
     if args.seed < 0:
         parser.error("--seed must be >= 0")
+    if args.camera_views < 0:
+        parser.error("--camera-views must be >= 0")
+    if args.cache is not None and not args.camera_views:
+        parser.error("--cache needs --camera-views")
     return args
 
 
@@ -296,92 +349,189 @@ def _fail(message: str) -> int:
     return 2
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Embed FACES_DIR, fit, write the JSON (and plot); 0 on success, 2 on an unusable folder / fit."""
-    args = _parse_args(argv)
+def _excluded_names(args: argparse.Namespace) -> tuple[list[str], set[str]]:
+    """(glob patterns, names of scenario identities) to leave out; ValueError on an unreadable scenario."""
+    from face_reid_master.simulate import ScenarioFormatError, load_scenario_document
+
+    names: set[str] = set()
+    for directory in args.exclude_scenario:
+        try:
+            doc = load_scenario_document(directory)
+        except ScenarioFormatError as exc:
+            raise ValueError(f"--exclude-scenario: {exc}") from None
+        names.update(str(i["name"]) for i in doc["identities"])
+    return list(args.exclude), names
+
+
+@dataclass
+class _Embedded:
+    """Embeddings of the usable photos, (photos, views, dim) per identity (1 view without --camera-views)."""
+
+    views: dict[str, npt.NDArray[np.float64]]
+    n_photos: int
+    skipped_unreadable: list[str]
+    skipped_no_face: list[str]
+    n_ignored_non_image: int
+    embedder_desc: str
+
+
+def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
+    """Embed FACES_DIR (identities for which ``keep(name)`` holds); ValueError on an unusable folder."""
     from face_reid_camera.face_photos import PhotoEmbedder, progress_bar
 
     faces_dir: Path = args.faces_dir
-    t0 = time.perf_counter()
+    if args.camera_views:
+        from face_reid_master.simulate import InsufficientFacesError, PhotoBank
+
+        try:
+            bank = PhotoBank(faces_dir, args.cache, min_photos_per_identity=1)
+        except InsufficientFacesError as exc:
+            raise ValueError(str(exc)) from None
+        names = [n for n in sorted(bank.identity_files) if keep(n)]
+        views = {}
+        progress = progress_bar(len(names), "embedding identities (camera views)")
+        for k, name in enumerate(names):
+            ident = bank.load_identity(name)
+            if ident is not None:
+                views[name] = np.stack([p.embeddings for p in ident.photos]).astype(np.float64)
+            progress(k + 1, len(names))
+        bank.save_cache()
+        model_path = bank.photo_embedder.embedder.model_path
+        return _Embedded(views, sum(len(v) for v in views.values()), list(bank.skipped_unreadable),
+                         list(bank.skipped_no_face), bank.ignored_non_image,
+                         _embedder_text(model_path, bank.photo_embedder.max_side_px)
+                         + "; camera views: face_reid_master.simulate PhotoBank variants")
     embedder = PhotoEmbedder()
+    folder = embedder.embed_folder_tree(faces_dir, progress_bar(0, "embedding photos"))
+    views = {name: np.stack([e.embedding for e in embs])[:, None, :].astype(np.float64)
+             for name, embs in folder.identities.items() if keep(name)}
+    return _Embedded(views, sum(len(v) for v in views.values()),
+                     _relative_names(folder.skipped_unreadable, faces_dir),
+                     _relative_names(folder.skipped_no_face, faces_dir), len(folder.ignored_non_image),
+                     _embedder_text(embedder.embedder.model_path, embedder.max_side_px))
+
+
+def _embedder_text(model_path: Path, max_side_px: int) -> str:
+    return (
+        "dlib_face_recognition_resnet_model_v1 (128-d, not L2-normalised) run as "
+        f"models/{model_path.name} (sha256 {_sha256(model_path)}); alignment: YuNet 2023mar "
+        f"(face_reid_camera.face_detector, detection on photos shrunk to <= {max_side_px} px) 5 landmarks of the "
+        "largest face -> similarity transform to the 150x150 dlib chip template "
+        "(face_reid_camera.face_photos.PhotoEmbedder)"
+    )
+
+
+def _command(args: argparse.Namespace) -> str:
+    parts = [args.faces_dir.as_posix(), f"--max-negative-pairs {args.max_negative_pairs}", f"--seed {args.seed}"]
+    if args.same_source_negatives:
+        parts.append("--same-source-negatives")
+    if args.camera_views:
+        parts.append(f"--camera-views {args.camera_views}")
+    parts += [f"--exclude '{p}'" for p in args.exclude]
+    parts += [f"--exclude-scenario {d.as_posix()}" for d in args.exclude_scenario]
+    if args.fit_min_of_k:
+        parts.append("--fit-min-of-k")
+    return "face-reid-fit-likelihood " + " ".join(parts)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Embed FACES_DIR, fit, write the JSON (and plot); 0 on success, 2 on an unusable folder / fit."""
+    import fnmatch
+
+    args = _parse_args(argv)
+    faces_dir: Path = args.faces_dir
     try:
-        folder = embedder.embed_folder_tree(faces_dir, progress_bar(0, "embedding photos"))
+        patterns, scenario_names = _excluded_names(args)
     except ValueError as exc:
         return _fail(str(exc))
-    t_embed = time.perf_counter() - t0
-    identities = {name: np.stack([e.embedding for e in embs]) for name, embs in folder.identities.items()}
-    n_unread, n_noface = len(folder.skipped_unreadable), len(folder.skipped_no_face)
+
+    def keep(name: str) -> bool:
+        return name not in scenario_names and not any(fnmatch.fnmatchcase(name, p) for p in patterns)
+
+    t0 = time.perf_counter()
+    try:
+        emb = _embed(args, keep)
+    except ValueError as exc:
+        return _fail(str(exc))
+    n_unread, n_noface = len(emb.skipped_unreadable), len(emb.skipped_no_face)
     print(
-        f"embedded {folder.n_photos} photos of {len(identities)} identities in {t_embed:.1f} s; skipped "
-        f"{n_unread} unreadable, {n_noface} without a detectable face; ignored {len(folder.ignored_non_image)} "
-        "non-image files"
+        f"embedded {emb.n_photos} photos of {len(emb.views)} identities in {time.perf_counter() - t0:.1f} s "
+        f"({len(scenario_names)} scenario identities and {len(patterns)} patterns excluded); skipped {n_unread} "
+        f"unreadable, {n_noface} without a detectable face; ignored {emb.n_ignored_non_image} non-image files"
     )
-    for p in folder.skipped_unreadable:
+    for p in emb.skipped_unreadable:
         print(f"  unreadable: {p}", file=sys.stderr)
-    for p in folder.skipped_no_face:
+    for p in emb.skipped_no_face:
         print(f"  no face: {p}", file=sys.stderr)
 
     pair_rng, k_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(args.seed).spawn(2))
     same_source = bool(args.same_source_negatives)
     try:
-        pairs = build_pair_distances(identities, args.max_negative_pairs, pair_rng, same_source)
-        if pairs.positive.size < 10 or pairs.negative.size < 10:
+        draws = (camera_view_draws(emb.views, args.camera_views, pair_rng) if args.camera_views
+                 else [{n: v[:, 0] for n, v in emb.views.items()}])
+        pair_sets = [build_pair_distances(d, args.max_negative_pairs, pair_rng, same_source) for d in draws]
+        positive = np.concatenate([p.positive for p in pair_sets])
+        negative = np.concatenate([p.negative for p in pair_sets])
+        if positive.size < 10 or negative.size < 10:
             raise ValueError(
-                f"too few pairs to fit ({pairs.positive.size} positive, {pairs.negative.size} negative; need "
+                f"too few pairs to fit ({positive.size} positive, {negative.size} negative; need "
                 ">= 10 each): add identities with several photos each"
             )
         neg_desc = "different-identity pairs" + (
-            " within the same source dataset (folder-name prefix before '_'; cross-dataset pairs are easier and "
-            "would bias N_n to larger distances)" if same_source else ""
+            " within the same source dataset (folder-name prefix before '_' or the name without trailing digits; "
+            "cross-dataset pairs are easier and would bias N_n to larger distances)" if same_source else ""
+        )
+        view_desc = (
+            f"; {args.camera_views} draws of one random camera view per photo (the photo or a simulated camera "
+            "degradation of it: darker / brighter, +-8 deg roll, JPEG 35, 14 / 10 / 9 px eye distance)"
+            if args.camera_views else ""
         )
         metadata: dict[str, Any] = {
-            "embedder": (
-                "dlib_face_recognition_resnet_model_v1 (128-d, not L2-normalised) run as "
-                f"models/{embedder.embedder.model_path.name} (sha256 {_sha256(embedder.embedder.model_path)}); "
-                "alignment: YuNet 2023mar (face_reid_camera.face_detector, detection on photos shrunk to "
-                f"<= {embedder.max_side_px} px) 5 landmarks of the largest face -> similarity transform to the "
-                "150x150 dlib chip template (face_reid_camera.face_photos.PhotoEmbedder)"
-            ),
+            "embedder": emb.embedder_desc,
             "distance": "L2 between raw 128-d descriptors",
-            "data": _describe_data(faces_dir, identities),
-            "n_identities": len(identities),
-            "n_images": folder.n_photos,
+            "data": _describe_data(faces_dir, emb.views) + view_desc,
+            "n_identities": len(emb.views),
+            "n_images": emb.n_photos,
             "n_skipped_unreadable": n_unread,
             "n_skipped_no_face": n_noface,
-            "skipped_unreadable": _relative_names(folder.skipped_unreadable, faces_dir),
-            "skipped_no_face": _relative_names(folder.skipped_no_face, faces_dir),
-            "positive_pairs": "all same-identity pairs",
+            "skipped_unreadable": emb.skipped_unreadable[:_MAX_LISTED_SKIPPED],
+            "skipped_no_face": emb.skipped_no_face[:_MAX_LISTED_SKIPPED],
+            "excluded": {"patterns": patterns, "scenario_identities": sorted(scenario_names)},
+            "positive_pairs": "all same-identity pairs of different photos" + (" in every draw" if args.camera_views
+                                                                               else ""),
             "negative_pairs": (
                 f"{neg_desc}; seeded random sample (numpy SeedSequence({args.seed}), stream 0) of at most "
-                f"{args.max_negative_pairs} of {pairs.n_negative_available} available"
+                f"{args.max_negative_pairs} of {pair_sets[0].n_negative_available} available"
+                + (" per draw" if args.camera_views else "")
             ),
-            "command": "face-reid-fit-likelihood " + " ".join(
-                [faces_dir.as_posix(), f"--max-negative-pairs {args.max_negative_pairs}", f"--seed {args.seed}"]
-                + (["--same-source-negatives"] if same_source else [])
-            ),
+            "command": _command(args),
         }
-        model = fit_likelihood_model(pairs.positive, pairs.negative, metadata=metadata)
+        model = fit_likelihood_model(positive, negative, metadata=metadata)
     except ValueError as exc:
         return _fail(f"cannot fit the likelihoods on {faces_dir}: {exc}")
 
-    samples = sample_min_of_k_distances(identities, k_rng, same_source_negatives=same_source)
-    if samples is None:
-        e_pos = e_neg = 0.0
-        k_desc = (
-            f"not fitted: fewer than 2 identities with >= {max(MIN_OF_K_VALUES) + 1} photos; 0 = the paper's "
-            "plain pair likelihoods"
-        )
-        print(f"warning: min-of-K exponents set to 0 ({k_desc})", file=sys.stderr)
-    else:
-        e_pos = round(fit_min_of_k_exponent(samples.positive, model.positive), 3)
-        e_neg = round(fit_min_of_k_exponent(samples.negative, model.negative), 3)
-        k_desc = (
-            f"K_eff = K**e for eq. 4's minimum over K stored features: e fitted (scipy L-BFGS-B MLE of s*K**e) on "
-            f"{MIN_OF_K_QUERIES_PER_K} queries per K in {tuple(MIN_OF_K_VALUES)}, {len(samples.identities)} "
-            f"identities with >= {max(MIN_OF_K_VALUES) + 1} photos, negatives "
-            f"{'from the same source' if same_source else 'from any other identity'}, numpy SeedSequence("
-            f"{args.seed}) stream 1. Set both to 0 for the paper's plain pair likelihoods."
-        )
+    e_pos = e_neg = 0.0
+    k_desc = ("not fitted: 0 = the paper's plain pair likelihoods (the stored features of a face are frames of a "
+              "few glances, far from independent; see README)")
+    if args.fit_min_of_k:
+        samples = [sample_min_of_k_distances(d, k_rng, same_source_negatives=same_source) for d in draws]
+        usable = [x for x in samples if x is not None]
+        if not usable:
+            k_desc = (f"not fitted: fewer than 2 identities with >= {max(MIN_OF_K_VALUES) + 1} photos; 0 = the "
+                      "paper's plain pair likelihoods")
+            print(f"warning: min-of-K exponents set to 0 ({k_desc})", file=sys.stderr)
+        else:
+            pos_k = {k: np.concatenate([x.positive[k] for x in usable]) for k in usable[0].positive}
+            neg_k = {k: np.concatenate([x.negative[k] for x in usable]) for k in usable[0].negative}
+            e_pos = round(fit_min_of_k_exponent(pos_k, model.positive), 3)
+            e_neg = round(fit_min_of_k_exponent(neg_k, model.negative), 3)
+            k_desc = (
+                f"K_eff = K**e for eq. 4's minimum over K stored features: e fitted (scipy L-BFGS-B MLE of s*K**e) "
+                f"on {MIN_OF_K_QUERIES_PER_K} queries per K in {tuple(MIN_OF_K_VALUES)} per draw, "
+                f"{len(usable[0].identities)} identities with >= {max(MIN_OF_K_VALUES) + 1} photos, negatives "
+                f"{'from the same source' if same_source else 'from any other identity'}, numpy SeedSequence("
+                f"{args.seed}) stream 1. Set both to 0 for the paper's plain pair likelihoods."
+            )
     try:
         model = dataclasses.replace(
             model,
@@ -404,21 +554,22 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     crossing = decision_distance(model)
     p, n = model.positive, model.negative
-    print(f"positive pairs {pairs.positive.size}, negative pairs {pairs.negative.size} "
-          f"(of {pairs.n_negative_available} available)")
+    print(f"positive pairs {positive.size}, negative pairs {negative.size} "
+          f"(of {pair_sets[0].n_negative_available} available{' per draw' if args.camera_views else ''})")
     print(f"N_p: alpha={p.alpha:.4f} xi={p.xi:.4f} omega={p.omega:.4f}; "
           f"N_n: alpha={n.alpha:.4f} xi={n.xi:.4f} omega={n.omega:.4f}")
     print(f"min-of-K exponents: positive {e_pos}, negative {e_neg}")
-    pos_ok = float(np.mean(pairs.positive < crossing))
-    neg_ok = float(np.mean(pairs.negative >= crossing))
+    pos_ok = float(np.mean(positive < crossing))
+    neg_ok = float(np.mean(negative >= crossing))
     print(f"N_p = N_n at d = {crossing:.4f}: {pos_ok:.3f} of positive pairs below, {neg_ok:.3f} of negative "
           "pairs above")
     print(f"wrote {out}")
     if args.plot is not None:
         args.plot.parent.mkdir(parents=True, exist_ok=True)
-        title = (f"{faces_dir.resolve().name}: {folder.n_photos} photos, {len(identities)} identities "
-                 f"(balanced pair accuracy {0.5 * (pos_ok + neg_ok):.3f})")
-        plot_fit(model, pairs.positive, pairs.negative, args.plot, title=title)
+        title = (f"{faces_dir.resolve().name}: {emb.n_photos} photos, {len(emb.views)} identities"
+                 f"{', camera views' if args.camera_views else ''} (balanced pair accuracy "
+                 f"{0.5 * (pos_ok + neg_ok):.3f})")
+        plot_fit(model, positive, negative, args.plot, title=title)
         print(f"wrote {args.plot}")
     return 0
 

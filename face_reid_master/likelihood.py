@@ -93,10 +93,10 @@ class SkewNormal:
 
 
 # Development fit (see models/face_likelihood.json for provenance): used only when that file is absent.
-_DEFAULT_POSITIVE = SkewNormal(alpha=1.61611087301098, xi=0.361333461700579, omega=0.09734399476886718)
-_DEFAULT_NEGATIVE = SkewNormal(alpha=1.7292112301308897, xi=0.7100754616322138, omega=0.12228723774733188)
-_DEFAULT_K_EXPONENT_POSITIVE = 0.538
-_DEFAULT_K_EXPONENT_NEGATIVE = 0.339
+_DEFAULT_POSITIVE = SkewNormal(alpha=0.100713635338185, xi=0.3866355840050013, omega=0.10571849683495746)
+_DEFAULT_NEGATIVE = SkewNormal(alpha=0.8191664318351702, xi=0.7011722958861444, omega=0.11093734511539335)
+_DEFAULT_K_EXPONENT_POSITIVE = 0.0
+_DEFAULT_K_EXPONENT_NEGATIVE = 0.0
 
 
 def _log_survival_grid(sn: SkewNormal, lo: float, hi: float, n: int) -> npt.NDArray[np.float64]:

@@ -163,9 +163,9 @@ def _make_node_class() -> type:
             gallery = self._load_gallery(str(values["gallery_path"]))
             likelihood = None
             if values["likelihood_path"]:
-                from face_reid_master.likelihood import LikelihoodModel
+                from face_reid_master.likelihood import load_likelihood_model
 
-                likelihood = LikelihoodModel.default(values["likelihood_path"])
+                likelihood = load_likelihood_model(str(values["likelihood_path"]))  # missing / bad file: clear error
             self.core = MasterCore(config, likelihood, self.store, gallery)
             self._subscribed: dict[str, Any] = {}
             self._rejections: dict[str, tuple[int, float]] = {}

@@ -100,6 +100,7 @@ __all__ = [
     "SimConfig",
     "SimResult",
     "load_scenario",
+    "load_scenario_document",
     "simulate",
     "write_scenario",
 ]
@@ -1115,8 +1116,8 @@ def _read_npz(path: Path, keys: Sequence[str]) -> dict[str, NDArray[Any]]:
         raise ScenarioFormatError(f"{path} is not a readable npz file: {exc}") from exc
 
 
-def load_scenario(directory: str | Path) -> Scenario:
-    """Read a scenario directory written by :func:`write_scenario`; ScenarioFormatError if it is broken."""
+def load_scenario_document(directory: str | Path) -> dict[str, Any]:
+    """The checked ``scenario.json`` of a scenario directory; ScenarioFormatError if missing or foreign."""
     base = Path(directory)
     doc_path = base / "scenario.json"
     if not doc_path.is_file():
@@ -1130,6 +1131,16 @@ def load_scenario(directory: str | Path) -> Scenario:
     if doc.get("version") != FORMAT_VERSION:
         raise ScenarioFormatError(f"{doc_path} has format version {doc.get('version')!r}, this reader knows "
                                   f"{FORMAT_VERSION}")
+    if not isinstance(doc.get("identities"), list):
+        raise ScenarioFormatError(f"{doc_path} has no identities list")
+    return doc
+
+
+def load_scenario(directory: str | Path) -> Scenario:
+    """Read a scenario directory written by :func:`write_scenario`; ScenarioFormatError if it is broken."""
+    base = Path(directory)
+    doc_path = base / "scenario.json"
+    doc = load_scenario_document(base)
     try:
         cameras = tuple(
             CameraSpec(c["camera_id"], CameraIntrinsics(**c["intrinsics"]),

@@ -204,8 +204,9 @@ def test_min_of_k_likelihood_matches_order_statistic_density() -> None:
 
 
 def test_min_of_k_makes_many_features_demand_a_closer_match() -> None:
-    m = LikelihoodModel.default()
-    assert m.k_exponent_positive > 0
+    # the shipped model uses the paper's pair form (exponents 0: the stored features of a face are correlated)
+    assert LikelihoodModel.default().k_exponent_positive == LikelihoodModel.default().k_exponent_negative == 0.0
+    m = LikelihoodModel.default().with_k_exponents(0.54, 0.34)  # exponents fitted on independent photos
     # the same distance is weaker evidence against a face that has many features to take the minimum over
     assert float(m.log_likelihood_ratio(0.55, 50)) < float(m.log_likelihood_ratio(0.55, 1))
 
