@@ -29,6 +29,7 @@ from face_reid_master.evaluate import (
     scenario_gallery,
     track_outcomes,
 )
+from face_reid_master.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
 from face_reid_master.master_core import MasterConfig
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.tracker import TrackerConfig
@@ -326,6 +327,27 @@ def test_cli_errors(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     assert "no scenario.json" in capsys.readouterr().err
     assert main([str(scenario_dir), "--gallery-people", "9", "--quiet"]) == 2
     assert "--gallery-people" in capsys.readouterr().err
+    assert main([str(scenario_dir), "--likelihood", str(tmp_path / "missing.json"), "--quiet"]) == 2
+    assert "--likelihood" in capsys.readouterr().err
+    (tmp_path / "bad.json").write_text("{}")
+    assert main([str(scenario_dir), "--likelihood", str(tmp_path / "bad.json"), "--quiet"]) == 2
+    assert "not a face likelihood model" in capsys.readouterr().err
+
+
+def test_cli_likelihood_option_uses_that_model(scenario_dir: Path, tmp_path: Path, capsys) -> None:
+    """--likelihood replaces the shipped model: a model that calls every pair 'different' creates a new
+    face for every decided track (no re-identification), and the JSON says which model ran."""
+    path = tmp_path / "strict.json"
+    strict = LikelihoodModel(SkewNormal(0.0, 0.05, 0.01), SkewNormal(0.0, 0.9, 0.3), metadata={"data": "strict"})
+    save_likelihood_model(strict, path)
+    assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["parameters"]["likelihood_data"] == "strict"
+    reid = printed["reidentification"]
+    assert reid["success"] == 0 and reid["failure_new_id"] > 0
+    assert main([str(scenario_dir), "--no-mot", "--quiet"]) == 0
+    shipped = json.loads(capsys.readouterr().out)
+    assert shipped["reidentification"]["success"] > 0
 
 
 def test_paired_reid_times_compare_the_same_tracks(embeddings) -> None:
