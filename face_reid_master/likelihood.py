@@ -123,9 +123,9 @@ class LikelihoodModel:
 
     ``k_exponent_positive`` / ``k_exponent_negative`` model eq. 4 taking the *minimum* over a face's K
     stored features: that minimum is distributed like the minimum of K_eff = K**exponent independent
-    pair distances, density K_eff f(d) S(d)^(K_eff - 1) (S = 1 - CDF).  With 0 (the paper) the pair
-    likelihoods are used as they are, which makes a face with many features look like a match for a
-    stranger (the min over 50 negative pairs is much smaller than one negative pair).
+    pair distances, density K_eff f(d) S(d)^(K_eff - 1) (S = 1 - CDF).  With 0 (the paper, and the shipped
+    model) the pair likelihoods are used as they are.  Exponents fitted on independent photos overstate
+    the evidence when the stored features are frames of a few glances (the usual case), so they are opt-in.
     """
 
     positive: SkewNormal
