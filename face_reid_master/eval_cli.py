@@ -34,6 +34,7 @@ from face_reid_master.evaluate import (
     scenario_gallery,
     track_outcomes,
 )
+from face_reid_master.fit_likelihood_cli import excluded_from_fit
 from face_reid_master.likelihood import LikelihoodModel, load_likelihood_model
 from face_reid_master.master_core import MasterConfig
 
@@ -81,20 +82,18 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _identities_in_likelihood_fit(names: Sequence[str]) -> list[str] | None:
-    """Scenario identities the shipped likelihood may have been fitted on: those its fit did not exclude
-    (metadata ``excluded``: scenario identities and name patterns); None if the model does not say."""
-    import fnmatch
-
-    excluded = LikelihoodModel.default().metadata.get("excluded")
+def _identities_in_likelihood_fit(names: Sequence[str], likelihood: LikelihoodModel) -> list[str] | None:
+    """Scenario identities ``likelihood`` may have been fitted on: those its fit did not exclude (metadata
+    ``excluded``, written by face-reid-fit-likelihood); None if the model does not say."""
+    excluded = likelihood.metadata.get("excluded")
     if not isinstance(excluded, dict):
         return None
     ids = set(excluded.get("scenario_identities", ()))
     patterns = list(excluded.get("patterns", ()))
-    return sorted(n for n in names if n not in ids and not any(fnmatch.fnmatchcase(n, p) for p in patterns))
+    return sorted(n for n in names if not excluded_from_fit(n, patterns, ids))
 
 
-def _scenario_json(scenario: Any) -> dict[str, Any]:
+def _scenario_json(scenario: Any, likelihood: LikelihoodModel) -> dict[str, Any]:
     doc = scenario.document
     summary = scenario.summary
     names = [str(i["name"]) for i in scenario.identities]
@@ -113,7 +112,7 @@ def _scenario_json(scenario: Any) -> dict[str, Any]:
         "gt_losses": summary.get("losses"),
         "gt_visible_segments": summary.get("visible_segments"),
         "faces_dir": doc.get("faces_dir"),
-        "identities_in_likelihood_fit": _identities_in_likelihood_fit(names),
+        "identities_in_likelihood_fit": _identities_in_likelihood_fit(names, likelihood),
     }
 
 
@@ -142,12 +141,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not (math.isfinite(args.tick_period) and args.tick_period > 0):
         print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
         return 2
-    if args.likelihood is not None:
-        try:
-            load_likelihood_model(args.likelihood)
-        except (OSError, ValueError) as exc:
-            print(f"face-reid-eval: error: --likelihood: {exc}", file=sys.stderr)
-            return 2
+    try:
+        model = LikelihoodModel.default() if args.likelihood is None else load_likelihood_model(args.likelihood)
+    except (OSError, ValueError) as exc:
+        print(f"face-reid-eval: error: --likelihood: {exc}", file=sys.stderr)
+        return 2
     from face_reid_master.simulate import ScenarioFormatError, load_scenario
 
     t0 = time.perf_counter()
@@ -174,7 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
             for d in scenario.days]
     if args.method == "both":
-        runs = {m: _run_offline(args, m, scenario, gallery, days, log) for m in ("bayes", "threshold")}
+        runs = {m: _run_offline(args, m, scenario, gallery, days, log, model) for m in ("bayes", "threshold")}
         result = {"scenario": runs["bayes"][0].pop("scenario"), "method": "both"}
         for m, (res, _) in runs.items():
             res.pop("scenario", None)
@@ -182,25 +180,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
     else:
         config = MasterConfig(method=args.method)
-        likelihood = _likelihood(args) if args.method == "bayes" else None
         if args.live:
-            return _main_live(args, scenario, gallery, config, likelihood, days, t0, log)
-        result = _run_offline(args, args.method, scenario, gallery, days, log)[0]
+            return _main_live(args, scenario, gallery, config, model, days, t0, log)
+        result = _run_offline(args, args.method, scenario, gallery, days, log, model)[0]
     result["total_time_s"] = round(time.perf_counter() - t0, 2)
     _emit(result, args.out)
     return 0
 
 
-def _likelihood(args: argparse.Namespace) -> LikelihoodModel:
-    """``--likelihood`` if given (checked in main), else the shipped model."""
-    return LikelihoodModel.default() if args.likelihood is None else load_likelihood_model(args.likelihood)
-
-
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
-                 days: list[tuple[int, float, float, list[int]]], log: Any) -> tuple[dict[str, Any], RunLog]:
-    """The master core with ``method`` over the scenario; (the JSON-ready metrics, the run's log)."""
+                 days: list[tuple[int, float, float, list[int]]], log: Any,
+                 model: LikelihoodModel) -> tuple[dict[str, Any], RunLog]:
+    """The master core with ``method`` (and ``model`` if bayes) over the scenario; (the JSON-ready metrics,
+    the run's log)."""
     config = MasterConfig(method=method)
-    likelihood = _likelihood(args) if method == "bayes" else None
+    likelihood = model if method == "bayes" else None
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
     run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
@@ -211,7 +205,7 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
     metrics = evaluate_run(run, gallery_people=gallery.gt_of_name or None, scenario_summary=scenario.summary,
                            with_mot=not args.no_mot)
     result: dict[str, Any] = {
-        "scenario": _scenario_json(scenario),
+        "scenario": _scenario_json(scenario, model),
         "method": method,
         "parameters": _parameters(config, likelihood, args.tick_period),
         "gallery": gallery.as_json(),
@@ -236,9 +230,10 @@ def _emit(result: dict[str, Any], out: Path | None) -> None:
 
 
 def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, config: MasterConfig,
-               likelihood: LikelihoodModel | None, days: list[tuple[int, float, float, list[int]]], t0: float,
+               model: LikelihoodModel, days: list[tuple[int, float, float, list[int]]], t0: float,
                log: Any) -> int:
     """``--live``: the scenario through the master node over DDS; the metrics of what it published."""
+    likelihood = model if args.method == "bayes" else None
     import os
     import random
     import signal
@@ -286,7 +281,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     transport = live.transport
     result: dict[str, Any] = {
         "mode": "live",
-        "scenario": _scenario_json(scenario),
+        "scenario": _scenario_json(scenario, model),
         "method": args.method,
         "parameters": {**_parameters(config, likelihood, 1.0 / 5.0), "master": "face_reid_master.node, default "
                        "parameters but method, db_path (temporary) and gallery_path (the gallery below, .npz)"},

@@ -2,26 +2,27 @@
 
 Koide et al. 2017, Sec. III-E / Fig. 6: skew-normals fitted by maximum likelihood to L2 distances of
 positive (same identity) and negative (different identity) face pairs, here of the embedder actually
-used.  Also fits the min-of-K exponents of :class:`~face_reid_master.likelihood.LikelihoodModel` (eq. 4
-takes the minimum over K stored features).  The shipped ``models/face_likelihood.json`` is produced by::
-
-    face-reid-fit-likelihood test/data/faces --same-source-negatives --plot models/face_likelihood_fit.png
+used.  ``--camera-views`` fits on what a camera sees (the simulator's degraded views of each photo);
+``--fit-min-of-k`` also fits the min-of-K exponents of :class:`~face_reid_master.likelihood.LikelihoodModel`
+(off by default: they assume a face's stored features are independent photos).  The command that made
+the shipped ``models/face_likelihood.json`` is in its metadata and in the README.
 
 FACES_DIR holds one sub-folder per identity (name = identity).  With ``--same-source-negatives`` the
-negative pairs are drawn only between identities of the same source dataset, the source being the
-folder-name prefix before the first ``_`` (``lfw_George_W_Bush`` -> ``lfw``): cross-dataset pairs differ
-also in camera / resolution and are easier, which would bias N_n towards large distances.
+negative pairs are drawn only between identities of the same source dataset (:func:`identity_source`):
+cross-dataset pairs differ also in camera / resolution and are easier, which would bias N_n towards large
+distances.  ``--exclude`` / ``--exclude-scenario`` leave identities out (:func:`excluded_from_fit`).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import fnmatch
 import hashlib
 import os
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,7 @@ __all__ = [
     "PairDistances",
     "build_pair_distances",
     "camera_view_draws",
-    "decision_distance",
+    "excluded_from_fit",
     "identity_source",
     "main",
     "plot_fit",
@@ -60,6 +61,11 @@ def identity_source(identity: str) -> str:
     if "_" in identity:
         return identity.split("_", 1)[0]
     return identity.rstrip("0123456789") or identity
+
+
+def excluded_from_fit(identity: str, patterns: Sequence[str], names: Collection[str]) -> bool:
+    """True when ``identity`` is one of ``names`` (e.g. a reported scenario's people) or matches a glob."""
+    return identity in names or any(fnmatch.fnmatchcase(identity, p) for p in patterns)
 
 
 def _stack(identities: Mapping[str, npt.ArrayLike]) -> tuple[list[str], npt.NDArray[np.float64], npt.NDArray[np.intp]]:
@@ -219,18 +225,6 @@ def camera_view_draws(
     return out
 
 
-def decision_distance(model: LikelihoodModel) -> float:
-    """Single-pair distance where N_p = N_n (log-ratio crosses 0 inside the monotone range)."""
-    from scipy import optimize
-
-    lo, hi = model.monotone_distance_range
-
-    def lr(d: float) -> float:
-        return float(model.log_likelihood_ratio(d))
-
-    return float(optimize.brentq(lr, lo, hi, xtol=1e-9))
-
-
 def plot_fit(
     model: LikelihoodModel,
     positive: npt.ArrayLike,
@@ -249,7 +243,7 @@ def plot_fit(
 
     pos = np.asarray(positive, dtype=np.float64)
     neg = np.asarray(negative, dtype=np.float64)
-    crossing = decision_distance(model)
+    crossing = model.decision_distance
     hi = max(1.4, float(np.max(neg)) + 0.05, float(np.max(pos)) + 0.05)
     bins = np.linspace(0.0, hi, 71)
     grid = np.linspace(0.0, hi, 600)
@@ -284,7 +278,7 @@ def _sha256(path: Path) -> str:
 
 def _relative_names(paths: Sequence[Path], root: Path) -> list[str]:
     out = []
-    for p in paths[:_MAX_LISTED_SKIPPED]:
+    for p in paths:
         try:
             out.append(p.relative_to(root).as_posix())
         except ValueError:
@@ -349,8 +343,8 @@ def _fail(message: str) -> int:
     return 2
 
 
-def _excluded_names(args: argparse.Namespace) -> tuple[list[str], set[str]]:
-    """(glob patterns, names of scenario identities) to leave out; ValueError on an unreadable scenario."""
+def _scenario_identities(args: argparse.Namespace) -> set[str]:
+    """Names of the identities of the ``--exclude-scenario`` scenarios; ValueError on an unreadable one."""
     from face_reid_master.simulate import ScenarioFormatError, load_scenario_document
 
     names: set[str] = set()
@@ -360,7 +354,7 @@ def _excluded_names(args: argparse.Namespace) -> tuple[list[str], set[str]]:
         except ScenarioFormatError as exc:
             raise ValueError(f"--exclude-scenario: {exc}") from None
         names.update(str(i["name"]) for i in doc["identities"])
-    return list(args.exclude), names
+    return names
 
 
 @dataclass
@@ -368,11 +362,14 @@ class _Embedded:
     """Embeddings of the usable photos, (photos, views, dim) per identity (1 view without --camera-views)."""
 
     views: dict[str, npt.NDArray[np.float64]]
-    n_photos: int
     skipped_unreadable: list[str]
     skipped_no_face: list[str]
     n_ignored_non_image: int
     embedder_desc: str
+
+    @property
+    def n_photos(self) -> int:
+        return sum(len(v) for v in self.views.values())
 
 
 def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
@@ -397,7 +394,7 @@ def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
             progress(k + 1, len(names))
         bank.save_cache()
         model_path = bank.photo_embedder.embedder.model_path
-        return _Embedded(views, sum(len(v) for v in views.values()), list(bank.skipped_unreadable),
+        return _Embedded(views, list(bank.skipped_unreadable),
                          list(bank.skipped_no_face), bank.ignored_non_image,
                          _embedder_text(model_path, bank.photo_embedder.max_side_px)
                          + "; camera views: face_reid_master.simulate PhotoBank variants")
@@ -405,9 +402,12 @@ def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
     folder = embedder.embed_folder_tree(faces_dir, progress_bar(0, "embedding photos"))
     views = {name: np.stack([e.embedding for e in embs])[:, None, :].astype(np.float64)
              for name, embs in folder.identities.items() if keep(name)}
-    return _Embedded(views, sum(len(v) for v in views.values()),
-                     _relative_names(folder.skipped_unreadable, faces_dir),
-                     _relative_names(folder.skipped_no_face, faces_dir), len(folder.ignored_non_image),
+
+    def kept(paths: list[Path]) -> list[Path]:  # skipped files of excluded identities are not reported
+        return [p for p in paths if keep(p.parent.name)]
+
+    return _Embedded(views, _relative_names(kept(folder.skipped_unreadable), faces_dir),
+                     _relative_names(kept(folder.skipped_no_face), faces_dir), len(folder.ignored_non_image),
                      _embedder_text(embedder.embedder.model_path, embedder.max_side_px))
 
 
@@ -436,17 +436,16 @@ def _command(args: argparse.Namespace) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Embed FACES_DIR, fit, write the JSON (and plot); 0 on success, 2 on an unusable folder / fit."""
-    import fnmatch
-
     args = _parse_args(argv)
     faces_dir: Path = args.faces_dir
+    patterns: list[str] = list(args.exclude)
     try:
-        patterns, scenario_names = _excluded_names(args)
+        scenario_names = _scenario_identities(args)
     except ValueError as exc:
         return _fail(str(exc))
 
     def keep(name: str) -> bool:
-        return name not in scenario_names and not any(fnmatch.fnmatchcase(name, p) for p in patterns)
+        return not excluded_from_fit(name, patterns, scenario_names)
 
     t0 = time.perf_counter()
     try:
@@ -552,7 +551,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if os.path.exists(tmp):
             os.unlink(tmp)
 
-    crossing = decision_distance(model)
+    crossing = model.decision_distance
     p, n = model.positive, model.negative
     print(f"positive pairs {positive.size}, negative pairs {negative.size} "
           f"(of {pair_sets[0].n_negative_available} available{' per draw' if args.camera_views else ''})")

@@ -191,7 +191,14 @@ class LikelihoodModel:
         i_hi = i_cross + int(np.argmin(lr[i_cross:]))
         if np.any(np.diff(lr[i_lo : i_hi + 1]) > 1e-9):
             raise ValueError("log N_p/N_n is not monotone between its maximum and minimum: refit the model")
-        return float(grid[i_lo]), float(grid[i_cross]), float(grid[i_hi])
+        from scipy import optimize
+
+        def lr_at(d: float) -> float:
+            return float(self.positive._logpdf_unchecked(np.array([d]))[0]
+                         - self.negative._logpdf_unchecked(np.array([d]))[0])
+
+        cross = optimize.brentq(lr_at, float(grid[i_cross - 1]), float(grid[i_cross]), xtol=1e-10)  # refine the grid
+        return float(grid[i_lo]), float(cross), float(grid[i_hi])
 
     @property
     def monotone_distance_range(self) -> tuple[float, float]:

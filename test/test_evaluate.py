@@ -343,11 +343,14 @@ def test_cli_likelihood_option_uses_that_model(scenario_dir: Path, tmp_path: Pat
     assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed["parameters"]["likelihood_data"] == "strict"
+    assert printed["scenario"]["identities_in_likelihood_fit"] is None  # this model does not say what it saw
     reid = printed["reidentification"]
     assert reid["success"] == 0 and reid["failure_new_id"] > 0
     assert main([str(scenario_dir), "--no-mot", "--quiet"]) == 0
     shipped = json.loads(capsys.readouterr().out)
     assert shipped["reidentification"]["success"] > 0
+    # the shipped fit lists its exclusions: the test scenario's identities are checked against them
+    assert isinstance(shipped["scenario"]["identities_in_likelihood_fit"], list)
 
 
 def test_paired_reid_times_compare_the_same_tracks(embeddings) -> None:

@@ -20,7 +20,7 @@ from face_reid_camera.face_photos import PhotoEmbedder
 from face_reid_master.fit_likelihood_cli import (
     build_pair_distances,
     camera_view_draws,
-    decision_distance,
+    excluded_from_fit,
     identity_source,
     main,
     sample_min_of_k_distances,
@@ -95,7 +95,7 @@ def test_fit_command_writes_a_loadable_discriminative_model(cli_run: tuple[int, 
     assert meta["n_skipped_no_face"] == 1 and meta["skipped_no_face"] == ["facerec_obama/zz_desk.jpg"]
     assert "4 ids / 40 photos" in meta["data"] and "5 identities with >= 8 photos" in meta["min_of_k_exponents"]
     assert "skipped 1 unreadable, 1 without a detectable face" in stdout
-    assert 0.5 < decision_distance(model) < 0.7
+    assert 0.5 < model.decision_distance < 0.7
 
 
 def test_plot_is_written(cli_run: tuple[int, Path, Path, str]) -> None:
@@ -185,17 +185,22 @@ def test_camera_views_widen_same_person_distances(subset_dir: Path, tmp_path: Pa
     m_clean, m_cam = LikelihoodModel.default(clean), LikelihoodModel.default(cam)
     assert m_cam.metadata["n_identities"] == m_clean.metadata["n_identities"] == 5
     assert m_cam.metadata["excluded"] == {"patterns": ["facerec_*"], "scenario_identities": []}
+    for m in (m_clean, m_cam):  # the face-less photo is in the excluded facerec_obama folder: not reported
+        assert m.metadata["skipped_no_face"] == []
+        assert m.metadata["skipped_unreadable"] == ["lfw_Tony_Blair/zz_corrupt.jpg"]
+    assert excluded_from_fit("facerec_obama", ["facerec_*"], set()) and excluded_from_fit("x", [], {"x"})
+    assert not excluded_from_fit("lfw_Tony_Blair", ["facerec_*"], {"x"})
     assert m_cam.metadata["n_positive_pairs"] == 2 * m_clean.metadata["n_positive_pairs"]  # 2 draws, no same-photo
     assert _mode(m_cam.positive) > _mode(m_clean.positive) + 0.02
     assert m_cam.k_exponent_positive == m_cam.k_exponent_negative == 0.0  # min-of-K only on request
     assert "--camera-views 2" in m_cam.metadata["command"] and cache.is_file()
-    assert 0.5 < decision_distance(m_cam) < 0.75
+    assert 0.5 < m_cam.decision_distance < 0.75
 
 
 def test_decision_distance_is_where_the_densities_cross(subset_embeddings: dict[str, np.ndarray]) -> None:
     pairs = build_pair_distances(subset_embeddings, 20000, np.random.default_rng(0))
     model = fit_likelihood_model(pairs.positive, pairs.negative)
-    d = decision_distance(model)
+    d = model.decision_distance
     assert float(model.positive.pdf(d)) == pytest.approx(float(model.negative.pdf(d)), rel=1e-6)
 
 
