@@ -29,10 +29,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose  # noqa: E402
-from face_reid_camera.camera_pipeline import CameraPipeline, CameraPipelineConfig  # noqa: E402
-from face_reid_camera.embedder import FaceEmbedder  # noqa: E402
-from face_reid_camera.face_detector import YuNetDetector  # noqa: E402
-from face_reid_camera.synthetic_scene import SyntheticPerson, crop_face_for_rendering, render_scene  # noqa: E402
+from face_reid_camera.faces.detector import YuNetDetector  # noqa: E402
+from face_reid_camera.faces.embedder import FaceEmbedder  # noqa: E402
+from face_reid_camera.pipeline import CameraPipeline, CameraPipelineConfig  # noqa: E402
+from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene  # noqa: E402
 
 FACES = REPO / "test" / "data" / "faces"
 IDENTITIES = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez", "lfw_Jacques_Chirac", "lfw_Vladimir_Putin"]

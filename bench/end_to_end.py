@@ -236,7 +236,7 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
 
     ``master_params``: extra ``name:=value`` parameters of the master node.
     """
-    from face_reid_master.children import child_env, start_child, stop_children
+    from face_reid_master.demo.children import child_env, start_child, stop_children
 
     env = child_env(domain_id, uuid.uuid4().hex[:12])
     logs = work / name
@@ -247,7 +247,7 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
     try:
         if with_master:
             children.append(start_child("master", [
-                "-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={logs / 'faces.db'}",
+                "-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={logs / 'faces.db'}",
                 "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0", "-p", "tick_rate_hz:=0.2",
                 "-p", f"camera_topic_regex:=^{prefix}/.*/face_reid/frames$",
                 *(a for p in master_params for a in ("-p", p))], env, logs))

@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from face_reid_camera.face_detector import YuNetDetector
+from face_reid_camera.faces.detector import YuNetDetector
 
 FACES_DIR = Path(__file__).resolve().parents[1] / "test" / "data" / "faces"
 FACE_SIZE_PX = 60  # face box width in the synthetic frame, pixels

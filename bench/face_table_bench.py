@@ -25,7 +25,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from face_reid_master.face_table import FaceIdentityManager, LearnedFace, sinkhorn_with_slack  # noqa: E402
+from face_reid_master.identity.face_table import FaceIdentityManager, LearnedFace, sinkhorn_with_slack  # noqa: E402
 
 DIM = 128
 CENTRE_SCALE = 0.8 / np.sqrt(2 * DIM)  # different-person distance ~0.8

@@ -33,8 +33,8 @@ sys.path.insert(0, str(REPO / "test"))
 from test_person_detector import HIGH_POSE, THREE_PEOPLE, render_depth, scene  # noqa: E402
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose  # noqa: E402
-from face_reid_camera.pcd_io import read_pcd  # noqa: E402
-from face_reid_camera.person_detector import PersonDetectionResult, PersonDetector  # noqa: E402
+from face_reid_camera.people.detector import PersonDetectionResult, PersonDetector  # noqa: E402
+from face_reid_camera.tools.pcd_io import read_pcd  # noqa: E402
 
 DATA = REPO / "test" / "data" / "rgbd"
 WALLS = (

@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from face_reid_master.kalman import ConstantVelocityModel
-from face_reid_master.tracker import Detection, Tracker, TrackerConfig
+from face_reid_master.tracking.kalman import ConstantVelocityModel
+from face_reid_master.tracking.tracker import Detection, Tracker, TrackerConfig
 
 RATE_HZ = 30.0
 VELOCITY = np.array([0.5, 0.2])

@@ -30,7 +30,7 @@ SCENE = {
 def test_malformed_input_is_logged_counted_and_survived(ros_domain_id: int, tmp_path: Path) -> None:
     node_log = tmp_path / "node.log"
     node = procs.start(
-        ["-m", "face_reid_camera.node", "--ros-args", "-p", "camera_id:=cam_bad",
+        ["-m", "face_reid_camera.ros.node", "--ros-args", "-p", "camera_id:=cam_bad",
          "-p", "camera_pose_xyz_m:=[0.0, 0.0, 2.2]", "-p", "camera_pose_rpy_rad:=[0.0, 0.3, 0.0]",
          "-p", "max_frame_age_s:=2.0", "-p", "image_qos_reliable:=true"],
         ros_domain_id, node_log,
@@ -73,7 +73,7 @@ def test_node_refuses_to_start_without_a_usable_model(
     if content is not None:
         model.write_bytes(content)
     result = subprocess.run(
-        [sys.executable, "-m", "face_reid_camera.node", "--ros-args", "-p", f"detector_model_path:={model}"],
+        [sys.executable, "-m", "face_reid_camera.ros.node", "--ros-args", "-p", f"detector_model_path:={model}"],
         env=procs.ros_env(ros_domain_id), cwd=procs.REPO, capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 2
@@ -83,10 +83,10 @@ def test_node_refuses_to_start_without_a_usable_model(
 
 
 def test_help_lists_every_parameter() -> None:
-    from face_reid_camera import params
+    from face_reid_camera.ros import params
 
     result = subprocess.run(
-        [sys.executable, "-m", "face_reid_camera.node", "--help"], cwd=procs.REPO, capture_output=True, text=True,
+        [sys.executable, "-m", "face_reid_camera.ros.node", "--help"], cwd=procs.REPO, capture_output=True, text=True,
         timeout=60, env=procs.ros_env(0),
     )
     assert result.returncode == 0

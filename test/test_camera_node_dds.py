@@ -47,7 +47,7 @@ def test_camera_node_publishes_people_and_embeddings(
 ) -> None:
     scene = _scene()
     node = procs.start(
-        ["-m", "face_reid_camera.node", "--ros-args", "-p", "camera_id:=cam_test",
+        ["-m", "face_reid_camera.ros.node", "--ros-args", "-p", "camera_id:=cam_test",
          "-p", "camera_pose_xyz_m:=[0.0, 0.0, 2.2]", "-p", "camera_pose_rpy_rad:=[0.0, 0.3, 0.0]",
          "-p", "max_frame_age_s:=2.0", "-p", "image_qos_reliable:=true"],
         ros_domain_id, tmp_path / "node.log",
@@ -87,8 +87,8 @@ def test_camera_node_publishes_people_and_embeddings(
     # each embedding is of the right person: nearest to the embedding of its own source photo
     import cv2
 
-    from face_reid_camera.embedder import FaceEmbedder
-    from face_reid_camera.face_detector import YuNetDetector
+    from face_reid_camera.faces.detector import YuNetDetector
+    from face_reid_camera.faces.embedder import FaceEmbedder
 
     detector, embedder = YuNetDetector(), FaceEmbedder()
     refs = []

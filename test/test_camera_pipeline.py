@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_camera.camera_pipeline import (
+from face_reid_camera.faces.detector import YuNetDetector
+from face_reid_camera.faces.embedder import FaceEmbedder
+from face_reid_camera.pipeline import (
     CameraPipeline,
     CameraPipelineConfig,
     FaceQualityConfig,
     face_pose_from_landmarks,
     face_quality,
 )
-from face_reid_camera.embedder import FaceEmbedder
-from face_reid_camera.face_detector import YuNetDetector
-from face_reid_camera.synthetic_scene import SyntheticPerson, crop_face_for_rendering, render_scene
+from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene
 
 DATA = Path(__file__).parent / "data"
 INTR = CameraIntrinsics.kinect_default()

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from face_reid_camera.rgbd_player import PlayerSpec, ScenePlayer
-from face_reid_master import demo
-from face_reid_master.children import start_child, stop_children
-from face_reid_master.published_tracks import TrackMessage
+from face_reid_master.demo import demo
+from face_reid_master.demo.children import start_child, stop_children
+from face_reid_master.evaluation.published_tracks import TrackMessage
 from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
+from face_reid_master.sim.rgbd_player import PlayerSpec, ScenePlayer
 
 FACES = Path(__file__).parent / "data" / "faces"
 REPO = Path(__file__).resolve().parents[1]
@@ -226,7 +226,7 @@ def test_stop_all_kills_stubborn_process_groups(tmp_path: Path) -> None:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
 def test_children_die_with_the_demo(tmp_path: Path) -> None:
     script = (
-        "import os, sys; from pathlib import Path; from face_reid_master.children import start_child; "
+        "import os, sys; from pathlib import Path; from face_reid_master.demo.children import start_child; "
         f"c = start_child('orphan', ['-c', {_IGNORES_SIGINT!r}], dict(os.environ), Path({str(tmp_path)!r})); "
         "print(c.proc.pid, flush=True); os._exit(0)"
     )
@@ -249,7 +249,7 @@ def test_cli_rejects_bad_arguments(capsys: pytest.CaptureFixture[str], tmp_path:
 
 
 def test_demo_faces_dir_lookup(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    from face_reid_camera.resources import demo_faces_dir
+    from face_reid_camera.common.resources import demo_faces_dir
 
     monkeypatch.delenv("FACE_REID_DEMO_FACES_DIR", raising=False)
     assert demo_faces_dir() == FACES.resolve()  # a source checkout: the test fixtures

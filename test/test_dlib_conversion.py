@@ -15,8 +15,11 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera import dlib_to_onnx
-from face_reid_camera.dlib_to_onnx import (
+from face_reid_camera.common.errors import ModelChecksumError, ModelFormatError
+from face_reid_camera.faces.alignment import align_face
+from face_reid_camera.faces.embedder import EMBEDDER_MODEL_FILENAME, FaceEmbedder
+from face_reid_camera.tools import dlib_to_onnx
+from face_reid_camera.tools.dlib_to_onnx import (
     DAT_SHA256,
     build_onnx,
     convert,
@@ -24,9 +27,6 @@ from face_reid_camera.dlib_to_onnx import (
     parse_dlib_net,
     read_dat_bytes,
 )
-from face_reid_camera.embedder import EMBEDDER_MODEL_FILENAME, FaceEmbedder
-from face_reid_camera.errors import ModelChecksumError, ModelFormatError
-from face_reid_camera.face_align import align_face
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 COMMITTED_ONNX = REPO_ROOT / "models" / EMBEDDER_MODEL_FILENAME

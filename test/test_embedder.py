@@ -13,14 +13,14 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera.embedder import (
+from face_reid_camera.common.errors import ModelLoadError
+from face_reid_camera.faces.alignment import ALIGN_TEMPLATE_150, align_face, align_faces, estimate_similarity
+from face_reid_camera.faces.embedder import (
     EMBEDDER_MODEL_FILENAME,
     MODELS_DIR_ENV_VAR,
     FaceEmbedder,
     models_dir,
 )
-from face_reid_camera.errors import ModelLoadError
-from face_reid_camera.face_align import ALIGN_TEMPLATE_150, align_face, align_faces, estimate_similarity
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 FACES_DIR = REPO_ROOT / "test" / "data" / "faces"

@@ -15,13 +15,14 @@ import pytest
 from conftest import FACES_DIR
 from ros_procs import procs
 
-from face_reid_master import eval_cli, sim_cli
+from face_reid_master.evaluation import cli as eval_cli
 from face_reid_master.records import CameraFrameRecord, PersonRecord
+from face_reid_master.sim import cli as sim_cli
 
 
 def test_frame_record_round_trips_through_the_message() -> None:
     pytest.importorskip("face_reid_msgs.msg")
-    from face_reid_master.node import frame_from_msg, frame_record_to_msg
+    from face_reid_master.ros.node import frame_from_msg, frame_record_to_msg
     from face_reid_msgs.msg import CameraFrame, PersonObservation
 
     emb = np.linspace(-0.2, 0.2, 128).astype(np.float32)
@@ -53,7 +54,7 @@ def test_live_evaluation_matches_offline(ros_domain_id: int, tmp_path: Path, cap
 
     t0 = time.monotonic()
     run = subprocess.run(
-        [sys.executable, "-m", "face_reid_master.eval_cli", str(scenario), "--live", "--domain-id",
+        [sys.executable, "-m", "face_reid_master.evaluation.cli", str(scenario), "--live", "--domain-id",
          str(ros_domain_id), "--out", str(tmp_path / "live.json")],
         env=procs.ros_env(ros_domain_id), cwd=procs.REPO, capture_output=True, text=True, timeout=120,
     )

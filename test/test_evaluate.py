@@ -1,4 +1,4 @@
-"""Tests of the offline evaluation (face_reid_master.evaluate / eval_cli).
+"""Tests of the offline evaluation (face_reid_master.evaluation.evaluate / eval_cli).
 
 Metric definitions are checked on hand-made run logs with known answers (exact re-identification time,
 success / failure / none, recover rates, names, IDF1 = 1 for a perfect run and < 1 with a swap); the
@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from face_reid_camera.face_photos import PhotoEmbedder
-from face_reid_master.eval_cli import main
-from face_reid_master.evaluate import (
+from face_reid_camera.faces.photos import PhotoEmbedder
+from face_reid_master.core import MasterConfig
+from face_reid_master.evaluation.cli import main
+from face_reid_master.evaluation.evaluate import (
     RunLog,
     TrackLog,
     default_gallery_people,
@@ -29,10 +30,9 @@ from face_reid_master.evaluate import (
     scenario_gallery,
     track_outcomes,
 )
-from face_reid_master.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
-from face_reid_master.master_core import MasterConfig
+from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
 from face_reid_master.records import CameraFrameRecord, PersonRecord
-from face_reid_master.tracker import TrackerConfig
+from face_reid_master.tracking.tracker import TrackerConfig
 
 FACES = Path(__file__).parent / "data" / "faces"
 IDS = ("lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez")
@@ -291,7 +291,7 @@ def test_scenario_gallery_uses_unused_photos_else_one_scenario_photo(tmp_path: P
 
 @pytest.fixture(scope="module")
 def scenario_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from face_reid_master.simulate import SimConfig, simulate, write_scenario
+    from face_reid_master.sim.simulate import SimConfig, simulate, write_scenario
 
     faces = tmp_path_factory.mktemp("faces")
     for ident in IDS:

@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera.errors import ModelLoadError
-from face_reid_camera.face_detector import FaceDetection, YuNetDetector
+from face_reid_camera.common.errors import ModelLoadError
+from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS_DIR = REPO / "models"

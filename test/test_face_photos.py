@@ -1,4 +1,4 @@
-"""Tests of face_reid_camera.face_photos: face photos / identity folders -> embeddings, progress bar."""
+"""Tests of face_reid_camera.faces.photos: face photos / identity folders -> embeddings, progress bar."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera.face_photos import (
+from face_reid_camera.faces.photos import (
     FaceFolderResult,
     PhotoEmbedder,
     PhotoEmbedding,

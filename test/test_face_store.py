@@ -17,15 +17,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from face_reid_master.face_store import (
+from face_reid_master.identity.face_table import FaceIdentityManager, LearnedFace
+from face_reid_master.storage.face_store import (
     FaceStore,
     FaceStoreError,
     FaceStoreLockedError,
     FaceSummary,
     default_db_path,
 )
-from face_reid_master.face_table import FaceIdentityManager, LearnedFace
-from face_reid_master.faces_cli import main as cli_main
+from face_reid_master.tools.faces_cli import main as cli_main
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DIM = 128
@@ -206,7 +206,7 @@ def test_broader_permissions_are_fixed_with_a_warning(db: Path, caplog: pytest.L
     with FaceStore(db) as store:
         store.save_face(LearnedFace(1, _feats(1)))
     os.chmod(db, 0o644)
-    with caplog.at_level(logging.WARNING, logger="face_reid_master.face_store"), FaceStore(db) as store:
+    with caplog.at_level(logging.WARNING, logger="face_reid_master.storage.face_store"), FaceStore(db) as store:
         assert _mode(db) == 0o600
         assert len(store.load_faces()) == 1 and store.recovered_from is None
     assert any("644" in r.getMessage() and r.levelno == logging.WARNING for r in caplog.records)
@@ -367,8 +367,8 @@ def test_empty_existing_file_is_a_valid_new_store(db: Path) -> None:
 _WRITER = """
 import sys
 import numpy as np
-from face_reid_master.face_store import FaceStore
-from face_reid_master.face_table import LearnedFace
+from face_reid_master.storage.face_store import FaceStore
+from face_reid_master.identity.face_table import LearnedFace
 
 store = FaceStore(sys.argv[1], synchronous=sys.argv[2])
 for i in range(1, 100_000):

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import optimize, stats
 
-from face_reid_master.face_table import (
+from face_reid_master.identity.face_table import (
     FaceIdentityManager,
     IdentityEvent,
     IdentityEventKind,
@@ -23,7 +23,7 @@ from face_reid_master.face_table import (
     select_diverse_subset,
     sinkhorn_with_slack,
 )
-from face_reid_master.likelihood import LikelihoodModel, SkewNormal
+from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 FACES_DIR = REPO_ROOT / "test" / "data" / "faces"
@@ -649,10 +649,10 @@ def lfw_embeddings() -> dict[str, np.ndarray]:
     """identity -> (10, 128) embeddings of the committed LFW photos (largest face of each)."""
     cv2 = pytest.importorskip("cv2")
     try:
-        from face_reid_camera.embedder import FaceEmbedder
-        from face_reid_camera.face_align import align_face
+        from face_reid_camera.faces.alignment import align_face
+        from face_reid_camera.faces.embedder import FaceEmbedder
     except ImportError:
-        pytest.skip("face_reid_camera.embedder not available")
+        pytest.skip("face_reid_camera.faces.embedder not available")
     detector = cv2.FaceDetectorYN.create(str(YUNET_PATH), "", (320, 320), 0.6, 0.3, 50)
     embedder = FaceEmbedder(num_threads=1)
     out = {}

@@ -1,4 +1,4 @@
-"""Tests of face-reid-fit-likelihood (face_reid_master.fit_likelihood_cli): pairs, min-of-K queries, camera
+"""Tests of face-reid-fit-likelihood (face_reid_master.tools.fit_likelihood): pairs, min-of-K queries, camera
 views, the command on real fixture photos, and (with the shared development faces) that it regenerates the
 shipped models/face_likelihood.json."""
 
@@ -16,8 +16,10 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera.face_photos import PhotoEmbedder
-from face_reid_master.fit_likelihood_cli import (
+from face_reid_camera.common.resources import model_path
+from face_reid_camera.faces.photos import PhotoEmbedder
+from face_reid_master.identity.likelihood import LIKELIHOOD_FILE, LikelihoodModel, fit_likelihood_model
+from face_reid_master.tools.fit_likelihood import (
     build_pair_distances,
     camera_view_draws,
     excluded_from_fit,
@@ -25,7 +27,6 @@ from face_reid_master.fit_likelihood_cli import (
     main,
     sample_min_of_k_distances,
 )
-from face_reid_master.likelihood import DEFAULT_LIKELIHOOD_PATH, LikelihoodModel, fit_likelihood_model
 
 DATA_DIR = Path(__file__).parent / "data"
 FACES_DIR = DATA_DIR / "faces"
@@ -232,7 +233,7 @@ SHARED_FACES = Path(os.environ.get("FACE_REID_SHARED_FACES", Path(__file__).pare
 def test_command_regenerates_the_shipped_model(tmp_path: Path) -> None:
     """The command recorded in models/face_likelihood.json, on the shared development faces, reproduces it
     (the held-out scenario identities passed as --exclude names, as recorded in its metadata)."""
-    shipped = json.loads(DEFAULT_LIKELIHOOD_PATH.read_text())
+    shipped = json.loads(model_path(LIKELIHOOD_FILE).read_text())
     meta = shipped["metadata"]
     out = tmp_path / "face_likelihood.json"
     excludes = [a for p in [*meta["excluded"]["patterns"], *meta["excluded"]["scenario_identities"]]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from face_reid_camera.frame_sync import StampSynchronizer
+from face_reid_camera.ros.frame_sync import StampSynchronizer
 
 
 def test_pairs_within_slop() -> None:

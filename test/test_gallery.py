@@ -1,4 +1,4 @@
-"""Tests of face_reid_master.gallery: predefined-people galleries from photo folders or .npz files."""
+"""Tests of face_reid_master.storage.gallery: predefined-people galleries from photo folders or .npz files."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera.face_photos import PhotoEmbedder
-from face_reid_master.gallery import GalleryResult, load_gallery, save_gallery_npz, validate_person_name
-from face_reid_master.predefined_people import PredefinedPeople
+from face_reid_camera.faces.photos import PhotoEmbedder
+from face_reid_master.identity.predefined_people import PredefinedPeople
+from face_reid_master.storage.gallery import GalleryResult, load_gallery, save_gallery_npz, validate_person_name
 
 DATA_DIR = Path(__file__).parent / "data"
 FACES_DIR = DATA_DIR / "faces"

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_camera.head_roi import head_roi_px
-from face_reid_camera.pcd_io import read_pcd
-from face_reid_camera.person_detector import PersonDetector
+from face_reid_camera.faces.head_roi import head_roi_px
+from face_reid_camera.people.detector import PersonDetector
+from face_reid_camera.tools.pcd_io import read_pcd
 
 KINECT = CameraIntrinsics.kinect_default()
 DATA = Path(__file__).parent / "data" / "rgbd"

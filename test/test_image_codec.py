@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from face_reid_camera.image_codec import (
+from face_reid_camera.ros.image_codec import (
     ImageDecodeError,
     decode_image,
     depth_to_metres,

@@ -1,4 +1,4 @@
-"""Tests of the skew-normal distance likelihoods (face_reid_master.likelihood)."""
+"""Tests of the skew-normal distance likelihoods (face_reid_master.identity.likelihood)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from face_reid_master.likelihood import (
-    DEFAULT_LIKELIHOOD_PATH,
+from face_reid_camera.common.resources import model_path
+from face_reid_master.identity.likelihood import (
+    LIKELIHOOD_FILE,
     LikelihoodModel,
     SkewNormal,
     fit_likelihood_model,
@@ -134,17 +135,15 @@ def test_load_rejects_malformed_files(tmp_path: Path, content: str) -> None:
 
 # ------------------------------------------------------------------------------------------ the model
 def test_default_model_is_the_shipped_file_and_discriminates_at_dlib_distances() -> None:
-    assert DEFAULT_LIKELIHOOD_PATH.is_file()
+    shipped = model_path(LIKELIHOOD_FILE)
+    assert shipped.is_file()
     m = LikelihoodModel.default()
-    assert m == load_likelihood_model(DEFAULT_LIKELIHOOD_PATH)
+    assert m == load_likelihood_model(shipped)
     assert m.metadata["n_positive_pairs"] > 500
     lr = m.log_likelihood_ratio([0.3, 0.45, 0.75, 0.9])
     assert lr[0] > lr[1] > 0 > lr[2] > lr[3]  # dlib: same person ~0.45, different ~0.8+
-    fallback = LikelihoodModel.default(Path("/nonexistent/face_likelihood.json"))
-    np.testing.assert_allclose(
-        fallback.log_likelihood_ratio([0.3, 0.6, 0.9]), m.log_likelihood_ratio([0.3, 0.6, 0.9]), rtol=1e-6
-    )
-    assert fallback.k_exponent_positive == m.k_exponent_positive
+    with pytest.raises(FileNotFoundError, match="No such file"):  # no built-in copy of the fitted numbers
+        LikelihoodModel.default(Path("/nonexistent/face_likelihood.json"))
 
 
 def test_log_ratio_is_clipped_where_fitted_tails_turn_back_up() -> None:
@@ -232,10 +231,10 @@ def fixture_embeddings() -> tuple[np.ndarray, np.ndarray]:
     """Embeddings of every committed fixture photo (largest face), with identities."""
     cv2 = pytest.importorskip("cv2")
     try:
-        from face_reid_camera.embedder import FaceEmbedder
-        from face_reid_camera.face_align import align_face
+        from face_reid_camera.faces.alignment import align_face
+        from face_reid_camera.faces.embedder import FaceEmbedder
     except ImportError:
-        pytest.skip("face_reid_camera.embedder not available")
+        pytest.skip("face_reid_camera.faces.embedder not available")
     detector = cv2.FaceDetectorYN.create(str(YUNET_PATH), "", (320, 320), 0.6, 0.3, 50)
     chips, identities = [], []
     for path in sorted(FACES_DIR.glob("*/*.jpg")):

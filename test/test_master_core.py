@@ -14,11 +14,11 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_camera.embedder import FaceEmbedder
-from face_reid_camera.face_detector import YuNetDetector
-from face_reid_master.master_core import MasterConfig, MasterCore
+from face_reid_camera.faces.detector import YuNetDetector
+from face_reid_camera.faces.embedder import FaceEmbedder
+from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord, PersonRecord
-from face_reid_master.tracker import TrackerConfig
+from face_reid_master.tracking.tracker import TrackerConfig
 
 FACES = Path(__file__).parent / "data" / "faces"
 IDS = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez"]
@@ -135,7 +135,7 @@ def test_config_validation() -> None:
 
 
 def test_faces_survive_a_restart_and_can_be_forgotten(embeddings, tmp_path) -> None:
-    from face_reid_master.face_store import FaceStore
+    from face_reid_master.storage.face_store import FaceStore
 
     db = tmp_path / "faces.db"
     with FaceStore(db) as store:

@@ -8,9 +8,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from face_reid_master.master_core import MasterConfig, MasterCore
+from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.records import CameraFrameRecord, PersonRecord
-from face_reid_master.tracker import TrackerConfig
+from face_reid_master.tracking.tracker import TrackerConfig
 
 _floats = st.one_of(
     st.floats(-20, 20), st.just(math.nan), st.just(math.inf), st.just(-math.inf), st.floats(-1e12, 1e12)

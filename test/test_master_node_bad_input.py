@@ -35,7 +35,7 @@ def test_corrupt_db_unknown_camera_and_bad_embeddings(ros_domain_id: int, tmp_pa
              nan=np.full((3, 128), np.nan, np.float32), good=rng.normal(0, 0.05, (3, 128)).astype(np.float32))
     log = tmp_path / "master.log"
     master = procs.start(
-        ["-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={db}", "-p", "known_camera_ids:=[cam_a]",
+        ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}", "-p", "known_camera_ids:=[cam_a]",
          "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0"],
         ros_domain_id, log,
     )

@@ -30,8 +30,8 @@ IDS = {"tony": "lfw_Tony_Blair", "colin": "lfw_Colin_Powell"}
 
 @pytest.fixture(scope="module")
 def embeddings(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from face_reid_camera.embedder import FaceEmbedder
-    from face_reid_camera.face_detector import YuNetDetector
+    from face_reid_camera.faces.detector import YuNetDetector
+    from face_reid_camera.faces.embedder import FaceEmbedder
 
     detector, embedder = YuNetDetector(), FaceEmbedder()
     out = {}
@@ -68,7 +68,7 @@ def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Pa
     ])
     db = tmp_path / "faces.db"
     master = procs.start(
-        ["-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={db}", "-p", f"gallery_path:={gallery}",
+        ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}", "-p", f"gallery_path:={gallery}",
          "-p", "tracker.lost_after_s:=0.5", "-p", "tracker.delete_after_s:=1.0",
          "-p", "topic_discovery_period_s:=0.5", "-p", "min_face_features_for_name:=3"],
         ros_domain_id, tmp_path / "master.log",
@@ -116,7 +116,7 @@ def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Pa
     assert last_tony[0]["track_id"] == tony_tracks[-1]
 
     # kill -9 lost nothing: both faces, with their names, are in the database
-    from face_reid_master.face_store import FaceStore
+    from face_reid_master.storage.face_store import FaceStore
 
     with FaceStore(db) as store:
         faces = store.load_faces()
@@ -134,7 +134,7 @@ def test_max_publish_rate_caps_tracks_named(ros_domain_id: int, tmp_path: Path) 
     plan.write_text(json.dumps({"rate_hz": 30, "embeddings": str(emb),
                                 "segments": [{"t0": 0.0, "t1": 4.0, "people": [{"x": 0.0, "y": 0.0, "vx": 0.5}]}]}))
     master = procs.start(
-        ["-m", "face_reid_master.node", "--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}",
+        ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}",
          "-p", "max_publish_rate_hz:=4.0", "-p", "tick_rate_hz:=1.0", "-p", "topic_discovery_period_s:=0.5"],
         ros_domain_id, tmp_path / "master.log",
     )

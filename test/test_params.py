@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from face_reid_camera import params
+from face_reid_camera.ros import params
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "camera.yaml"
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics
-from face_reid_camera.pcd_io import (
+from face_reid_camera.tools.pcd_io import (
     intrinsics_from_organized_cloud,
     lzf_compress,
     lzf_decompress,

@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_camera.ground_plane import GroundPlane, estimate_ground_plane, fit_ground_plane
-from face_reid_camera.head_roi import head_roi_px
-from face_reid_camera.pcd_io import read_pcd
-from face_reid_camera.person_detector import (
+from face_reid_camera.faces.head_roi import head_roi_px
+from face_reid_camera.people.detector import (
     PersonDetectionResult,
     PersonDetector,
     PersonDetectorConfig,
 )
+from face_reid_camera.people.ground_plane import GroundPlane, estimate_ground_plane, fit_ground_plane
+from face_reid_camera.tools.pcd_io import read_pcd
 
 DATA = Path(__file__).parent / "data" / "rgbd"
 DESK_FRAMES = sorted((DATA / "pcl_desk").glob("*_depth_mm.png"))

@@ -1,4 +1,4 @@
-"""Tests of predefined-people naming (face_reid_master.predefined_people, paper Sec. III-F)."""
+"""Tests of predefined-people naming (face_reid_master.identity.predefined_people, paper Sec. III-F)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from face_reid_master.predefined_people import (
+from face_reid_master.identity.predefined_people import (
     NameMatch,
     PredefinedPeople,
     assign_one_to_one,
@@ -150,10 +150,10 @@ def test_build_gallery_groups_by_name() -> None:
 def lfw_embeddings() -> dict[str, np.ndarray]:
     cv2 = pytest.importorskip("cv2")
     try:
-        from face_reid_camera.embedder import FaceEmbedder
-        from face_reid_camera.face_align import align_face
+        from face_reid_camera.faces.alignment import align_face
+        from face_reid_camera.faces.embedder import FaceEmbedder
     except ImportError:
-        pytest.skip("face_reid_camera.embedder not available")
+        pytest.skip("face_reid_camera.faces.embedder not available")
     detector = cv2.FaceDetectorYN.create(str(YUNET_PATH), "", (320, 320), 0.6, 0.3, 50)
     embedder = FaceEmbedder(num_threads=1)
     out = {}

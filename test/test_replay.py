@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from face_reid_camera.replay import main
+from face_reid_camera.tools.replay import main
 
 RGBD = Path(__file__).parent / "data" / "rgbd"
 

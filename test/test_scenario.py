@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_master.scenario import (
+from face_reid_master.sim.world import (
     MotionConfig,
     Room,
     SimCamera,

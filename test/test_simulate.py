@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from face_reid_master.records import CameraFrameRecord, PersonRecord
-from face_reid_master.sim_cli import main
-from face_reid_master.simulate import (
+from face_reid_master.sim.cli import main
+from face_reid_master.sim.simulate import (
     NUM_VARIANTS,
     InsufficientFacesError,
     PhotoBank,

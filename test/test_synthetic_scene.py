@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose, depth_to_points
-from face_reid_camera.synthetic_scene import (
+from face_reid_master.sim.renderer import (
     HEAD_SEMI_AXES_M,
     RenderedFrame,
     SyntheticPerson,

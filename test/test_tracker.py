@@ -1,4 +1,4 @@
-"""Tests of the master's multi-camera people tracker (face_reid_master.tracker / .kalman).
+"""Tests of the master's multi-camera people tracker (face_reid_master.tracking.tracker / .kalman).
 
 Behaviour tests are driven by the synthetic trajectory generator in ``trajectories.py``; the filter is
 checked against filterpy's reference ``KalmanFilter``.
@@ -29,8 +29,8 @@ from trajectories import (
     random_walkers,
 )
 
-from face_reid_master.kalman import ConstantVelocityModel, mahalanobis_sq
-from face_reid_master.tracker import (
+from face_reid_master.tracking.kalman import ConstantVelocityModel, mahalanobis_sq
+from face_reid_master.tracking.tracker import (
     Detection,
     FrameStatus,
     Tracker,

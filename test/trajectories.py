@@ -19,7 +19,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.tracker import Detection, UpdateResult
+from face_reid_master.tracking.tracker import Detection, UpdateResult
 
 FloatArray = NDArray[np.float64]
 

@@ -48,7 +48,7 @@ def stop(proc: subprocess.Popen[str], timeout_s: float = 5.0) -> None:
 
 
 def run_pids(domain_id: int) -> list[int]:
-    """Live processes started by ``face_reid_master.children.start_child`` (marked FACE_REID_DEMO_RUN) on
+    """Live processes started by ``face_reid_master.demo.children.start_child`` (marked FACE_REID_DEMO_RUN) on
     ``domain_id`` (Linux /proc), zombies excluded."""
     pids = []
     for env_file in Path("/proc").glob("[0-9]*/environ"):

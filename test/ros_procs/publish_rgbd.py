@@ -30,9 +30,9 @@ def main() -> int:
     scene = json.loads(args.scene)
 
     from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-    from face_reid_camera.face_detector import YuNetDetector
-    from face_reid_camera.image_codec import encode_image
-    from face_reid_camera.synthetic_scene import SyntheticPerson, crop_face_for_rendering, render_scene
+    from face_reid_camera.faces.detector import YuNetDetector
+    from face_reid_camera.ros.image_codec import encode_image
+    from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene
 
     intr = CameraIntrinsics.kinect_default()
     pose = CameraPose.from_xyz_rpy(*scene["camera_pose"])

@@ -1,0 +1,268 @@
+"""One camera's per-frame pipeline: depth people detection -> head ROIs -> faces -> embeddings.
+
+Pure core (no rclpy): the camera node, the replay tool, the simulator and the benchmarks all
+call :meth:`CameraPipeline.process` with numpy images and get a :class:`FrameResult` back.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
+from face_reid_camera.faces.embedder import FaceEmbedder
+from face_reid_camera.faces.head_roi import head_roi_px
+from face_reid_camera.people.detector import PersonDetector, PersonDetectorConfig
+from face_reid_camera.people.ground_plane import GroundPlane
+
+EMBEDDING_DIM = 128
+
+
+@dataclass(frozen=True)
+class FaceQualityConfig:
+    """How face size and pose turn into a 0..1 quality score (documented in the README)."""
+
+    min_eye_distance_px: float = 6.0
+    good_eye_distance_px: float = 20.0
+    max_yaw_deg: float = 75.0
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_eye_distance_px < self.good_eye_distance_px:
+            raise ValueError("need 0 < min_eye_distance_px < good_eye_distance_px")
+        if not 0 < self.max_yaw_deg <= 90:
+            raise ValueError("max_yaw_deg must be in (0, 90] degrees")
+
+
+@dataclass(frozen=True)
+class CameraPipelineConfig:
+    """Parameters of the per-frame pipeline (units in the names)."""
+
+    camera_id: str = "camera"
+    head_roi_size_m: float = 0.3
+    detect_faces: bool = True
+    max_faces_per_frame: int = 16
+    min_face_quality: float = 0.0
+    position_std_base_m: float = 0.05
+    position_std_per_m2: float = 0.005
+    person: PersonDetectorConfig = field(default_factory=PersonDetectorConfig)
+    quality: FaceQualityConfig = field(default_factory=FaceQualityConfig)
+
+    def __post_init__(self) -> None:
+        if not self.camera_id:
+            raise ValueError("camera_id must be a non-empty string")
+        if not (math.isfinite(self.head_roi_size_m) and 0.05 <= self.head_roi_size_m <= 2.0):
+            raise ValueError(f"head_roi_size_m must be within [0.05, 2.0] m, got {self.head_roi_size_m!r}")
+        if self.max_faces_per_frame < 0:
+            raise ValueError("max_faces_per_frame must be >= 0")
+        if not 0.0 <= self.min_face_quality <= 1.0:
+            raise ValueError("min_face_quality must be within [0, 1]")
+        if self.position_std_base_m <= 0 or self.position_std_per_m2 < 0:
+            raise ValueError("position_std_base_m must be > 0 and position_std_per_m2 >= 0")
+
+
+@dataclass(frozen=True)
+class FaceObservation:
+    """A face found in a person's head ROI, with its embedding."""
+
+    detection: FaceDetection
+    quality: float
+    yaw_deg: float
+    eye_distance_px: float
+    embedding: NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class PersonObservation:
+    """One detected person in one frame (the core twin of face_reid_msgs/PersonObservation)."""
+
+    position_world: NDArray[np.float64]
+    position_camera: NDArray[np.float64]
+    position_std_m: float
+    height_m: float
+    num_points: int
+    head_roi_xywh: tuple[int, int, int, int] | None
+    face: FaceObservation | None = None
+
+    def to_json(self) -> dict[str, object]:
+        """A JSON-friendly dict (what the replay tool prints)."""
+        out: dict[str, object] = {
+            "position_world": [round(float(v), 4) for v in self.position_world],
+            "position_camera": [round(float(v), 4) for v in self.position_camera],
+            "position_std_m": round(self.position_std_m, 4),
+            "height_m": round(self.height_m, 3),
+            "num_points": self.num_points,
+            "head_roi": list(self.head_roi_xywh) if self.head_roi_xywh else None,
+            "face_found": self.face is not None,
+            "face_score": round(self.face.detection.score, 4) if self.face else 0.0,
+        }
+        if self.face is not None:
+            out["face_box"] = [round(float(v), 1) for v in self.face.detection.box_xywh]
+            out["face_quality"] = round(self.face.quality, 3)
+            out["face_yaw_deg"] = round(self.face.yaw_deg, 1)
+        return out
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything the pipeline found in one frame, with per-stage timings in milliseconds."""
+
+    people: list[PersonObservation]
+    ground_plane_found: bool
+    timings_ms: dict[str, float]
+    ground_plane: GroundPlane | None = None
+    ground_plane_source: str = "none"
+
+    @property
+    def num_faces(self) -> int:
+        return sum(1 for p in self.people if p.face is not None)
+
+
+def face_pose_from_landmarks(landmarks: NDArray[np.floating]) -> tuple[float, float]:
+    """Rough head yaw (degrees) and inter-ocular distance (px) from YuNet's 5 landmarks.
+
+    Yaw comes from how far the nose sits from the eyes' midpoint relative to the eye distance
+    (0 = frontal; positive = the subject turned to their left, i.e. the nose moved image-right).
+    """
+    lm = np.asarray(landmarks, dtype=np.float64).reshape(5, 2)
+    eye_vec = lm[1] - lm[0]
+    eye_dist = float(np.hypot(*eye_vec))
+    if eye_dist < 1e-6:
+        return 90.0, 0.0
+    mid = (lm[0] + lm[1]) / 2.0
+    # Nose offset along the eye axis, normalised: ~0.5 at a 90-degree profile.
+    offset = float(np.dot(lm[2] - mid, eye_vec) / (eye_dist * eye_dist))
+    yaw = math.degrees(math.asin(max(-1.0, min(1.0, 2.0 * offset))))
+    return yaw, eye_dist
+
+
+def face_quality(score: float, eye_distance_px: float, yaw_deg: float, config: FaceQualityConfig) -> float:
+    """0..1: detector score x size factor x frontality factor."""
+    size = (eye_distance_px - config.min_eye_distance_px) / (
+        config.good_eye_distance_px - config.min_eye_distance_px
+    )
+    size = min(1.0, max(0.0, size))
+    frontal = max(0.0, 1.0 - abs(yaw_deg) / config.max_yaw_deg)
+    return float(min(1.0, max(0.0, score)) * size * frontal)
+
+
+class CameraPipeline:
+    """Runs the per-frame pipeline of one camera.
+
+    ``face_detector`` / ``embedder`` may be None when ``config.detect_faces`` is false (people
+    only). The person detector keeps the floor estimate between frames (see PersonDetector).
+    """
+
+    def __init__(
+        self,
+        config: CameraPipelineConfig,
+        camera_pose: CameraPose,
+        face_detector: YuNetDetector | None = None,
+        embedder: FaceEmbedder | None = None,
+        seed_ground_from_pose: bool = True,
+    ) -> None:
+        if config.detect_faces and (face_detector is None or embedder is None):
+            raise ValueError("detect_faces=True needs a face detector and an embedder")
+        self.config = config
+        self.camera_pose = camera_pose
+        self.face_detector = face_detector
+        self.embedder = embedder
+        self.person_detector = PersonDetector(config.person, camera_pose if seed_ground_from_pose else None)
+
+    def process(
+        self,
+        color_bgr: NDArray[np.uint8] | None,
+        depth_m: NDArray[np.floating],
+        intrinsics: CameraIntrinsics,
+        color_intrinsics: CameraIntrinsics | None = None,
+    ) -> FrameResult:
+        """Detect people in ``depth_m`` (metres, NaN/0 invalid) and their faces in ``color_bgr``.
+
+        ``intrinsics`` describe the depth image; ``color_intrinsics`` the colour image (default:
+        registered, i.e. the depth intrinsics scaled to the colour size). ``color_bgr`` None
+        means people only.
+        """
+        t0 = time.perf_counter()
+        detection = self.person_detector.detect_depth(depth_m, intrinsics)
+        t1 = time.perf_counter()
+        if color_bgr is not None and color_intrinsics is None:
+            h, w = color_bgr.shape[:2]
+            color_intrinsics = (
+                intrinsics if (w, h) == (intrinsics.width, intrinsics.height) else intrinsics.scaled(w, h)
+            )
+        people: list[PersonObservation] = []
+        rois: list[tuple[int, int, int, int] | None] = []
+        plane = detection.ground_plane
+        for cand in detection.people:
+            head = np.asarray(cand.head_cam, dtype=np.float64)
+            # The person's position is the head centre dropped onto the floor: unlike the centroid
+            # of the visible surface it does not shift towards whichever camera sees the person.
+            cam = head - float(plane.height_of(head[None, :])[0]) * plane.normal if plane is not None else head
+            rng = float(np.linalg.norm(cam))
+            std = self.config.position_std_base_m + self.config.position_std_per_m2 * rng * rng
+            roi = head_roi_px(
+                np.asarray(cand.head_cam), color_intrinsics or intrinsics, self.config.head_roi_size_m
+            )
+            rois.append(roi)
+            people.append(
+                PersonObservation(
+                    position_world=self.camera_pose.to_world(cam)[0],
+                    position_camera=cam,
+                    position_std_m=float(std),
+                    height_m=float(cand.height_m),
+                    num_points=int(cand.num_points),
+                    head_roi_xywh=roi,
+                )
+            )
+        timings = {"people_ms": (t1 - t0) * 1e3, "face_detect_ms": 0.0, "embed_ms": 0.0}
+        if self.config.detect_faces and color_bgr is not None and people:
+            people = self._add_faces(color_bgr, people, rois, timings)
+        timings["total_ms"] = (time.perf_counter() - t0) * 1e3
+        return FrameResult(
+            people, detection.ground_plane is not None, timings, detection.ground_plane, detection.ground_plane_source
+        )
+
+    def _add_faces(
+        self,
+        color_bgr: NDArray[np.uint8],
+        people: list[PersonObservation],
+        rois: list[tuple[int, int, int, int] | None],
+        timings: dict[str, float],
+    ) -> list[PersonObservation]:
+        assert self.face_detector is not None and self.embedder is not None
+        # Nearest people first, so the per-frame face budget goes to the best-resolved heads.
+        order = sorted(
+            (i for i, r in enumerate(rois) if r is not None),
+            key=lambda i: float(people[i].position_camera[2]),
+        )[: self.config.max_faces_per_frame]
+        if not order:
+            return people
+        t0 = time.perf_counter()
+        faces = self.face_detector.detect_in_rois(color_bgr, [rois[i] for i in order])
+        t1 = time.perf_counter()
+        found: list[tuple[int, FaceDetection, float, float, float]] = []
+        for i, face in zip(order, faces, strict=True):
+            if face is None:
+                continue
+            yaw, eye_dist = face_pose_from_landmarks(face.landmarks)
+            quality = face_quality(face.score, eye_dist, yaw, self.config.quality)
+            if quality < self.config.min_face_quality:
+                continue
+            found.append((i, face, quality, yaw, eye_dist))
+        if found:
+            embeddings = self.embedder.embed_faces(color_bgr, [f[1].landmarks for f in found])
+            people = list(people)
+            for (i, face, quality, yaw, eye_dist), emb in zip(found, embeddings, strict=True):
+                if not np.all(np.isfinite(emb)):
+                    continue
+                obs = FaceObservation(face, quality, yaw, eye_dist, np.asarray(emb, dtype=np.float32))
+                people[i] = dataclasses.replace(people[i], face=obs)
+        t2 = time.perf_counter()
+        timings["face_detect_ms"] = (t1 - t0) * 1e3
+        timings["embed_ms"] = (t2 - t1) * 1e3
+        return people

@@ -1,0 +1,422 @@
+"""The master's pure core: camera frames in, named tracks out (no rclpy).
+
+One :class:`MasterCore` owns the tracker, the face-identity manager (Algorithm 1, Bayesian or
+threshold), the predefined-people matcher and (optionally) the persistent face store. The node,
+the evaluation and the benchmarks all drive it the same way:
+
+    core.process_frame(CameraFrameRecord(...), now_s=...)   # per camera message
+    core.tick(now_s)                                          # when no frames arrive (timeouts)
+    core.tracks()                                             # -> list[NamedTrackRecord]
+
+Bad input never raises: malformed frames and detections are rejected, counted in
+:class:`MasterStats` and reported in the returned :class:`FrameOutcome`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from face_reid_master.identity.face_table import (
+    IdentityEventKind,
+    IdentityManagerBase,
+    LearnedFace,
+    make_identity_manager,
+)
+from face_reid_master.identity.likelihood import LikelihoodModel
+from face_reid_master.identity.predefined_people import PredefinedPeople
+from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, NamedTrackRecord
+from face_reid_master.tracking.tracker import Detection, FrameStatus, Tracker, TrackerConfig, TrackState
+
+
+@dataclass(frozen=True)
+class MasterConfig:
+    """Parameters of the master core (units in the names).
+
+    ``known_camera_ids``: accepted camera ids (empty = any). ``max_stamp_age_s`` /
+    ``max_stamp_future_s``: frames older / newer than this relative to ``now_s`` (when the caller
+    passes one) are rejected as stale / from the future. ``min_face_quality``: embeddings of lower
+    quality are not used for identity. ``save_interval_s``: how often faces that learned new
+    features are written to the store (new faces and re-identifications are written at once).
+    ``name_update_interval_s``: how often a live face's predefined-name match is re-evaluated.
+    ``learn_only_consistent_features``: an identified track's embedding joins its face only within the
+    decision distance (bayes: where N_p = N_n; threshold: ``threshold_distance``), so a track the tracker
+    swapped onto another person does not teach the face that person (our extension; False = the paper).
+    """
+
+    method: str = "bayes"
+    known_camera_ids: tuple[str, ...] = ()
+    max_stamp_age_s: float = 10.0
+    max_stamp_future_s: float = 2.0
+    min_face_quality: float = 0.0
+    publish_tentative: bool = False
+    save_interval_s: float = 30.0
+    name_update_interval_s: float = 0.5
+    prune_interval_s: float = 60.0
+    # identity (Bayesian)
+    posterior_threshold: float = 0.95
+    prior_probability: float = 0.1
+    min_observations: int = 3
+    new_person_scale_c: float = 1.0
+    max_features_per_face: int = 50
+    learn_only_consistent_features: bool = True
+    # identity (threshold baseline)
+    threshold_distance: float = 0.6
+    threshold_votes: int = 5
+    # predefined people
+    name_threshold: float = 0.45
+    min_face_features_for_name: int = 5
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+
+    def __post_init__(self) -> None:
+        if self.method not in ("bayes", "threshold"):
+            raise ValueError(f"method must be 'bayes' or 'threshold', got {self.method!r}")
+        for name in (
+            "max_stamp_age_s", "max_stamp_future_s", "save_interval_s", "name_update_interval_s", "prune_interval_s"
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0 seconds, got {value!r}")
+        if not 0.0 <= self.min_face_quality <= 1.0:
+            raise ValueError(f"min_face_quality must be within [0, 1], got {self.min_face_quality!r}")
+        if not (math.isfinite(self.new_person_scale_c) and self.new_person_scale_c > 0):
+            raise ValueError(f"new_person_scale_c must be > 0, got {self.new_person_scale_c!r}")
+
+
+@dataclass
+class MasterStats:
+    """Counters of everything the core accepted, rejected or decided (logged by the node)."""
+
+    frames_received: int = 0
+    frames_applied: int = 0
+    frames_rejected_unknown_camera: int = 0
+    frames_rejected_stale: int = 0
+    frames_rejected_future: int = 0
+    frames_rejected_bad_stamp: int = 0
+    frames_rejected_tracker_late: int = 0
+    detections_received: int = 0
+    detections_rejected_position: int = 0
+    embeddings_used: int = 0
+    embeddings_rejected_length: int = 0
+    embeddings_rejected_nonfinite: int = 0
+    embeddings_skipped_quality: int = 0
+    faces_created: int = 0
+    faces_reidentified: int = 0
+    faces_released: int = 0
+    faces_pruned: int = 0
+    store_errors: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class FrameOutcome:
+    """What :meth:`MasterCore.process_frame` did with one frame (``reason`` when rejected)."""
+
+    accepted: bool
+    reason: str = ""
+    track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> track id
+    tracks_created: tuple[int, ...] = ()
+    tracks_deleted: tuple[int, ...] = ()
+    identity_events: tuple[Any, ...] = ()
+
+
+class FaceStoreLike:
+    """The persistence interface the core needs (satisfied by face_store.FaceStore)."""
+
+    def save_face(self, face: LearnedFace) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def load_faces(self) -> list[LearnedFace]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def forget(self, face_id: int) -> bool:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class MasterCore:
+    """Tracking + face identities + names + persistence, frame by frame."""
+
+    def __init__(
+        self,
+        config: MasterConfig | None = None,
+        likelihood: LikelihoodModel | None = None,
+        store: Any | None = None,
+        gallery: Mapping[str, NDArray[np.floating]] | None = None,
+    ) -> None:
+        self.config = config or MasterConfig()
+        cfg = self.config
+        self.tracker = Tracker(cfg.tracker)
+        if cfg.method == "bayes":
+            model = likelihood or LikelihoodModel.default()
+            if cfg.new_person_scale_c != model.new_person_scale_c:
+                model = model.with_new_person_scale(cfg.new_person_scale_c)
+            self.identity: IdentityManagerBase = make_identity_manager(
+                "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
+                prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
+                max_features_per_face=cfg.max_features_per_face,
+                feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
+            )
+        else:
+            self.identity = make_identity_manager(
+                "threshold", distance_threshold=cfg.threshold_distance, n_votes=cfg.threshold_votes,
+                max_features_per_face=cfg.max_features_per_face,
+                feature_gate_distance=cfg.threshold_distance if cfg.learn_only_consistent_features else None,
+            )
+        self.people = PredefinedPeople(
+            gallery or {}, name_threshold=cfg.name_threshold, min_face_features=cfg.min_face_features_for_name
+        )
+        self.store = store
+        self.stats = MasterStats()
+        self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed
+        self._dirty_faces: dict[int, float] = {}  # face id -> first unsaved change (s)
+        self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
+        self._names: dict[int, str] = {}  # face id -> name from the predefined people
+        self._last_stamp = -math.inf
+        self._last_prune_s = -math.inf
+        if store is not None:
+            faces = store.load_faces()
+            self.identity.import_faces(faces)
+            self.identity.reserve_face_ids(int(store.max_face_id()))
+            for face in faces:
+                self._refresh_name(face.face_id, face.features)
+
+    # ------------------------------------------------------------------------------ input
+    def process_frame(self, frame: CameraFrameRecord, now_s: float | None = None) -> FrameOutcome:
+        """Validate one camera frame, track its people and update face identities."""
+        cfg, st = self.config, self.stats
+        st.frames_received += 1
+        stamp = float(frame.stamp_s) if isinstance(frame.stamp_s, int | float) else math.nan
+        if not math.isfinite(stamp):
+            st.frames_rejected_bad_stamp += 1
+            return FrameOutcome(False, "stamp is not a finite number")
+        if cfg.known_camera_ids and frame.camera_id not in cfg.known_camera_ids:
+            st.frames_rejected_unknown_camera += 1
+            return FrameOutcome(False, f"unknown camera id {frame.camera_id!r}")
+        if not frame.camera_id:
+            st.frames_rejected_unknown_camera += 1
+            return FrameOutcome(False, "empty camera id")
+        if now_s is not None:
+            if stamp < now_s - cfg.max_stamp_age_s:
+                st.frames_rejected_stale += 1
+                return FrameOutcome(False, f"stamp {now_s - stamp:.2f} s in the past (> max_stamp_age_s)")
+            if stamp > now_s + cfg.max_stamp_future_s:
+                st.frames_rejected_future += 1
+                return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)")
+
+        detections, embeddings, person_index = self._detections(frame)
+        result = self.tracker.update(detections, stamp, frame.camera_id)
+        if result.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
+            st.frames_rejected_tracker_late += 1
+            return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})")
+        st.frames_applied += 1
+        st.detections_rejected_position += len(result.rejected_detections)
+        self._last_stamp = max(self._last_stamp, stamp)
+
+        touched_tracks: set[int] = set()
+        for track_id, det_index in result.associations:
+            emb = embeddings.get(det_index)
+            if emb is None:
+                continue
+            if self.identity.add_observations(track_id, emb[None, :], stamp):
+                self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
+                touched_tracks.add(track_id)
+                st.embeddings_used += 1
+        events = self._identity_step(result.deleted, stamp)
+        for track_id in touched_tracks:
+            fid = self.identity.face_id_of(track_id)
+            if fid is not None:
+                self._dirty_faces.setdefault(fid, stamp)
+        self._maintain_faces(stamp)
+        track_of_person = {person_index[det]: tid for tid, det in result.associations}
+        return FrameOutcome(
+            True, "", track_of_person, tuple(result.created), tuple(result.deleted), tuple(events)
+        )
+
+    def tick(self, now_s: float) -> None:
+        """Advance time without a frame (tracks time out, released faces are saved)."""
+        if not math.isfinite(now_s) or now_s <= self._last_stamp:
+            return
+        result = self.tracker.advance(now_s)
+        self._last_stamp = now_s
+        self._identity_step(result.deleted, now_s)
+        self._maintain_faces(now_s)
+
+    def _detections(
+        self, frame: CameraFrameRecord
+    ) -> tuple[list[Detection], dict[int, NDArray[np.float32]], list[int]]:
+        """Valid detections, their usable embeddings by detection index, and detection -> person index.
+
+        Positions and embeddings are validated in one vectorised pass over the frame (this runs for
+        every person of every camera frame).
+        """
+        cfg, st = self.config, self.stats
+        people = frame.people
+        n = len(people)
+        st.detections_received += n
+        if n == 0:
+            return [], {}, []
+        xy = np.full((n, 2), np.nan)
+        std = np.full(n, np.nan)
+        for i, person in enumerate(people):
+            pos = np.asarray(person.position_world, dtype=np.float64).reshape(-1)
+            if pos.size >= 2:
+                xy[i] = pos[:2]
+            std[i] = person.position_std_m
+        valid = np.isfinite(xy).all(axis=1) & np.isfinite(std) & (std > 0)
+        st.detections_rejected_position += int(n - np.count_nonzero(valid))
+        person_index = [int(i) for i in np.flatnonzero(valid)]
+        detections = [
+            Detection(xy[i], frame.camera_id, float(std[i]), float(people[i].height_m), payload_index=k)
+            for k, i in enumerate(person_index)
+        ]
+        with_face = [
+            (k, i) for k, i in enumerate(person_index)
+            if people[i].embedding is not None and np.size(people[i].embedding) > 0
+        ]
+        embeddings: dict[int, NDArray[np.float32]] = {}
+        if not with_face:
+            return detections, embeddings, person_index
+        good_len = [(k, i) for k, i in with_face if np.size(people[i].embedding) == EMBEDDING_DIM]
+        st.embeddings_rejected_length += len(with_face) - len(good_len)
+        if not good_len:
+            return detections, embeddings, person_index
+        stacked = np.stack([np.asarray(people[i].embedding, dtype=np.float32).reshape(-1) for _, i in good_len])
+        finite = np.isfinite(stacked).all(axis=1)
+        quality = np.array([people[i].face_quality for _, i in good_len], dtype=np.float64)
+        good_quality = quality >= cfg.min_face_quality
+        st.embeddings_rejected_nonfinite += int(np.count_nonzero(~finite))
+        st.embeddings_skipped_quality += int(np.count_nonzero(finite & ~good_quality))
+        for row in np.flatnonzero(finite & good_quality):
+            embeddings[good_len[row][0]] = stacked[row]
+        return detections, embeddings, person_index
+
+    # ------------------------------------------------------------------------------ identities
+    def _identity_step(self, deleted: Iterable[int], stamp: float) -> list[Any]:
+        for track_id in deleted:
+            self.identity.track_deleted(track_id, stamp)
+            self._face_obs.pop(track_id, None)
+        events = self.identity.step(stamp)
+        for ev in events:
+            if ev.kind == IdentityEventKind.NEW_FACE:
+                self.stats.faces_created += 1
+                self._save_face(ev.face_id)
+            elif ev.kind == IdentityEventKind.ASSIGNED_KNOWN:
+                self.stats.faces_reidentified += 1
+                self._save_face(ev.face_id)
+            elif ev.kind == IdentityEventKind.RELEASED:
+                self.stats.faces_released += 1
+                self._save_face(ev.face_id)
+            self._name_checked.pop(ev.face_id, None)
+        return events
+
+    def _maintain_faces(self, stamp: float) -> None:
+        cfg = self.config
+        if self.store is not None and stamp - self._last_prune_s >= cfg.prune_interval_s:
+            self._last_prune_s = stamp
+            self._prune_unnamed(stamp)
+        for fid, since in list(self._dirty_faces.items()):
+            if stamp - since >= cfg.save_interval_s:
+                self._save_face(fid)
+        for fid in set(self.identity.assigned_tracks().values()):
+            if stamp - self._name_checked.get(fid, -math.inf) >= cfg.name_update_interval_s:
+                self._name_checked[fid] = stamp
+                self._refresh_name(fid, self.identity.face_features(fid))
+
+    def _refresh_name(self, face_id: int, features: NDArray[np.floating]) -> None:
+        if not self.people.names():
+            return
+        self.people.update_face(face_id, features)
+        matches = self.people.assignments()
+        self._names = {fid: m.name for fid, m in matches.items()}
+        for fid, name in self._names.items():
+            if self.identity.face_name(fid) != name:
+                self.identity.set_face_name(fid, name)
+                self._save_face(fid)
+
+    def _save_face(self, face_id: int) -> None:
+        self._dirty_faces.pop(face_id, None)
+        if self.store is None:
+            return
+        try:
+            face = self.identity.export_face(face_id)
+        except KeyError:
+            return
+        try:
+            self.store.save_face(face)
+        except Exception:  # the store logs; identity keeps working in memory
+            self.stats.store_errors += 1
+
+    def _prune_unnamed(self, stamp: float) -> None:
+        """Retention: forget unnamed faces the store says are too old (never those on live tracks)."""
+        try:
+            pruned = self.store.prune_unnamed(stamp, keep=tuple(self.identity.assigned_tracks().values()))
+        except Exception:
+            self.stats.store_errors += 1
+            return
+        for fid in pruned:
+            self.identity.forget_face(fid)
+            self.people.remove_face(fid)
+            self._names.pop(fid, None)
+            self._dirty_faces.pop(fid, None)
+            self.stats.faces_pruned += 1
+
+    def flush(self) -> None:
+        """Write every face with unsaved features to the store (call at shutdown)."""
+        for fid in list(self._dirty_faces):
+            self._save_face(fid)
+
+    # ------------------------------------------------------------------------------ people
+    def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
+        """Add or replace a predefined person (gallery embeddings (k, 128)) at run time."""
+        self.people.set_person(name, embeddings)
+        for fid in self.identity.face_ids():
+            self._refresh_name(fid, self.identity.face_features(fid))
+
+    def forget_face(self, face_id: int) -> bool:
+        """Delete a learned face everywhere (memory, names, store). True if it existed."""
+        found = bool(self.identity.forget_face(face_id))
+        self.people.remove_face(face_id)
+        self._names.pop(face_id, None)
+        self._dirty_faces.pop(face_id, None)
+        if self.store is not None:
+            found = bool(self.store.forget(face_id)) or found
+        return found
+
+    def face_name(self, face_id: int) -> str:
+        """The name linked to a face (predefined match, else a stored name), or ''."""
+        return self._names.get(face_id) or self.identity.face_name(face_id) or ""
+
+    # ------------------------------------------------------------------------------ output
+    def tracks(self, at_s: float | None = None) -> list[NamedTrackRecord]:
+        """Current tracks with identities (confirmed and lost; tentative if configured)."""
+        out = []
+        for snap in self.tracker.snapshots(at_s, include_tentative=self.config.publish_tentative):
+            if snap.state == TrackState.DELETED:
+                continue
+            fid = self.identity.face_id_of(snap.track_id) or 0
+            out.append(
+                NamedTrackRecord(
+                    track_id=snap.track_id,
+                    face_id=fid,
+                    name=self.face_name(fid) if fid else "",
+                    identity_confidence=float(self.identity.confidence_of(snap.track_id)),
+                    face_observations=self._face_obs.get(snap.track_id, 0),
+                    position_xy=snap.position_xy,
+                    velocity_xy=snap.velocity_xy,
+                    covariance=snap.covariance,
+                    height_m=float(snap.height_m),
+                    state=int(snap.state),
+                    first_seen_s=float(snap.created_s),
+                    last_seen_s=float(snap.last_seen_s),
+                    cameras=tuple(sorted(snap.cameras)),
+                )
+            )
+        return out

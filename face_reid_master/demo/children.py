@@ -1,0 +1,130 @@
+"""Child processes of a live run (demo, live evaluation): each in its own process group, on a private ROS domain
+with discovery on loopback only, dying with the parent (Linux PR_SET_PDEATHSIG), stopped together.
+
+No rclpy here: the children are plain ``python ARGS`` processes; the parent joins the domain itself.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import json
+import os
+import queue
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["ChildProcess", "child_env", "read_events", "start_child", "stop_children"]
+
+
+def _libc_prctl() -> Any:
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True).prctl
+    except OSError:
+        return None
+
+
+_PRCTL = _libc_prctl()
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent_pid: int) -> Any:
+    """preexec_fn: the child gets SIGTERM when its parent dies, even by SIGKILL (Linux), so nothing is orphaned."""
+    def set_up() -> None:
+        if _PRCTL is not None:
+            _PRCTL(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        if os.getppid() != parent_pid:  # the parent died before prctl took effect
+            os._exit(1)
+    return set_up
+
+
+@dataclass
+class ChildProcess:
+    """A child process (own process group), its log and, for children that talk (players), the events it printed."""
+
+    name: str
+    proc: subprocess.Popen[str]
+    log_path: Path
+    events: queue.Queue[dict[str, Any]] = field(default_factory=queue.Queue)
+
+    def log_tail(self, lines: int = 15) -> str:
+        try:
+            text = self.log_path.read_text(errors="replace").splitlines()
+        except OSError:
+            return ""
+        return "\n".join(f"    {line}" for line in text[-lines:])
+
+
+def child_env(domain_id: int, run_id: str) -> dict[str, str]:
+    """Environment of a child: the given ROS domain, discovery on loopback only, this checkout importable,
+    ``FACE_REID_DEMO_RUN`` marking it as ours."""
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_STATIC_PEERS", None)
+    env["PYTHONUNBUFFERED"] = "1"
+    env["OMP_NUM_THREADS"] = "1"
+    env["RCUTILS_COLORIZED_OUTPUT"] = "0"
+    env["FACE_REID_DEMO_RUN"] = run_id
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    return env
+
+
+def start_child(name: str, args: list[str], env: dict[str, str], log_dir: Path, talk: bool = False) -> ChildProcess:
+    """``python ARGS`` in its own process group (dies with this process), stderr (and stdout unless ``talk``:
+    then stdin/stdout are pipes) to ``log_dir/NAME.log``. Start children before any thread (preexec_fn)."""
+    log_path = log_dir / f"{name}.log"
+    log = open(log_path, "w")  # handed to the child, closed below
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, *args], env=env, stdin=subprocess.PIPE if talk else subprocess.DEVNULL,
+            stdout=subprocess.PIPE if talk else log, stderr=log, text=True, start_new_session=True,
+            preexec_fn=_die_with_parent(os.getpid()),  # safe: started before any thread of ours
+        )
+    finally:
+        log.close()
+    return ChildProcess(name, proc, log_path)
+
+
+def read_events(child: ChildProcess) -> None:
+    """Thread: the player's JSON lines on stdout -> its event queue."""
+    assert child.proc.stdout is not None
+    for line in child.proc.stdout:
+        line = line.strip()
+        if line.startswith("{"):
+            with contextlib.suppress(json.JSONDecodeError):
+                child.events.put(json.loads(line))
+
+
+def stop_children(children: Sequence[ChildProcess], timeout_s: float = 5.0) -> None:
+    """SIGINT every process group, then SIGKILL what is still there after ``timeout_s``."""
+    for child in children:
+        if child.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(child.proc.pid, signal.SIGINT)
+    deadline = time.monotonic() + timeout_s
+    for child in children:
+        try:
+            child.proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            pass
+    for child in children:
+        if child.proc.poll() is None:  # still there (not reaped: its pid, the group id, cannot have been reused)
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(child.proc.pid, signal.SIGKILL)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.proc.wait(timeout=2.0)
+        for stream in (child.proc.stdin, child.proc.stdout):
+            if stream is not None:
+                with contextlib.suppress(OSError):
+                    stream.close()

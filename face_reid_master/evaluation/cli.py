@@ -1,0 +1,422 @@
+"""``face-reid-eval``: run the master core on a recorded scenario and print the paper's metrics as JSON.
+
+Example: ``face-reid-eval S --method bayes --plot S/bayes`` after ``face-reid-sim ... --out S``.
+The metrics are defined in ``README.md, "What is counted, exactly"`` (computed by
+:mod:`face_reid_master.evaluation.evaluate`).
+One JSON object goes to stdout (and to ``--out``); progress to stderr. ``--live`` replays the scenario
+through the real master node over DDS instead (:mod:`face_reid_master.evaluation.live`). Exit status: 0 done,
+2 bad arguments / unreadable scenario, 1 other errors (e.g. missing models, the master node failed),
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from face_reid_master.core import MasterConfig
+from face_reid_master.evaluation.evaluate import (
+    DEFAULT_TICK_PERIOD_S,
+    GalleryInfo,
+    RunLog,
+    default_gallery_people,
+    evaluate_run,
+    paired_reid_times,
+    progress_to,
+    run_master,
+    scenario_gallery,
+    track_outcomes,
+)
+from face_reid_master.identity.likelihood import LikelihoodModel, load_likelihood_model
+from face_reid_master.tools.fit_likelihood import excluded_from_fit
+
+_IDENTITY_FIELDS = {
+    "bayes": ("posterior_threshold", "prior_probability", "min_observations", "new_person_scale_c",
+              "max_features_per_face"),
+    "threshold": ("threshold_distance", "threshold_votes", "max_features_per_face"),
+}
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="face-reid-eval",
+        description="Evaluate people re-identification on a scenario written by face-reid-sim: tracks "
+                    "re-identified successfully / wrongly, re-identification time, recover rate, names of "
+                    "predefined people, IDF1 / MOTA (definitions: README.md, 'What is counted, exactly').",
+    )
+    p.add_argument("scenario", type=Path, metavar="SCENARIO_DIR", help="directory written by face-reid-sim")
+    p.add_argument("--method", choices=("bayes", "threshold", "both"), default="bayes",
+                   help="face classification: the paper's Bayesian inference (default) or the threshold baseline; "
+                        "both: run each (offline) and compare their re-identification times on the same tracks")
+    p.add_argument("--gallery-people", type=int, default=None, metavar="K",
+                   help="predefined people: K day-1 identities (default: half of them; 0 = no gallery), each "
+                        "with the photos of their folder the scenario did not use")
+    p.add_argument("--faces", type=Path, default=None,
+                   help="faces folder for the gallery photos (default: the one recorded in scenario.json)")
+    p.add_argument("--tick-period", type=float, default=DEFAULT_TICK_PERIOD_S, metavar="S",
+                   help=f"core.tick period between frames, scenario seconds (default {DEFAULT_TICK_PERIOD_S})")
+    p.add_argument("--plot", type=str, default=None, metavar="PREFIX",
+                   help="save PREFIX_timeline.png and PREFIX_map.png")
+    p.add_argument("--out", type=Path, default=None, metavar="JSON", help="also write the JSON to this file")
+    p.add_argument("--likelihood", type=Path, default=None, metavar="JSON",
+                   help="bayes: the fitted likelihoods to use (default: models/face_likelihood.json); "
+                   "see face-reid-fit-likelihood")
+    p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
+    p.add_argument("--live", action="store_true",
+                   help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
+                        "database, the same gallery, --method) gets the recorded camera frames as CameraFrame "
+                        "messages in real time (takes the scenario's duration); metrics from what it publishes "
+                        "on /tracks_named (each track attributed to the nearest true person; no MOT metrics). "
+                        "Later days are replayed after a 5 s pause with the master kept running")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="--live: ROS_DOMAIN_ID of the run (default: random in 1..100; discovery on localhost only)")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    return p
+
+
+def _identities_in_likelihood_fit(names: Sequence[str], likelihood: LikelihoodModel) -> list[str] | None:
+    """Scenario identities ``likelihood`` may have been fitted on: those its fit did not exclude (metadata
+    ``excluded``, written by face-reid-fit-likelihood); None if the model does not say."""
+    excluded = likelihood.metadata.get("excluded")
+    if not isinstance(excluded, dict):
+        return None
+    ids = set(excluded.get("scenario_identities", ()))
+    patterns = list(excluded.get("patterns", ()))
+    return sorted(n for n in names if not excluded_from_fit(n, patterns, ids))
+
+
+def _scenario_json(scenario: Any, likelihood: LikelihoodModel) -> dict[str, Any]:
+    doc = scenario.document
+    summary = scenario.summary
+    names = [str(i["name"]) for i in scenario.identities]
+    return {
+        "directory": str(scenario.directory),
+        "level": scenario.level,
+        "seed": scenario.seed,
+        "days": len(scenario.days),
+        "people_per_day": summary.get("people_per_day"),
+        "identities": len(names),
+        "cameras": len(scenario.cameras),
+        "duration_s": summary.get("duration_s"),
+        "frames": summary.get("frames"),
+        "detections": summary.get("detections"),
+        "face_detections": summary.get("face_detections"),
+        "gt_losses": summary.get("losses"),
+        "gt_visible_segments": summary.get("visible_segments"),
+        "faces_dir": doc.get("faces_dir"),
+        "identities_in_likelihood_fit": _identities_in_likelihood_fit(names, likelihood),
+    }
+
+
+def _parameters(config: MasterConfig, likelihood: LikelihoodModel | None, tick_period_s: float) -> dict[str, Any]:
+    out: dict[str, Any] = {k: getattr(config, k) for k in _IDENTITY_FIELDS[config.method]}
+    out["name_threshold"] = config.name_threshold
+    out["tick_period_s"] = tick_period_s
+    out["tracker"] = dataclasses.asdict(config.tracker)
+    if likelihood is not None:
+        out["likelihood_data"] = likelihood.metadata.get("data", "")
+        out["likelihood_command"] = likelihood.metadata.get("command", "")
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the evaluation; returns the exit status."""
+    parser = _parser()
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    log = None if args.quiet else sys.stderr
+    if args.domain_id is not None and not 0 <= args.domain_id <= 101:
+        print(f"face-reid-eval: error: --domain-id must be in 0..101, got {args.domain_id}", file=sys.stderr)
+        return 2
+    if args.live and args.method == "both":
+        print("face-reid-eval: error: --live runs one method: use --method bayes or threshold", file=sys.stderr)
+        return 2
+    if not (math.isfinite(args.tick_period) and args.tick_period > 0):
+        print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
+        return 2
+    try:
+        model = LikelihoodModel.default() if args.likelihood is None else load_likelihood_model(args.likelihood)
+    except (OSError, ValueError) as exc:
+        print(f"face-reid-eval: error: --likelihood: {exc}", file=sys.stderr)
+        return 2
+    from face_reid_master.sim.simulate import ScenarioFormatError, load_scenario
+
+    t0 = time.perf_counter()
+    try:
+        scenario = load_scenario(args.scenario)
+    except ScenarioFormatError as exc:
+        print(f"face-reid-eval: error: {exc}", file=sys.stderr)
+        return 2
+    if log:
+        print(f"loaded {args.scenario}: {len(scenario.frames)} frames in {time.perf_counter() - t0:.1f} s", file=log)
+    try:
+        gallery_ids = default_gallery_people(scenario.document, args.gallery_people)
+    except ValueError as exc:
+        print(f"face-reid-eval: error: --gallery-people: {exc}", file=sys.stderr)
+        return 2
+    t1 = time.perf_counter()
+    gallery = scenario_gallery(scenario.document, scenario.directory, gallery_ids, faces_dir=args.faces, log=log) \
+        if gallery_ids else GalleryInfo({}, {}, {}, [], skipped="--gallery-people 0")
+    if gallery.skipped and gallery_ids and log:
+        print(f"gallery skipped: {gallery.skipped}", file=log)
+    if log and gallery.people:
+        print(f"gallery of {len(gallery.people)} people built in {time.perf_counter() - t1:.1f} s", file=log)
+
+    days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
+            for d in scenario.days]
+    if args.method == "both":
+        runs = {m: _run_offline(args, m, scenario, gallery, days, log, model) for m in ("bayes", "threshold")}
+        result = {"scenario": runs["bayes"][0].pop("scenario"), "method": "both"}
+        for m, (res, _) in runs.items():
+            res.pop("scenario", None)
+            result[m] = res
+        result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
+    else:
+        config = MasterConfig(method=args.method)
+        if args.live:
+            return _main_live(args, scenario, gallery, config, model, days, t0, log)
+        result = _run_offline(args, args.method, scenario, gallery, days, log, model)[0]
+    result["total_time_s"] = round(time.perf_counter() - t0, 2)
+    _emit(result, args.out)
+    return 0
+
+
+def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
+                 days: list[tuple[int, float, float, list[int]]], log: Any,
+                 model: LikelihoodModel) -> tuple[dict[str, Any], RunLog]:
+    """The master core with ``method`` (and ``model`` if bayes) over the scenario; (the JSON-ready metrics,
+    the run's log)."""
+    config = MasterConfig(method=method)
+    likelihood = model if method == "bayes" else None
+    if log:
+        print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
+    run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
+                     gallery=gallery.people or None, tick_period_s=args.tick_period, days=days,
+                     progress=progress_to(log) if log else None)
+    if log:
+        print(f"core done in {run.runtime_s:.1f} s; computing metrics", file=log)
+    metrics = evaluate_run(run, gallery_people=gallery.gt_of_name or None, scenario_summary=scenario.summary,
+                           with_mot=not args.no_mot)
+    result: dict[str, Any] = {
+        "scenario": _scenario_json(scenario, model),
+        "method": method,
+        "parameters": _parameters(config, likelihood, args.tick_period),
+        "gallery": gallery.as_json(),
+        **{k: v for k, v in metrics.items() if k != "method"},
+    }
+    if args.plot:
+        t2 = time.perf_counter()
+        prefix = args.plot if args.method != "both" else f"{args.plot}_{method}"
+        paths = save_plots(run, scenario, prefix, title=f"{args.scenario.name} / {method}")
+        result["plots"] = [str(p) for p in paths]
+        if log:
+            print(f"plots saved in {time.perf_counter() - t2:.1f} s: {', '.join(map(str, paths))}", file=log)
+    return result, run
+
+
+def _emit(result: dict[str, Any], out: Path | None) -> None:
+    text = json.dumps(result, indent=1, sort_keys=False)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n", encoding="utf-8")
+    print(text)
+
+
+def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, config: MasterConfig,
+               model: LikelihoodModel, days: list[tuple[int, float, float, list[int]]], t0: float,
+               log: Any) -> int:
+    """``--live``: the scenario through the master node over DDS; the metrics of what it published."""
+    likelihood = model if args.method == "bayes" else None
+    import os
+    import random
+    import signal
+    import uuid
+
+    from face_reid_master.evaluation.live import LiveError, run_live, scenario_truth
+    from face_reid_master.evaluation.published_tracks import MATCH_RADIUS_M, run_log_from_messages
+
+    domain_id = args.domain_id if args.domain_id is not None else random.randint(1, 100)
+    # this process joins the same private, loopback-only domain before rclpy is imported
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_STATIC_PEERS", None)
+    day_of = {int(d["day"]): (float(d["start_s"]), float(d["end_s"])) for d in scenario.days}
+    day_of_frame = [next((d for d, (a, b) in day_of.items() if a - 1e-6 <= f.stamp_s <= b + 1e-6), 0)
+                    for f in scenario.frames]
+    if log:
+        print(f"live run on ROS_DOMAIN_ID={domain_id} (localhost only): {len(scenario.frames)} frames over "
+              f"{len(days)} day(s), method {args.method}", file=log)
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous = signal.signal(signal.SIGTERM, on_term)
+    t1 = time.perf_counter()
+    try:
+        live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
+                        log=log, likelihood_path=args.likelihood)
+    except LiveError as exc:
+        print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("face-reid-eval: interrupted; every process stopped", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    play_s = time.perf_counter() - t1
+    run = run_log_from_messages(live.messages, scenario_truth(scenario.ground_truth, days),
+                                len(scenario.identities), days, args.method)
+    metrics = evaluate_run(run, gallery_people=gallery.gt_of_name or None, scenario_summary=scenario.summary,
+                           with_mot=False)
+    for key in ("method", "master_stats", "frames", "frames_rejected", "detections", "run_time_s"):
+        metrics.pop(key, None)
+    transport = live.transport
+    result: dict[str, Any] = {
+        "mode": "live",
+        "scenario": _scenario_json(scenario, model),
+        "method": args.method,
+        "parameters": {**_parameters(config, likelihood, 1.0 / 5.0), "master": "face_reid_master.ros.node, default "
+                       "parameters but method, db_path (temporary) and gallery_path (the gallery below, .npz)"},
+        "gallery": gallery.as_json(),
+        **metrics,
+        "frames": transport["frames_sent"],
+        "frames_rejected": transport["frames_sent"] - transport["frames_answered"],
+        "detections": transport["detections_sent"],
+        "attribution": {"match_radius_m": MATCH_RADIUS_M, "published_track_samples": int(run.det_gt.size),
+                        "samples_near_nobody": int((run.det_gt < 0).sum())},
+        "transport": {"domain_id": domain_id, **transport},
+        "run_time_s": round(play_s, 2),
+    }
+    if args.plot:
+        paths = save_plots(run, scenario, args.plot, title=f"{args.scenario.name} / {args.method} (live)")
+        result["plots"] = [str(p) for p in paths]
+    result["total_time_s"] = round(time.perf_counter() - t0, 2)
+    _emit(result, args.out)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------------
+# Figures
+
+
+_COLOURS = {"success": "tab:green", "failure": "tab:red", "pending": "0.6"}
+_DAY_GAP_PLOT_S = 10.0  # gap drawn between consecutive days on the timeline
+
+
+def save_plots(run: RunLog, scenario: Any, prefix: str, title: str = "") -> list[Path]:
+    """PREFIX_timeline.png (tracks per person over time) and PREFIX_map.png (top-down view)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch, Rectangle, Wedge
+
+    base = Path(prefix)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    names = {int(i["gt_id"]): str(i["name"]) for i in scenario.identities}
+    outcomes = {o.track_id: o for o in track_outcomes(run)}
+    persons = sorted(names)
+    row = {p: k for k, p in enumerate(persons)}
+    colours = plt.get_cmap("tab10" if len(persons) <= 10 else "tab20")
+
+    # timeline; later days are shifted left to follow the previous day after a short gap
+    days = sorted(scenario.days, key=lambda d: d["day"])
+    shifts: list[tuple[float, float]] = []  # (day start, shift)
+    shift = 0.0
+    for k, day in enumerate(days):
+        if k:
+            shift += float(day["start_s"]) - float(days[k - 1]["end_s"]) - _DAY_GAP_PLOT_S
+        shifts.append((float(day["start_s"]), shift))
+
+    def tx(t: float) -> float:
+        return t - max((sh for start, sh in shifts if t >= start - _DAY_GAP_PLOT_S / 2), default=0.0)
+
+    fig, ax = plt.subplots(figsize=(12, 1.0 + 0.45 * len(persons)))
+    for k, day in enumerate(days[1:], start=2):
+        x = tx(float(day["start_s"])) - _DAY_GAP_PLOT_S / 2
+        ax.axvline(x, color="k", ls=":", lw=1)
+        ax.text(x, -0.55, f" day {k}", fontsize=7, va="top")
+    for day in scenario.summary.get("per_day", []):
+        for gt, segs in (day.get("segments") or {}).items():
+            for a, b in segs:
+                ax.plot([tx(a), tx(b)], [row[int(gt)] - 0.32] * 2, color="k", lw=1.0)
+    lane: dict[int, int] = {}
+    for o in sorted(outcomes.values(), key=lambda o: o.birth_s):
+        t = run.tracks[o.track_id]
+        y = row.get(o.person)
+        if y is None:
+            continue
+        lane[o.person] = (lane.get(o.person, -1) + 1) % 3
+        yy = y - 0.18 + 0.16 * lane[o.person]
+        decided = o.decided_s if o.decided_s is not None else t.last_seen_s
+        ax.plot([tx(t.birth_s), tx(min(decided, t.last_seen_s))], [yy, yy], color=_COLOURS["pending"], lw=4,
+                solid_capstyle="butt")
+        if o.decided_s is not None:
+            ax.plot([tx(o.decided_s), tx(max(o.decided_s, t.last_seen_s))], [yy, yy], color=_COLOURS[o.outcome],
+                    lw=4, solid_capstyle="butt")
+            ax.text(tx(o.decided_s), yy + 0.05, str(o.face_id), fontsize=6, va="bottom")
+    ax.set_yticks(range(len(persons)), [f"{p}: {names[p]}" for p in persons], fontsize=7)
+    ax.set_ylim(-0.6, len(persons) - 0.4)
+    ax.invert_yaxis()
+    ax.set_xlabel("time [s]" + (" (later days shifted to follow the previous one)" if len(days) > 1 else ""))
+    ax.set_title(f"{title}  tracks per person (label: face id; black: true visible segments)", fontsize=9)
+    ax.legend(handles=[Patch(color=_COLOURS["success"], label="correct face id"),
+                       Patch(color=_COLOURS["failure"], label="wrong face id"),
+                       Patch(color=_COLOURS["pending"], label="pending / none")], fontsize=7, loc="upper right")
+    fig.tight_layout()
+    timeline = base.parent / f"{base.name}_timeline.png"
+    fig.savefig(timeline, dpi=120)
+    plt.close(fig)
+
+    # map
+    doc = scenario.document
+    w, d = float(doc["room"]["width_m"]), float(doc["room"]["depth_m"])
+    fig, ax = plt.subplots(figsize=(8, 8 * d / w + 0.5))
+    ax.add_patch(Rectangle((-w / 2, -d / 2), w, d, fill=False, lw=1.5, color="k"))
+    for door in doc.get("doors", []):
+        cx, cy = door["centre_xy"]
+        ax.plot([cx], [cy], marker="s", color="saddlebrown", ms=8)
+    max_range = float(doc.get("parameters", {}).get("visibility", {}).get("max_range_m", 6.0))
+    for cam in scenario.cameras:
+        pos = cam.pose.translation
+        fwd = cam.pose.rotation[:, 2]
+        heading = math.degrees(math.atan2(fwd[1], fwd[0]))
+        half = math.degrees(math.atan2(cam.intrinsics.width / 2.0, cam.intrinsics.fx))
+        ax.add_patch(Wedge((pos[0], pos[1]), max_range, heading - half, heading + half, alpha=0.08, color="tab:blue"))
+        ax.plot([pos[0]], [pos[1]], marker="^", color="tab:blue", ms=9)
+        ax.text(pos[0], pos[1], f" {cam.camera_id}", fontsize=7)
+    gt = scenario.ground_truth
+    for p in persons:
+        xy = gt.xy[p]
+        ax.plot(xy[:, 0], xy[:, 1], lw=0.6, color=colours(row[p] % colours.N), alpha=0.5)
+    for t in run.tracks.values():
+        if not t.path or t.true_person < 0:
+            continue
+        arr = np.asarray(t.path)
+        ax.plot(arr[:, 1], arr[:, 2], lw=1.0, ls="--", color=colours(row.get(t.true_person, 0) % colours.N))
+    ax.legend(handles=[Patch(color=colours(row[p] % colours.N), label=f"{p}: {names[p]}") for p in persons],
+              fontsize=6, loc="upper right")
+    ax.set_aspect("equal")
+    ax.set_xlim(-w / 2 - 2, w / 2 + 2)
+    ax.set_ylim(-d / 2 - 2, d / 2 + 2)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{title}  true paths (solid) and tracks (dashed, colour = true person)", fontsize=9)
+    fig.tight_layout()
+    map_path = base.parent / f"{base.name}_map.png"
+    fig.savefig(map_path, dpi=120)
+    plt.close(fig)
+    return [timeline, map_path]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

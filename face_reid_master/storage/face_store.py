@@ -1,0 +1,589 @@
+"""Persistent memory of the master: learned faces (biometric data) in one SQLite file, private to the user.
+
+One file (default :func:`default_db_path`) holds every learned face: its id, optional name, counters and
+bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.face_table`).  Privacy measures:
+
+* the file, its ``-wal``/``-shm`` companions and backups are mode 0600, a directory we create is 0700;
+  an existing file with broader permissions is fixed and a warning logged;
+* :meth:`FaceStore.forget` / :meth:`~FaceStore.forget_name` / :meth:`~FaceStore.prune_unnamed` delete a
+  person's rows with ``PRAGMA secure_delete=ON`` (freed content is zeroed) and then truncate the WAL, so
+  the vectors no longer exist in either file (the filesystem/SSD may still hold old blocks: out of reach);
+* one process at a time: the store holds an exclusive ``flock`` on the database file, so the CLI cannot
+  edit a store a running node would silently overwrite (:class:`FaceStoreLockedError`).
+
+Durability: WAL journal, ``synchronous=FULL`` by default (every commit fsyncs the WAL: survives a
+``kill -9`` *and* an OS crash / power loss); ``synchronous="NORMAL"`` still survives a process crash
+(committed frames are in the OS page cache) but the last commits may be lost on power loss.
+Each ``save_face`` is one transaction committed before it returns.
+
+A corrupt file (not SQLite, failing ``PRAGMA integrity_check``, foreign schema or unknown schema version)
+is renamed ``<name>.corrupt-<UTC stamp>`` (with its -wal/-shm), an ERROR is logged and an empty store is
+started; :attr:`FaceStore.recovered_from` tells the node.  Not thread-safe: use one store from the thread
+that created it (sqlite3's ``check_same_thread`` enforces it).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import fcntl
+import logging
+import math
+import os
+import sqlite3
+import stat
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from face_reid_master.identity.face_table import LearnedFace
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "FaceStore",
+    "FaceStoreError",
+    "FaceStoreLockedError",
+    "FaceSummary",
+    "default_db_path",
+]
+
+_LOG = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+_FILE_MODE = 0o600
+_DIR_MODE = 0o700
+_SIDECARS = ("-wal", "-shm")
+_DEFAULT_DIM = 128
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_VECTOR_DTYPE = np.dtype("<f4")  # little-endian float32 on every platform
+
+_SCHEMA = f"""
+CREATE TABLE meta (
+    key TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE faces (
+    face_id INTEGER PRIMARY KEY CHECK (face_id >= 1),
+    name TEXT NULL,
+    created_s REAL NOT NULL,
+    last_seen_s REAL NOT NULL,
+    n_observations INTEGER NOT NULL CHECK (n_observations >= 0)
+);
+CREATE TABLE features (
+    face_id INTEGER NOT NULL REFERENCES faces(face_id) ON DELETE CASCADE,
+    idx INTEGER NOT NULL CHECK (idx >= 0),
+    vector BLOB NOT NULL,
+    PRIMARY KEY (face_id, idx)
+) WITHOUT ROWID;
+CREATE INDEX faces_name ON faces(name);
+INSERT INTO meta(key, value) VALUES ('schema_version', '{SCHEMA_VERSION}');
+"""
+_EXPECTED_TABLES = {"meta", "faces", "features"}
+
+
+class FaceStoreError(RuntimeError):
+    """The face store cannot be used (configuration or I/O problem; corruption is recovered instead)."""
+
+
+class FaceStoreLockedError(FaceStoreError):
+    """Another process (normally the running master node) has the store open."""
+
+
+class _CorruptStore(Exception):
+    """Internal: the file is not a usable face store (reason in args[0])."""
+
+
+@dataclass(frozen=True)
+class FaceSummary:
+    """One stored face without its vectors (for listings)."""
+
+    face_id: int
+    name: str | None
+    n_features: int
+    n_observations: int
+    created_s: float
+    last_seen_s: float
+
+
+def default_db_path() -> Path:
+    """``$FACE_REID_DB`` if set, else ``${XDG_DATA_HOME:-~/.local/share}/face_reid/faces.db``."""
+    env = os.environ.get("FACE_REID_DB", "").strip()
+    if env:
+        return Path(env).expanduser()
+    xdg = os.environ.get("XDG_DATA_HOME", "").strip()
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".local" / "share"
+    return base / "face_reid" / "faces.db"
+
+
+def _utc_stamp() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+
+
+def _check_face_id(face_id: Any) -> int:
+    if isinstance(face_id, bool) or not isinstance(face_id, (int, np.integer)):
+        raise ValueError(f"face_id must be an int, got {face_id!r}")
+    return int(face_id)
+
+
+def _check_name(name: Any) -> str | None:
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"name must be a str or None, got {name!r}")
+    return name
+
+
+class FaceStore:
+    """SQLite-backed persistent memory of learned faces (see the module docstring for the guarantees).
+
+    ``retention_unnamed_s``: unnamed faces not seen for this long are deleted by :meth:`prune_unnamed`
+    (None = keep forever).  ``embedding_dim``: length of the stored vectors; a store written with another
+    dimension raises :class:`FaceStoreError` (a different embedder: the operator must decide); None adopts
+    the stored dimension (128 for a new store).
+    ``synchronous``: "FULL" (default, power-loss safe) or "NORMAL" (process-crash safe).  ``create``:
+    False raises :class:`FaceStoreError` when the file does not exist (used by the CLI).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        retention_unnamed_s: float | None = None,
+        embedding_dim: int | None = 128,
+        synchronous: str = "FULL",
+        create: bool = True,
+    ) -> None:
+        if not isinstance(path, (str, Path)) or str(path) in ("", ":memory:"):
+            raise ValueError(f"path must be a file path, got {path!r}")
+        if retention_unnamed_s is not None:
+            if isinstance(retention_unnamed_s, bool) or not isinstance(retention_unnamed_s, (int, float)):
+                raise ValueError(f"retention_unnamed_s must be a number or None, got {retention_unnamed_s!r}")
+            if not (math.isfinite(retention_unnamed_s) and retention_unnamed_s > 0.0):
+                raise ValueError(f"retention_unnamed_s must be finite and > 0, got {retention_unnamed_s!r}")
+            retention_unnamed_s = float(retention_unnamed_s)
+        if embedding_dim is not None and (
+            isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) or embedding_dim < 1
+        ):
+            raise ValueError(f"embedding_dim must be an int >= 1 or None, got {embedding_dim!r}")
+        if synchronous not in ("FULL", "NORMAL"):
+            raise ValueError(f"synchronous must be 'FULL' or 'NORMAL', got {synchronous!r}")
+        self.path = Path(path).expanduser().absolute()
+        self.retention_unnamed_s = retention_unnamed_s
+        self.embedding_dim: int = 0 if embedding_dim is None else embedding_dim  # 0: take the store's
+        self.synchronous = synchronous
+        self.recovered_from: Path | None = None  # set when a corrupt file was moved aside at open
+        self._lock_fd: int | None = None
+        self._conn: sqlite3.Connection | None = None
+        if not create and not self.path.exists():
+            raise FaceStoreError(f"no face store at {self.path}")
+        self._ensure_parent()
+        self._open_locked_file()
+        try:
+            self._conn = self._connect_and_validate()
+        except _CorruptStore as exc:
+            try:
+                self._recover(str(exc))
+            except OSError as exc2:
+                self._release_lock()
+                raise FaceStoreError(
+                    f"face store {self.path} is corrupt ({exc}) and cannot be moved aside: {exc2}"
+                ) from exc2
+            try:
+                self._conn = self._connect_and_validate()
+            except _CorruptStore as exc2:  # a fresh file must work; anything else is an I/O problem
+                self._release_lock()
+                raise FaceStoreError(f"cannot create a fresh face store at {self.path}: {exc2}") from exc2
+        except BaseException:
+            self._release_lock()
+            raise
+        self._secure_sidecars()
+
+    # ------------------------------------------------------------------------------ opening
+    def _ensure_parent(self) -> None:
+        parent = self.path.parent
+        if not parent.exists():
+            parent.mkdir(mode=_DIR_MODE, parents=True, exist_ok=True)
+            os.chmod(parent, _DIR_MODE)  # mkdir's mode is filtered by the umask
+
+    def _open_locked_file(self) -> None:
+        """Create (0600) or open the file, fix broader permissions, take the exclusive process lock."""
+        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0)
+        try:
+            fd = os.open(self.path, flags, _FILE_MODE)
+        except OSError as exc:
+            raise FaceStoreError(f"cannot open face store {self.path}: {exc}") from exc
+        try:
+            info = os.fstat(fd)
+            if not stat.S_ISREG(info.st_mode):
+                raise FaceStoreError(f"face store {self.path} is not a regular file")
+            mode = stat.S_IMODE(info.st_mode)
+            if mode & ~_FILE_MODE:
+                try:
+                    os.fchmod(fd, _FILE_MODE)
+                except OSError as exc:
+                    raise FaceStoreError(
+                        f"face store {self.path} has permissions {mode:o} and cannot be restricted to 600: {exc}"
+                    ) from exc
+                _LOG.warning(
+                    "face store %s had permissions %o, broader than 600 for biometric data: fixed to 600",
+                    self.path,
+                    mode,
+                )
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError as exc:
+                raise FaceStoreLockedError(
+                    f"face store {self.path} is in use by another process (is the master node running?)"
+                ) from exc
+        except BaseException:
+            os.close(fd)
+            raise
+        self._lock_fd = fd
+
+    def _release_lock(self) -> None:
+        # close the connection first: closing any fd of the file drops SQLite's POSIX locks of the process
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
+
+    def _connect_and_validate(self) -> sqlite3.Connection:
+        assert self._lock_fd is not None
+        head = os.pread(self._lock_fd, len(_SQLITE_MAGIC), 0)
+        if head and head != _SQLITE_MAGIC:
+            # Never hand a foreign file to SQLite: with a -wal beside it, closing would delete that -wal.
+            # (An empty file is fine: a new store, or one whose whole content is still in the WAL.)
+            raise _CorruptStore("not an SQLite database (bad header)")
+        try:
+            conn = sqlite3.connect(self.path, isolation_level=None, timeout=5.0)
+        except sqlite3.Error as exc:
+            raise FaceStoreError(f"cannot open face store {self.path}: {exc}") from exc
+        try:
+            # connection-level settings only: nothing may touch a file we have not recognised yet
+            conn.execute("PRAGMA secure_delete=ON")
+            conn.execute("PRAGMA foreign_keys=ON")
+            conn.execute("PRAGMA trusted_schema=OFF")
+            self._validate_or_init(conn)
+            self._enable_wal(conn)
+            conn.execute(f"PRAGMA synchronous={self.synchronous}")
+        except BaseException:
+            conn.close()
+            raise
+        return conn
+
+    def _enable_wal(self, conn: sqlite3.Connection) -> None:
+        try:
+            mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        except sqlite3.DatabaseError as exc:
+            raise _CorruptStore(f"cannot switch to WAL ({exc})") from exc
+        if str(mode).lower() != "wal":
+            raise FaceStoreError(f"face store {self.path}: cannot enable the WAL journal (got {mode!r})")
+
+    def _validate_or_init(self, conn: sqlite3.Connection) -> None:
+        try:
+            check = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
+            if check != ["ok"]:
+                raise _CorruptStore("integrity_check failed: " + "; ".join(str(c) for c in check[:5]))
+            tables = {
+                r[0]
+                for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
+                if not str(r[0]).startswith("sqlite_")
+            }
+            if not tables:
+                if not self.embedding_dim:
+                    self.embedding_dim = _DEFAULT_DIM
+                self._enable_wal(conn)  # before the first write: the schema goes straight into the WAL
+                conn.executescript("BEGIN IMMEDIATE;" + _SCHEMA + "COMMIT;")
+                self._set_meta(conn, "embedding_dim", str(self.embedding_dim))
+                return
+            if not _EXPECTED_TABLES <= tables:
+                raise _CorruptStore(f"not a face store (tables {sorted(tables)})")
+            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+            if meta.get("schema_version") != str(SCHEMA_VERSION):
+                raise _CorruptStore(f"unknown schema version {meta.get('schema_version')!r}")
+            dim = meta.get("embedding_dim")
+            if not self.embedding_dim:  # embedding_dim=None: adopt the store's (tools such as the CLI)
+                self.embedding_dim = int(dim) if dim is not None and dim.isdigit() and int(dim) > 0 else _DEFAULT_DIM
+            if dim is None:
+                self._set_meta(conn, "embedding_dim", str(self.embedding_dim))
+            elif dim != str(self.embedding_dim):
+                raise FaceStoreError(
+                    f"face store {self.path} holds {dim}-dimensional features but embedding_dim is "
+                    f"{self.embedding_dim} (a different embedder?): use another file or delete this one"
+                )
+        except sqlite3.DatabaseError as exc:
+            raise _CorruptStore(f"unreadable database ({exc})") from exc
+
+    @staticmethod
+    def _set_meta(conn: sqlite3.Connection, key: str, value: str) -> None:
+        conn.execute(
+            "INSERT INTO meta(key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = excluded.value",
+            (key, value),
+        )
+
+    def _recover(self, reason: str) -> None:
+        """Move the corrupt file (and its -wal/-shm, which must not be replayed into a fresh file) aside."""
+        stamp = _utc_stamp()
+        backup = self.path.with_name(f"{self.path.name}.corrupt-{stamp}")
+        n = 1
+        while backup.exists():
+            backup = self.path.with_name(f"{self.path.name}.corrupt-{stamp}-{n}")
+            n += 1
+        self._release_lock()
+        os.replace(self.path, backup)
+        os.chmod(backup, _FILE_MODE)
+        for suffix in _SIDECARS:
+            side = Path(str(self.path) + suffix)
+            if side.exists():
+                target = Path(str(backup) + suffix)
+                os.replace(side, target)
+                os.chmod(target, _FILE_MODE)
+        _LOG.error(
+            "FACE STORE CORRUPT: %s (%s). Moved it to %s and started an EMPTY store: previously learned "
+            "faces are not loaded.",
+            self.path,
+            reason,
+            backup,
+        )
+        self.recovered_from = backup
+        self._open_locked_file()
+
+    def _secure_sidecars(self) -> None:
+        """SQLite gives -wal/-shm the database file's mode; enforce 0600 anyway."""
+        for suffix in _SIDECARS:
+            side = Path(str(self.path) + suffix)
+            with contextlib.suppress(FileNotFoundError):
+                if stat.S_IMODE(side.stat().st_mode) & ~_FILE_MODE:
+                    os.chmod(side, _FILE_MODE)
+
+    # ------------------------------------------------------------------------------ helpers
+    @property
+    def _db(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise FaceStoreError("face store is closed")
+        return self._conn
+
+    @contextlib.contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        conn = self._db
+        try:
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                yield conn
+                conn.execute("COMMIT")
+            except BaseException:
+                if conn.in_transaction:
+                    with contextlib.suppress(sqlite3.Error):
+                        conn.execute("ROLLBACK")
+                raise
+        except sqlite3.Error as exc:
+            raise FaceStoreError(f"face store {self.path}: {exc}") from exc
+
+    def _encode(self, face: LearnedFace) -> list[tuple[int, int, bytes]]:
+        if not isinstance(face, LearnedFace):
+            raise ValueError(f"expected a LearnedFace, got {type(face).__name__}")
+        feats = face.features
+        if feats.shape[1] != self.embedding_dim:
+            raise ValueError(
+                f"face {face.face_id}: features have dim {feats.shape[1]}, expected {self.embedding_dim}"
+            )
+        if not np.all(np.isfinite(feats)):
+            raise ValueError(f"face {face.face_id}: features contain NaN or Inf")
+        raw = np.ascontiguousarray(feats, dtype=_VECTOR_DTYPE)
+        return [(face.face_id, i, raw[i].tobytes()) for i in range(raw.shape[0])]
+
+    def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, rows: list[tuple[int, int, bytes]]) -> None:
+        conn.execute(
+            "INSERT INTO faces(face_id, name, created_s, last_seen_s, n_observations) VALUES (?, ?, ?, ?, ?) "
+            "ON CONFLICT(face_id) DO UPDATE SET name = excluded.name, created_s = excluded.created_s, "
+            "last_seen_s = excluded.last_seen_s, n_observations = excluded.n_observations",
+            (face.face_id, face.name, face.created_s, face.last_seen_s, face.n_observations),
+        )
+        conn.execute("DELETE FROM features WHERE face_id = ?", (face.face_id,))
+        conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?)", rows)
+        self._bump_max_face_id(conn, face.face_id)
+
+    @staticmethod
+    def _bump_max_face_id(conn: sqlite3.Connection, face_id: int) -> None:
+        conn.execute(
+            "INSERT INTO meta(key, value) VALUES ('max_face_id', ?) ON CONFLICT(key) DO UPDATE SET "
+            "value = CAST(MAX(CAST(value AS INTEGER), CAST(excluded.value AS INTEGER)) AS TEXT)",
+            (str(face_id),),
+        )
+
+    def _delete_ids(self, face_ids: list[int]) -> None:
+        """Delete faces + features in one transaction, then scrub the WAL (secure_delete zeroed the pages)."""
+        if not face_ids:
+            return
+        with self._transaction() as conn:
+            conn.executemany("DELETE FROM features WHERE face_id = ?", [(f,) for f in face_ids])
+            conn.executemany("DELETE FROM faces WHERE face_id = ?", [(f,) for f in face_ids])
+        self._scrub_wal()
+
+    def _scrub_wal(self) -> None:
+        """Checkpoint every WAL frame into the (zeroed) database pages and truncate the WAL to 0 bytes."""
+        try:
+            busy, _, _ = self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
+        except sqlite3.Error as exc:
+            raise FaceStoreError(f"face store {self.path}: WAL checkpoint failed: {exc}") from exc
+        if busy:
+            _LOG.warning(
+                "face store %s: WAL checkpoint blocked by a reader; deleted data may stay in %s-wal until "
+                "the next checkpoint",
+                self.path,
+                self.path.name,
+            )
+
+    # ------------------------------------------------------------------------------ public API
+    def save_face(self, face: LearnedFace) -> None:
+        """Insert or replace one face (row + all its features) in one transaction, committed on return."""
+        rows = self._encode(face)
+        with self._transaction() as conn:
+            self._write_face(conn, face, rows)
+
+    def save_faces(self, faces: Iterable[LearnedFace]) -> int:
+        """Insert or replace several faces in one transaction (all or nothing); returns how many."""
+        batch = [(f, self._encode(f)) for f in faces]
+        ids = [f.face_id for f, _ in batch]
+        if len(ids) != len(set(ids)):
+            raise ValueError("save_faces: duplicate face ids in the batch")
+        if not batch:
+            return 0
+        with self._transaction() as conn:
+            for face, rows in batch:
+                self._write_face(conn, face, rows)
+        return len(batch)
+
+    def load_faces(self) -> list[LearnedFace]:
+        """All stored faces sorted by id, features in stored order (exact float32 round trip).
+
+        A face whose stored data is invalid (wrong vector length, NaN, no features) is skipped with an
+        ERROR log rather than aborting the load.
+        """
+        conn = self._db
+        meta_rows = conn.execute(
+            "SELECT face_id, name, created_s, last_seen_s, n_observations FROM faces ORDER BY face_id"
+        ).fetchall()
+        vectors: dict[int, list[bytes]] = {}
+        for face_id, blob in conn.execute("SELECT face_id, vector FROM features ORDER BY face_id, idx"):
+            vectors.setdefault(face_id, []).append(blob)
+        width = self.embedding_dim * _VECTOR_DTYPE.itemsize
+        out: list[LearnedFace] = []
+        for face_id, name, created_s, last_seen_s, n_obs in meta_rows:
+            blobs = vectors.get(face_id, [])
+            try:
+                if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
+                    raise ValueError(f"{len(blobs)} stored vectors, expected >= 1 of {width} bytes each")
+                feats = np.frombuffer(b"".join(blobs), dtype=_VECTOR_DTYPE).reshape(len(blobs), -1)
+                out.append(
+                    LearnedFace(face_id, feats.astype(np.float32), name, created_s, last_seen_s, n_obs)
+                )
+            except (ValueError, TypeError) as exc:
+                _LOG.error("face store %s: skipping invalid stored face %s: %s", self.path, face_id, exc)
+        return out
+
+    def list_faces(self) -> list[FaceSummary]:
+        """Summaries of all stored faces (no vectors), sorted by id."""
+        rows = self._db.execute(
+            "SELECT f.face_id, f.name, COUNT(v.idx), f.n_observations, f.created_s, f.last_seen_s "
+            "FROM faces f LEFT JOIN features v ON v.face_id = f.face_id GROUP BY f.face_id ORDER BY f.face_id"
+        ).fetchall()
+        return [FaceSummary(int(r[0]), r[1], int(r[2]), int(r[3]), float(r[4]), float(r[5])) for r in rows]
+
+    def face_ids(self) -> list[int]:
+        """Ids of all stored faces, sorted."""
+        return [int(r[0]) for r in self._db.execute("SELECT face_id FROM faces ORDER BY face_id")]
+
+    def max_face_id(self) -> int:
+        """Largest face id ever saved in this store (also after it was forgotten); 0 if none."""
+        row = self._db.execute("SELECT value FROM meta WHERE key = 'max_face_id'").fetchone()
+        return 0 if row is None else int(row[0])
+
+    def set_name(self, face_id: int, name: str | None) -> bool:
+        """Set (or clear with None) the name of a stored face; False if the id is not stored."""
+        fid = _check_face_id(face_id)
+        name = _check_name(name)
+        with self._transaction() as conn:
+            cur = conn.execute("UPDATE faces SET name = ? WHERE face_id = ?", (name, fid))
+        return cur.rowcount > 0
+
+    def forget(self, face_id: int) -> bool:
+        """Delete a face and its vectors for good (zeroed pages, WAL truncated); False if not stored."""
+        fid = _check_face_id(face_id)
+        if self._db.execute("SELECT 1 FROM faces WHERE face_id = ?", (fid,)).fetchone() is None:
+            return False
+        self._delete_ids([fid])
+        _LOG.info("face store %s: forgot face %d", self.path, fid)
+        return True
+
+    def forget_name(self, name: str) -> list[int]:
+        """Delete every face with exactly this name (case-sensitive); returns their ids."""
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"name must be a non-empty str, got {name!r}")
+        rows = self._db.execute("SELECT face_id FROM faces WHERE name = ? ORDER BY face_id", (name,))
+        ids = [int(r[0]) for r in rows]
+        self._delete_ids(ids)
+        if ids:
+            _LOG.info("face store %s: forgot faces %s named %r", self.path, ids, name)
+        return ids
+
+    def prune_unnamed(self, now_s: float, keep: Iterable[int] = ()) -> list[int]:
+        """Retention: delete unnamed faces with ``last_seen_s < now_s - retention_unnamed_s``.
+
+        ``keep``: face ids never pruned (the node passes faces carried by live tracks, whose stored
+        ``last_seen_s`` may be stale).  Returns the deleted ids ([] when retention is None).  The node
+        must also :meth:`~face_reid_master.identity.face_table.IdentityManagerBase.forget_face` them.
+        """
+        if isinstance(now_s, bool) or not isinstance(now_s, (int, float, np.floating, np.integer)):
+            raise ValueError(f"now_s must be a number of seconds, got {now_s!r}")
+        if not math.isfinite(float(now_s)):
+            raise ValueError(f"now_s must be finite, got {now_s!r}")
+        if self.retention_unnamed_s is None:
+            return []
+        keep_ids = {_check_face_id(k) for k in keep}
+        cutoff = float(now_s) - self.retention_unnamed_s
+        ids = [
+            int(r[0])
+            for r in self._db.execute(
+                "SELECT face_id FROM faces WHERE name IS NULL AND last_seen_s < ? ORDER BY face_id", (cutoff,)
+            )
+            if int(r[0]) not in keep_ids
+        ]
+        self._delete_ids(ids)
+        if ids:
+            _LOG.info("face store %s: retention pruned unnamed faces %s", self.path, ids)
+        return ids
+
+    def integrity_ok(self) -> bool:
+        """Run ``PRAGMA integrity_check`` now (diagnostics)."""
+        return [r[0] for r in self._db.execute("PRAGMA integrity_check").fetchall()] == ["ok"]
+
+    @property
+    def closed(self) -> bool:
+        return self._conn is None
+
+    def close(self) -> None:
+        """Checkpoint, close the database and release the process lock (idempotent)."""
+        if self._conn is not None:
+            try:
+                with contextlib.suppress(sqlite3.Error):
+                    self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                self._conn.close()
+            finally:
+                self._conn = None
+                self._release_lock()
+        else:
+            self._release_lock()
+
+    def __enter__(self) -> FaceStore:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()

@@ -1,0 +1,155 @@
+"""``face-reid-faces``: inspect and edit the master's persistent face memory (list, forget, rename).
+
+The data never leaves the store: there is no export of vectors, ``list --json`` prints summaries only.
+The store is locked while the master node runs (edits would be overwritten by it): stop the node first.
+
+Exit codes: 0 done, 1 nothing matched (unknown face id / name), 2 usage error, 3 store in use by another
+process, 4 store unusable (missing file, I/O or configuration error).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from face_reid_master.storage.face_store import (
+    FaceStore,
+    FaceStoreError,
+    FaceStoreLockedError,
+    FaceSummary,
+    default_db_path,
+)
+
+__all__ = ["EXIT_BUSY", "EXIT_NOT_FOUND", "EXIT_OK", "EXIT_STORE_ERROR", "EXIT_USAGE", "build_parser", "main"]
+
+PROG = "face-reid-faces"
+EXIT_OK = 0
+EXIT_NOT_FOUND = 1
+EXIT_USAGE = 2
+EXIT_BUSY = 3
+EXIT_STORE_ERROR = 4
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="List, forget or rename the faces learned by the face-reid master (biometric data).",
+    )
+    parser.add_argument(
+        "--db",
+        type=Path,
+        default=None,
+        help="face store file (default: $FACE_REID_DB or ~/.local/share/face_reid/faces.db)",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_list = sub.add_parser("list", help="list stored faces (no feature vectors)")
+    p_list.add_argument("--json", action="store_true", help="one JSON array of summaries")
+    p_forget = sub.add_parser("forget", help="delete a face (or all faces with a name) for good")
+    target = p_forget.add_mutually_exclusive_group(required=True)
+    target.add_argument("face_id", nargs="?", type=int, help="face id to delete")
+    target.add_argument("--name", help="delete every face with exactly this name")
+    p_rename = sub.add_parser("rename", help="set or clear the name of a face")
+    p_rename.add_argument("face_id", type=int)
+    name = p_rename.add_mutually_exclusive_group(required=True)
+    name.add_argument("name", nargs="?", help="new name")
+    name.add_argument("--clear", action="store_true", help="remove the name")
+    return parser
+
+
+def _iso(stamp_s: float) -> str:
+    try:
+        return _dt.datetime.fromtimestamp(stamp_s, _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    except (OverflowError, OSError, ValueError):
+        return f"{stamp_s:.3f}"
+
+
+def _print_list(faces: list[FaceSummary], as_json: bool) -> None:
+    if as_json:
+        print(
+            json.dumps(
+                [
+                    {
+                        "face_id": f.face_id,
+                        "name": f.name,
+                        "n_features": f.n_features,
+                        "n_observations": f.n_observations,
+                        "created_s": f.created_s,
+                        "last_seen_s": f.last_seen_s,
+                    }
+                    for f in faces
+                ]
+            )
+        )
+        return
+    print(f"{'id':>6}  {'name':<24} {'features':>8} {'observ.':>8}  {'created (UTC)':<20}  {'last seen (UTC)':<20}")
+    for f in faces:
+        name = f.name if f.name is not None else "-"
+        print(
+            f"{f.face_id:>6}  {name:<24} {f.n_features:>8} {f.n_observations:>8}  "
+            f"{_iso(f.created_s):<20}  {_iso(f.last_seen_s):<20}"
+        )
+    print(f"{len(faces)} face(s)")
+
+
+def _run(store: FaceStore, args: argparse.Namespace) -> int:
+    if args.command == "list":
+        _print_list(store.list_faces(), args.json)
+        return EXIT_OK
+    if args.command == "forget":
+        if args.name is not None:
+            ids = store.forget_name(args.name)
+            if not ids:
+                print(f"{PROG}: no face named {args.name!r}", file=sys.stderr)
+                return EXIT_NOT_FOUND
+            print(f"forgot face(s) {', '.join(str(i) for i in ids)} named {args.name!r}")
+            return EXIT_OK
+        if not store.forget(args.face_id):
+            print(f"{PROG}: no face {args.face_id}", file=sys.stderr)
+            return EXIT_NOT_FOUND
+        print(f"forgot face {args.face_id}")
+        return EXIT_OK
+    # rename
+    new_name = None if args.clear else args.name
+    if new_name is not None and not new_name.strip():
+        print(f"{PROG}: error: empty name (use --clear to remove a name)", file=sys.stderr)
+        return EXIT_USAGE
+    if not store.set_name(args.face_id, new_name):
+        print(f"{PROG}: no face {args.face_id}", file=sys.stderr)
+        return EXIT_NOT_FOUND
+    print(f"face {args.face_id} " + (f"renamed {new_name!r}" if new_name is not None else "name cleared"))
+    return EXIT_OK
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_USAGE
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.WARNING, format=f"{PROG}: %(levelname)s: %(message)s")
+    path = args.db if args.db is not None else default_db_path()
+    try:
+        with FaceStore(path, create=False, embedding_dim=None) as store:
+            if store.recovered_from is not None:
+                print(
+                    f"{PROG}: warning: the store was corrupt and has been moved to {store.recovered_from}; "
+                    "this is a new, empty store",
+                    file=sys.stderr,
+                )
+            return _run(store, args)
+    except FaceStoreLockedError as exc:
+        print(f"{PROG}: error: {exc}; stop the master node first", file=sys.stderr)
+        return EXIT_BUSY
+    except (FaceStoreError, OSError) as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_STORE_ERROR
+
+
+if __name__ == "__main__":
+    sys.exit(main())
