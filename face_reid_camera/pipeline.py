@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
 from face_reid_camera.faces.embedder import FaceEmbedder
 from face_reid_camera.faces.head_roi import head_roi_px
@@ -26,44 +27,40 @@ EMBEDDING_DIM = 128
 
 @dataclass(frozen=True)
 class FaceQualityConfig:
-    """How face size and pose turn into a 0..1 quality score (documented in the README)."""
+    """How face size and pose turn into a 0..1 quality score (the camera node's quality parameters)."""
 
-    min_eye_distance_px: float = 6.0
-    good_eye_distance_px: float = 20.0
-    max_yaw_deg: float = 75.0
+    min_eye_distance_px: float = param(6.0, "Quality is 0 at this eye distance (px).", low=0.0, high=500.0,
+                                       low_open=True)
+    good_eye_distance_px: float = param(20.0, "Quality size factor is 1 from here (px).", low=0.0, high=500.0,
+                                        low_open=True)
+    max_face_yaw_deg: float = param(75.0, "Quality frontality factor reaches 0 at this yaw (deg).", low=0.0,
+                                    high=90.0, low_open=True)
 
     def __post_init__(self) -> None:
-        if not 0 < self.min_eye_distance_px < self.good_eye_distance_px:
-            raise ValueError("need 0 < min_eye_distance_px < good_eye_distance_px")
-        if not 0 < self.max_yaw_deg <= 90:
-            raise ValueError("max_yaw_deg must be in (0, 90] degrees")
+        validate_fields(self)
+        if not self.min_eye_distance_px < self.good_eye_distance_px:
+            raise ValueError("need min_eye_distance_px < good_eye_distance_px")
 
 
 @dataclass(frozen=True)
 class CameraPipelineConfig:
     """Parameters of the per-frame pipeline (units in the names)."""
 
-    camera_id: str = "camera"
-    head_roi_size_m: float = 0.3
-    detect_faces: bool = True
-    max_faces_per_frame: int = 16
-    min_face_quality: float = 0.0
-    position_std_base_m: float = 0.05
-    position_std_per_m2: float = 0.005
+    camera_id: str = param("camera", "Unique id of this camera, sent in every message (string).", read_only=True)
+    head_roi_size_m: float = param(0.3, "Side of the metric square around each head (m).", low=0.05, high=2.0)
+    detect_faces: bool = param(True, "Run face detection and embedding (false = people positions only).")
+    max_faces_per_frame: int = param(16, "Faces embedded per frame, nearest first (count).", low=0, high=1000)
+    min_face_quality: float = param(0.0, "Faces below this quality (0..1) are not embedded.", low=0.0, high=1.0)
+    position_std_base_m: float = param(0.05, "Position uncertainty at 0 m range (m).", low=0.0, high=5.0,
+                                       low_open=True)
+    position_std_per_m2: float = param(0.005, "Uncertainty growth with range squared (m/m^2).", low=0.0, high=1.0)
     person: PersonDetectorConfig = field(default_factory=PersonDetectorConfig)
     quality: FaceQualityConfig = field(default_factory=FaceQualityConfig)
 
     def __post_init__(self) -> None:
+        validate_fields(self)
         if not self.camera_id:
             raise ValueError("camera_id must be a non-empty string")
-        if not (math.isfinite(self.head_roi_size_m) and 0.05 <= self.head_roi_size_m <= 2.0):
-            raise ValueError(f"head_roi_size_m must be within [0.05, 2.0] m, got {self.head_roi_size_m!r}")
-        if self.max_faces_per_frame < 0:
-            raise ValueError("max_faces_per_frame must be >= 0")
-        if not 0.0 <= self.min_face_quality <= 1.0:
-            raise ValueError("min_face_quality must be within [0, 1]")
-        if self.position_std_base_m <= 0 or self.position_std_per_m2 < 0:
-            raise ValueError("position_std_base_m must be > 0 and position_std_per_m2 >= 0")
 
 
 @dataclass(frozen=True)
@@ -147,7 +144,7 @@ def face_quality(score: float, eye_distance_px: float, yaw_deg: float, config: F
         config.good_eye_distance_px - config.min_eye_distance_px
     )
     size = min(1.0, max(0.0, size))
-    frontal = max(0.0, 1.0 - abs(yaw_deg) / config.max_yaw_deg)
+    frontal = max(0.0, 1.0 - abs(yaw_deg) / config.max_face_yaw_deg)
     return float(min(1.0, max(0.0, score)) * size * frontal)
 
 

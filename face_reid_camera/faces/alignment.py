@@ -13,6 +13,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.checks import check_bgr_image
+
 __all__ = [
     "ALIGN_TEMPLATE_150",
     "CHIP_SIZE_PX",
@@ -80,20 +82,6 @@ def estimate_similarity(src: np.ndarray, dst: np.ndarray) -> NDArray[np.float64]
     return matrix
 
 
-def _validate_image(image_bgr: np.ndarray) -> np.ndarray:
-    if not isinstance(image_bgr, np.ndarray):
-        raise ValueError(f"image must be a numpy array, got {type(image_bgr).__name__}")
-    if image_bgr.dtype != np.uint8:
-        raise ValueError(f"image must be uint8, got {image_bgr.dtype}")
-    if image_bgr.ndim == 3 and image_bgr.shape[2] == 1:
-        image_bgr = image_bgr[:, :, 0]
-    if not (image_bgr.ndim == 2 or (image_bgr.ndim == 3 and image_bgr.shape[2] in (3, 4))):
-        raise ValueError(f"image must be HxW grey, HxWx3 BGR or HxWx4 BGRA, got shape {image_bgr.shape}")
-    if image_bgr.shape[0] == 0 or image_bgr.shape[1] == 0:
-        raise ValueError(f"image is empty: shape {image_bgr.shape}")
-    return image_bgr
-
-
 def _warp_to_rgb(image: np.ndarray, matrix: NDArray[np.float64]) -> NDArray[np.uint8]:
     chip = cv2.warpAffine(
         image,
@@ -117,7 +105,7 @@ def align_face(image_bgr: np.ndarray, landmarks5: np.ndarray) -> NDArray[np.uint
     fall outside the image are black. Raises ValueError on a bad image or bad landmarks (wrong shape,
     non-finite, degenerate).
     """
-    image = _validate_image(image_bgr)
+    image = check_bgr_image(image_bgr, allow_bgra=True)
     matrix = estimate_similarity(_validate_landmarks(landmarks5), ALIGN_TEMPLATE_150)
     return _warp_to_rgb(image, matrix)
 
@@ -126,7 +114,7 @@ def align_faces(
     image_bgr: np.ndarray, landmarks_list: Sequence[np.ndarray] | np.ndarray
 ) -> NDArray[np.uint8]:
     """Align several faces of one image: returns [N, 150, 150, 3] uint8 RGB (N may be 0)."""
-    image = _validate_image(image_bgr)
+    image = check_bgr_image(image_bgr, allow_bgra=True)
     if isinstance(landmarks_list, np.ndarray) and landmarks_list.ndim != 3 and landmarks_list.size > 0:
         raise ValueError(f"landmarks_list must be [N, 5, 2], got shape {landmarks_list.shape}")
     chips = np.empty((len(landmarks_list), CHIP_SIZE_PX, CHIP_SIZE_PX, 3), dtype=np.uint8)

@@ -19,6 +19,7 @@ import numpy as np
 import onnxruntime as ort
 from numpy.typing import NDArray
 
+from face_reid_camera.common.checks import check_bgr_image, check_int, check_real
 from face_reid_camera.common.errors import ModelLoadError
 from face_reid_camera.common.resources import models_dir
 
@@ -88,37 +89,6 @@ def _make_anchor_grid(height_px: int, width_px: int) -> _AnchorGrid:
     )
 
 
-def _check_positive_int(name: str, value: object, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-def _check_unit_interval(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ValueError(f"{name} must be a number in (0, 1], got {value!r}")
-    fvalue = float(value)
-    if not (0.0 < fvalue <= 1.0):
-        raise ValueError(f"{name} must be in (0, 1], got {value!r}")
-    return fvalue
-
-
-def _validate_image(image_bgr: object) -> np.ndarray:
-    """Return a (H, W, 3) BGR or (H, W) grey uint8 view; ValueError on anything else."""
-    if not isinstance(image_bgr, np.ndarray):
-        raise ValueError(f"image must be a numpy array, got {type(image_bgr).__name__}")
-    if image_bgr.dtype != np.uint8:
-        raise ValueError(f"image must be uint8 (bgr8 or mono8), got dtype {image_bgr.dtype}")
-    image = image_bgr
-    if image.ndim == 3 and image.shape[2] == 1:
-        image = image[:, :, 0]
-    if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
-        raise ValueError(f"image must have shape (H, W), (H, W, 1) or (H, W, 3), got {image_bgr.shape}")
-    if image.shape[0] == 0 or image.shape[1] == 0:
-        raise ValueError(f"image must not be empty, got shape {image_bgr.shape}")
-    return image
-
-
 def _validate_rois(rois_xywh: Sequence[tuple[int, int, int, int]] | np.ndarray) -> NDArray[np.float64]:
     """Return ROIs as an (N, 4) float64 array of x, y, w, h; ValueError if malformed."""
     try:
@@ -164,14 +134,14 @@ class YuNetDetector:
         num_threads: int = 1,
         top_k: int = 50,
     ) -> None:
-        self.score_threshold = _check_unit_interval("score_threshold", score_threshold)
-        self.nms_iou_threshold = _check_unit_interval("nms_iou_threshold", nms_iou_threshold)
-        roi_size = _check_positive_int("roi_input_size_px", roi_input_size_px, minimum=_PAD_DIVISOR_PX)
+        self.score_threshold = check_real("score_threshold", score_threshold, 0.0, 1.0, low_open=True)
+        self.nms_iou_threshold = check_real("nms_iou_threshold", nms_iou_threshold, 0.0, 1.0, low_open=True)
+        roi_size = check_int("roi_input_size_px", roi_input_size_px, _PAD_DIVISOR_PX)
         if roi_size % _PAD_DIVISOR_PX:
             raise ValueError(f"roi_input_size_px must be a multiple of {_PAD_DIVISOR_PX}, got {roi_size}")
         self.roi_input_size_px = roi_size
-        self.num_threads = _check_positive_int("num_threads", num_threads)
-        self.top_k = _check_positive_int("top_k", top_k)
+        self.num_threads = check_int("num_threads", num_threads, 1)
+        self.top_k = check_int("top_k", top_k, 1)
 
         path = Path(model_path) if model_path is not None else models_dir() / DEFAULT_MODEL_FILENAME
         if not path.is_file():
@@ -277,7 +247,7 @@ class YuNetDetector:
 
     def detect(self, image_bgr: np.ndarray) -> list[FaceDetection]:
         """All faces in a full image (padded bottom/right to a multiple of 32), by decreasing score."""
-        image = _validate_image(image_bgr)
+        image = check_bgr_image(image_bgr)
         height, width = image.shape[:2]
         pad_h = math.ceil(height / _PAD_DIVISOR_PX) * _PAD_DIVISOR_PX
         pad_w = math.ceil(width / _PAD_DIVISOR_PX) * _PAD_DIVISOR_PX
@@ -308,7 +278,7 @@ class YuNetDetector:
         ``roi_input_size_px`` and all ROIs go through ONE batched inference. ROIs entirely (or all but a
         sliver under 8 px) outside the image give None. The face box may slightly overhang its ROI.
         """
-        image = _validate_image(image_bgr)
+        image = check_bgr_image(image_bgr)
         rois = _validate_rois(rois_xywh)
         results: list[FaceDetection | None] = [None] * len(rois)
         if len(rois) == 0:

@@ -45,10 +45,10 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose, depth_to_points
+from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.people.ground_plane import GroundPlane, fit_ground_plane
 
 __all__ = [
-    "PERSON_PARAM_DESCRIPTIONS",
     "PersonCandidate",
     "PersonDetectionResult",
     "PersonDetector",
@@ -71,144 +71,92 @@ _ABOVE_MAX_HEIGHT_MARGIN_M = 0.3
 _EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
 
 
-# One-line documentation of every PersonDetectorConfig field (for ROS parameter descriptors).
-PERSON_PARAM_DESCRIPTIONS: dict[str, str] = {
-    "depth_stride_px": "Use every n-th depth row and column (px; 1 = all pixels).",
-    "voxel_size_m": "Voxel size of the down-sampled cloud and cell size of the floor height map (m).",
-    "min_depth_m": "Ignore depth returns closer than this (m).",
-    "max_depth_m": "Ignore depth returns farther than this (m); people beyond are not detected.",
-    "ground_distance_threshold_m": (
-        "Floor RANSAC inlier distance; points this close to the floor or below it are removed (m)."
-    ),
-    "depth_noise_coefficient_per_m": (
-        "Depth noise sigma = this x range^2 (Kinect v1); the floor band is at least 3 sigma (1/m; 0 = off)."
-    ),
-    "ransac_iterations": "Floor plane hypotheses scored per frame (count).",
-    "ransac_max_sample_points": "Points sub-sampled to score the floor hypotheses (count).",
-    "ground_seed_angle_deg": (
-        "With a camera pose: max angle between the floor normal and the pose's up (deg)."
-    ),
-    "ground_seed_height_tolerance_m": (
-        "With a camera pose: max difference between the camera height and the pose's (m)."
-    ),
-    "ground_max_tilt_deg": "Without a pose: max angle between the floor normal and camera -y (deg).",
-    "min_ground_points": "A floor needs at least this many inlier points after striding (count).",
-    "ground_max_below_fraction": (
-        "Reject floor planes with more than this fraction of the points clearly below them (0..1)."
-    ),
-    "min_camera_height_m": "Reject floor planes closer than this below the camera (m).",
-    "cluster_tolerance_m": "Gaps narrower than this join occupied floor cells into one cluster (m).",
-    "min_person_height_m": "Heads lower than this above the floor are not people (m; OpenPTrack uses 0.6).",
-    "max_person_height_m": "Heads higher than this above the floor are not people (m).",
-    "min_person_width_m": "A person's upper body (top upper_body_depth_m) is at least this wide (m).",
-    "max_person_width_m": (
-        "A person's upper body is at most this wide; voxels join a head within half of it (m)."
-    ),
-    "min_cluster_points": "A person has at least this many voxels (count).",
-    "heads_minimum_distance_m": (
-        "Heads are at least this far apart; the lower of a closer pair is dropped (m)."
-    ),
-    "head_annulus_inner_m": "Head test: inner radius of the shoulder ring around a head top (m).",
-    "head_annulus_outer_m": "Head test: outer radius of the shoulder ring around a head top (m).",
-    "head_min_drop_m": "Head test: shoulders are at least this much lower than the head top (m).",
-    "upper_body_depth_m": "Head test and width use only the top this-many metres of a person (m).",
-    "max_head_plateau_fraction": (
-        "Head test: at most this fraction of the ring is as high as the head; flat tops fail (0..1)."
-    ),
-    "min_shoulder_offset_m": (
-        "Head test: shoulders on both sides of the line of sight, at least this far off it (m)."
-    ),
-    "head_top_to_centre_m": "Head centre = head top minus this along the floor normal (m).",
-    "random_seed": "Seed of the floor RANSAC generator (None = a random seed).",
-}
-
-
 @dataclass(frozen=True)
 class PersonDetectorConfig:
-    """Parameters of :class:`PersonDetector` (metres, pixels, degrees as named).
+    """Parameters of :class:`PersonDetector` (the camera node's ``person.*`` parameters).
 
     Defaults follow OpenPTrack (voxel 0.06 m, max height 2.3 m, max distance 10 m, heads 0.3 m
     apart) except ``min_person_height_m`` = 1.0 (OpenPTrack: 0.6): without OpenPTrack's HOG/SVM
     confirmation, 0.6-1.0 m admits chairs and tables while losing only small children; sitting adults
-    (1.2-1.4 m) are kept. :data:`PERSON_PARAM_DESCRIPTIONS` documents every field in one line.
+    (1.2-1.4 m) are kept.
     """
 
-    depth_stride_px: int = 4
-    voxel_size_m: float = 0.06
-    min_depth_m: float = 0.4
-    max_depth_m: float = 10.0
-    ground_distance_threshold_m: float = 0.06
-    depth_noise_coefficient_per_m: float = 0.0014
-    ransac_iterations: int = 100
-    ransac_max_sample_points: int = 1000
-    ground_seed_angle_deg: float = 15.0
-    ground_seed_height_tolerance_m: float = 0.25
-    ground_max_tilt_deg: float = 60.0
-    min_ground_points: int = 150
-    ground_max_below_fraction: float = 0.05
-    min_camera_height_m: float = 0.2
-    cluster_tolerance_m: float = 0.12
-    min_person_height_m: float = 1.0
-    max_person_height_m: float = 2.3
-    min_person_width_m: float = 0.25
-    max_person_width_m: float = 1.0
-    min_cluster_points: int = 30
-    heads_minimum_distance_m: float = 0.3
-    head_annulus_inner_m: float = 0.12
-    head_annulus_outer_m: float = 0.35
-    head_min_drop_m: float = 0.18
-    upper_body_depth_m: float = 0.5
-    max_head_plateau_fraction: float = 0.4
-    min_shoulder_offset_m: float = 0.06
-    head_top_to_centre_m: float = 0.1
-    random_seed: int | None = 0
+    depth_stride_px: int = param(4, "Use every n-th depth row and column (px; 1 = all pixels).", low=1, high=64)
+    voxel_size_m: float = param(
+        0.06, "Voxel size of the down-sampled cloud and cell size of the floor height map (m).",
+        low=0.0, high=1.0, low_open=True)
+    min_depth_m: float = param(0.4, "Ignore depth returns closer than this (m).", low=0.0, high=20.0)
+    max_depth_m: float = param(
+        10.0, "Ignore depth returns farther than this (m); people beyond are not detected.",
+        low=0.0, high=50.0, low_open=True)
+    ground_distance_threshold_m: float = param(
+        0.06, "Floor RANSAC inlier distance; points this close to the floor or below it are removed (m).",
+        low=0.0, high=1.0, low_open=True)
+    depth_noise_coefficient_per_m: float = param(
+        0.0014, "Depth noise sigma = this x range^2 (Kinect v1); the floor band is at least 3 sigma (1/m; 0 = off).",
+        low=0.0, high=0.1)
+    ransac_iterations: int = param(100, "Floor plane hypotheses scored per frame (count).", low=1, high=100_000)
+    ransac_max_sample_points: int = param(
+        1000, "Points sub-sampled to score the floor hypotheses (count).", low=3, high=1_000_000)
+    ground_seed_angle_deg: float = param(
+        15.0, "With a camera pose: max angle between the floor normal and the pose's up (deg).",
+        low=0.0, high=90.0, low_open=True, high_open=True)
+    ground_seed_height_tolerance_m: float = param(
+        0.25, "With a camera pose: max difference between the camera height and the pose's (m).",
+        low=0.0, high=10.0, low_open=True)
+    ground_max_tilt_deg: float = param(
+        60.0, "Without a pose: max angle between the floor normal and camera -y (deg).",
+        low=0.0, high=90.0, low_open=True, high_open=True)
+    min_ground_points: int = param(
+        150, "A floor needs at least this many inlier points after striding (count).", low=1, high=1_000_000)
+    ground_max_below_fraction: float = param(
+        0.05, "Reject floor planes with more than this fraction of the points clearly below them (0..1).",
+        low=0.0, high=1.0)
+    min_camera_height_m: float = param(
+        0.2, "Reject floor planes closer than this below the camera (m).", low=0.0, high=10.0)
+    cluster_tolerance_m: float = param(
+        0.12, "Gaps narrower than this join occupied floor cells into one cluster (m).",
+        low=0.0, high=2.0, low_open=True)
+    min_person_height_m: float = param(
+        1.0, "Heads lower than this above the floor are not people (m; OpenPTrack uses 0.6).",
+        low=0.0, high=3.0, low_open=True)
+    max_person_height_m: float = param(
+        2.3, "Heads higher than this above the floor are not people (m).", low=0.0, high=4.0, low_open=True)
+    min_person_width_m: float = param(
+        0.25, "A person's upper body (top upper_body_depth_m) is at least this wide (m).",
+        low=0.0, high=3.0, low_open=True)
+    max_person_width_m: float = param(
+        1.0, "A person's upper body is at most this wide; voxels join a head within half of it (m).",
+        low=0.0, high=5.0, low_open=True)
+    min_cluster_points: int = param(30, "A person has at least this many voxels (count).", low=1, high=1_000_000)
+    heads_minimum_distance_m: float = param(
+        0.3, "Heads are at least this far apart; the lower of a closer pair is dropped (m).",
+        low=0.0, high=3.0, low_open=True)
+    head_annulus_inner_m: float = param(
+        0.12, "Head test: inner radius of the shoulder ring around a head top (m).", low=0.0, high=2.0)
+    head_annulus_outer_m: float = param(
+        0.35, "Head test: outer radius of the shoulder ring around a head top (m).",
+        low=0.0, high=2.0, low_open=True)
+    head_min_drop_m: float = param(
+        0.18, "Head test: shoulders are at least this much lower than the head top (m).",
+        low=0.0, high=2.0, low_open=True)
+    upper_body_depth_m: float = param(
+        0.5, "Head test and width use only the top this-many metres of a person (m).",
+        low=0.0, high=3.0, low_open=True)
+    max_head_plateau_fraction: float = param(
+        0.4, "Head test: at most this fraction of the ring is as high as the head; flat tops fail (0..1).",
+        low=0.0, high=1.0)
+    min_shoulder_offset_m: float = param(
+        0.06, "Head test: shoulders on both sides of the line of sight, at least this far off it (m).",
+        low=0.0, high=1.0, low_open=True)
+    head_top_to_centre_m: float = param(
+        0.1, "Head centre = head top minus this along the floor normal (m).", low=0.0, high=1.0)
+    random_seed: int = param(
+        0, "Seed of the floor RANSAC generator (count; -1 = a different random seed every start).",
+        low=-1, high=2**31 - 1)
 
     def __post_init__(self) -> None:
-        for name in ("depth_stride_px", "ransac_iterations", "min_ground_points", "min_cluster_points"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-        if self.ransac_max_sample_points < 3:
-            raise ValueError(f"ransac_max_sample_points must be >= 3, got {self.ransac_max_sample_points}")
-        positive = (
-            "voxel_size_m",
-            "max_depth_m",
-            "ground_distance_threshold_m",
-            "ground_seed_height_tolerance_m",
-            "cluster_tolerance_m",
-            "min_person_height_m",
-            "max_person_height_m",
-            "min_person_width_m",
-            "max_person_width_m",
-            "heads_minimum_distance_m",
-            "head_annulus_outer_m",
-            "head_min_drop_m",
-            "upper_body_depth_m",
-            "min_shoulder_offset_m",
-        )
-        for name in positive:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-        non_negative = (
-            "min_depth_m",
-            "min_camera_height_m",
-            "head_annulus_inner_m",
-            "head_top_to_centre_m",
-            "depth_noise_coefficient_per_m",
-        )
-        for name in non_negative:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a non-negative finite number, got {value!r}")
-        for name in ("ground_seed_angle_deg", "ground_max_tilt_deg"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and 0 < value < 90):
-                raise ValueError(f"{name} must be in (0, 90) degrees, got {value!r}")
-        for name in ("ground_max_below_fraction", "max_head_plateau_fraction"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and 0 <= value <= 1):
-                raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+        validate_fields(self)
         if self.min_depth_m >= self.max_depth_m:
             raise ValueError(f"min_depth_m ({self.min_depth_m}) must be < max_depth_m ({self.max_depth_m})")
         if self.min_person_height_m >= self.max_person_height_m:
@@ -311,7 +259,7 @@ class PersonDetector:
         self.camera_pose = camera_pose
         self._pose_plane = GroundPlane.from_camera_pose(camera_pose) if camera_pose is not None else None
         self._previous_plane: GroundPlane | None = None
-        self._rng = np.random.default_rng(self.config.random_seed)
+        self._rng = np.random.default_rng(None if self.config.random_seed < 0 else self.config.random_seed)
         # Height-map geometry (cells of voxel_size_m): peak footprint, head ring offsets, gap bridging.
         cell = self.config.voxel_size_m
         reach = math.ceil(self.config.head_annulus_outer_m / cell)

@@ -5,22 +5,21 @@ Kept apart from the node so the conversion is unit-tested without spinning anyth
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from face_reid_camera.camera_model import CameraPose
+from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.pipeline import FrameResult, PersonObservation
 
 
-def stamp_from_seconds(stamp_s: float) -> tuple[int, int]:
-    """(sec, nanosec) of a builtin_interfaces/Time for ``stamp_s`` seconds."""
-    sec = math.floor(stamp_s)
-    nanosec = round((stamp_s - sec) * 1e9)
-    if nanosec >= 1_000_000_000:
-        sec, nanosec = sec + 1, nanosec - 1_000_000_000
-    return int(sec), int(nanosec)
+def intrinsics_from_camera_info(msg: Any) -> CameraIntrinsics:
+    """CameraIntrinsics from a sensor_msgs/CameraInfo (raises ValueError when unusable)."""
+    k = list(msg.k)
+    if len(k) != 9:
+        raise ValueError("CameraInfo.k must have 9 values")
+    return CameraIntrinsics(float(k[0]), float(k[4]), float(k[2]), float(k[5]), int(msg.width), int(msg.height))
 
 
 def _roi(msg: Any, xywh: tuple[float, float, float, float] | None, width: int = 0, height: int = 0) -> None:
@@ -54,14 +53,15 @@ def person_to_msg(person_cls: type, person: PersonObservation) -> Any:
 
 
 def frame_to_msg(
-    frame_cls: type, result: FrameResult, stamp_s: float, camera_id: str, world_frame_id: str,
+    result: FrameResult, stamp_s: float, camera_id: str, world_frame_id: str,
     camera_frame_id: str, pose: CameraPose, frames_dropped: int = 0,
 ) -> Any:
     """Fill a face_reid_msgs/CameraFrame from a pipeline result."""
+    from face_reid_msgs.msg import CameraFrame
     from face_reid_msgs.msg import PersonObservation as PersonMsg
 
-    msg = frame_cls()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_from_seconds(stamp_s)
+    msg = CameraFrame()
+    set_stamp(msg.header.stamp, stamp_s)
     msg.header.frame_id = world_frame_id
     msg.camera_id = camera_id
     msg.camera_frame_id = camera_frame_id

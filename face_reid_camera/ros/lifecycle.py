@@ -1,0 +1,283 @@
+"""What both face-reid nodes share as ROS lifecycle nodes: parameter declaration from a :class:`ParamTable`,
+the start-up walk to ACTIVE (``autostart``), throttled logging of rejected input, and ``/diagnostics``.
+
+Subclasses implement ``configure`` / ``activate`` / ``deactivate`` / ``cleanup`` (plain methods; an
+exception in ``configure`` fails the transition with its message in :attr:`ManagedNode.failure`).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
+
+from face_reid_camera.common.diagnostics import DiagnosticReport
+from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable
+from face_reid_camera.common.stamps import set_stamp
+
+__all__ = ["ManagedNode", "descriptor_for", "report_to_msg", "run_node"]
+
+_TYPES = {
+    "bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER, "float": Parameter.Type.DOUBLE,
+    "str": Parameter.Type.STRING, "float_list": Parameter.Type.DOUBLE_ARRAY, "str_list": Parameter.Type.STRING_ARRAY,
+}
+_INT64 = 2**63 - 1
+LOG_THROTTLE_S = 5.0
+_MAX_LOG_CHARS = 300
+
+
+def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
+    """The ROS descriptor of a parameter: type, description (+ range / choices), range, read-only."""
+    notes = spec.notes()
+    d = ParameterDescriptor(
+        name=spec.name, type=_TYPES[spec.kind].value, read_only=spec.read_only,
+        description=spec.description + (f" ({notes})" if notes else ""),
+        additional_constraints=spec.range_text(),
+    )
+    if spec.kind == "int" and (spec.low is not None or spec.high is not None):
+        d.integer_range = [IntegerRange(
+            from_value=int(spec.low) if spec.low is not None else -_INT64,
+            to_value=int(spec.high) if spec.high is not None else _INT64, step=0)]
+    elif spec.kind == "float" and (spec.low is not None or spec.high is not None):
+        d.floating_point_range = [FloatingPointRange(
+            from_value=float(spec.low) if spec.low is not None else -float("inf"),
+            to_value=float(spec.high) if spec.high is not None else float("inf"), step=0.0)]
+    return d
+
+
+def report_to_msg(report: DiagnosticReport, stamp_s: float) -> DiagnosticArray:
+    """A DiagnosticArray with the one status of ``report``."""
+    arr = DiagnosticArray()
+    set_stamp(arr.header.stamp, stamp_s)
+    status = DiagnosticStatus(level=bytes([int(report.level)]), name=report.name, message=report.message,
+                              hardware_id=report.hardware_id)
+    status.values = [KeyValue(key=k, value=v) for k, v in report.values.items()]
+    arr.status = [status]
+    return arr
+
+
+class ManagedNode(LifecycleNode):
+    """A lifecycle node whose parameters come from one :class:`ParamTable`."""
+
+    def __init__(self, table: ParamTable, **kwargs: Any) -> None:
+        super().__init__(table.node_name, **kwargs)
+        self.table = table
+        self.failure = ""  # why the last transition failed (for the FATAL line at start-up)
+        self.quiet_failures = False  # run_node reports start-up failures itself, as one FATAL line
+        self._configured = False
+        self._active = False
+        self._last_logged: dict[str, float] = {}
+        for spec in table.specs:
+            try:
+                self.declare_parameter(spec.name, spec.default, descriptor_for(spec))
+            except InvalidParameterTypeException:
+                given = self._parameter_overrides.get(spec.name)
+                raise ParamError(
+                    f"parameter {spec.name!r} must be a {spec.type_text()} like {_json(spec.default)}, got "
+                    f"{given.value if given is not None else '?'!r}"
+                    + (" (write numbers with a decimal point, e.g. 2.0)" if spec.kind in ("float", "float_list")
+                       else "")
+                ) from None
+            except InvalidParameterValueException:
+                given = self._parameter_overrides.get(spec.name)
+                raise ParamError(f"parameter {spec.name!r} must be in {spec.range_text()}, got "
+                                 f"{given.value if given is not None else '?'!r}") from None
+        self._warn_unknown_overrides()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._diagnostics_pub: Any = None
+        self._diagnostics_timer: Any = None
+
+    # ------------------------------------------------------------------ parameters
+    def _warn_unknown_overrides(self) -> None:
+        known = set(self._parameters)
+        for name in sorted(set(getattr(self, "_parameter_overrides", {})) - known):
+            self.get_logger().warning(
+                f"parameter {name!r} given to {self.get_fully_qualified_name()} is not a parameter of this node: "
+                f"ignored{self.table.suggest(name)}"
+            )
+
+    def _on_set_parameters(self, params: list[Parameter[Any]]) -> SetParametersResult:
+        if not self._configured:
+            return SetParametersResult(successful=True)
+        return SetParametersResult(
+            successful=False,
+            reason="parameters are read on configure: deactivate and clean up the node, set them, configure again",
+        )
+
+    def parameter_values(self) -> dict[str, Any]:
+        """Every declared parameter's current value, checked by its spec (ParamError on a bad one)."""
+        return {s.name: s.check(self.get_parameter(s.name).value) for s in self.table.specs}
+
+    # ------------------------------------------------------------------ transitions
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self.configure()
+        except Exception as exc:  # a bad parameter, a missing model, a corrupt file: say why, stay unconfigured
+            self.failure = f"{exc}" if isinstance(exc, ValueError | OSError) else f"{type(exc).__name__}: {exc}"
+            if not self.quiet_failures:
+                self.get_logger().error(f"configure failed: {self.failure}")
+            self._release_quietly()
+            return TransitionCallbackReturn.FAILURE
+        self._configured = True
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+            self._diagnostics_timer = self.create_timer(1.0, self._publish_diagnostics)
+            self.activate()
+            self._active = True
+        except Exception as exc:
+            self.failure = f"{type(exc).__name__}: {exc}"
+            if not self.quiet_failures:
+                self.get_logger().error(f"activate failed: {self.failure}")
+            self._stop_diagnostics()
+            return TransitionCallbackReturn.FAILURE
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = False
+        self.deactivate()
+        self._stop_diagnostics()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.cleanup()
+        self._configured = False
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def release(self) -> None:
+        """Undo activate and configure, whatever the state (shutdown, or the context is already gone)."""
+        if self._active:
+            self._active = False
+            self.deactivate()
+            self._stop_diagnostics()
+        if self._configured:
+            self._configured = False
+            self.cleanup()
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_diagnostics()
+        self._release_quietly()
+        return TransitionCallbackReturn.SUCCESS  # back to unconfigured
+
+    def _release_quietly(self) -> None:
+        try:
+            self.cleanup()
+        except Exception as exc:
+            self.get_logger().error(f"cleanup after a failure failed too: {exc}")
+        self._configured = False
+
+    def _stop_diagnostics(self) -> None:
+        if self._diagnostics_timer is not None:
+            self.destroy_timer(self._diagnostics_timer)
+            self._diagnostics_timer = None
+        if self._diagnostics_pub is not None:
+            self.destroy_publisher(self._diagnostics_pub)
+            self._diagnostics_pub = None
+
+    def _publish_diagnostics(self) -> None:
+        pub = self._diagnostics_pub
+        if pub is None:
+            return
+        try:
+            now = self.now_s()
+            pub.publish(report_to_msg(self.diagnostics(now), now))
+        except Exception as exc:  # diagnostics must never take the node down
+            self.log_throttled("diagnostics", f"diagnostics failed: {type(exc).__name__}: {exc}")
+
+    # ------------------------------------------------------------------ for subclasses
+    def configure(self) -> None:
+        """Read parameters, load models / open files (raise to fail)."""
+
+    def activate(self) -> None:
+        """Create publishers, subscriptions and timers."""
+
+    def deactivate(self) -> None:
+        """Destroy what :meth:`activate` created."""
+
+    def cleanup(self) -> None:
+        """Release what :meth:`configure` loaded (must work after a partial configure)."""
+
+    def diagnostics(self, now_s: float) -> DiagnosticReport:
+        raise NotImplementedError
+
+    def now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def log_throttled(self, key: str, message: str, total: int | None = None, warn: bool = False) -> None:
+        """Log at once the first time, then at most every LOG_THROTTLE_S per key; messages are truncated."""
+        now = time.monotonic()
+        if now - self._last_logged.get(key, -1e18) < LOG_THROTTLE_S:
+            return
+        self._last_logged[key] = now
+        text = message if len(message) <= _MAX_LOG_CHARS else message[: _MAX_LOG_CHARS - 3] + "..."
+        if total is not None:
+            text += f" [{key}: {total} so far]"
+        (self.get_logger().warning if warn else self.get_logger().error)(text)
+
+
+def _json(value: Any) -> str:
+    import json
+
+    return json.dumps(value)
+
+
+def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], ManagedNode],
+             argv: list[str] | None = None) -> int:
+    """Run a face-reid node until Ctrl-C / shutdown; returns the exit status.
+
+    ``--help`` (without ``--ros-args``) prints ``usage`` and every parameter without starting ROS. A bad
+    parameter, or (with ``autostart``) a failed configure, is one ``FATAL`` line and exit status 2.
+    """
+    argv = list(sys.argv if argv is None else argv)
+    if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv:
+        print(usage + table.help_text())
+        return 0
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    def fatal(message: str) -> int:
+        print(f"[{prog}] FATAL: cannot start: {message}", file=sys.stderr, flush=True)
+        return 2
+
+    rclpy.init(args=argv)
+    try:
+        node = make_node()
+    except (ParamError, ValueError) as exc:
+        rclpy.try_shutdown()
+        return fatal(str(exc))
+    status = 0
+    try:
+        if node.get_parameter("autostart").value:
+            node.quiet_failures = True
+            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                return (status := fatal(node.failure or "configure failed"))
+            if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+                return (status := fatal(node.failure or "activate failed"))
+            node.quiet_failures = False
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        try:
+            if rclpy.ok():
+                node.trigger_shutdown()
+            else:  # Ctrl-C / SIGTERM shut the context down: release without the state machine
+                node.release()
+        except Exception as exc:
+            print(f"[{prog}] shutdown: {type(exc).__name__}: {exc}", file=sys.stderr)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return status
