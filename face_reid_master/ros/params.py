@@ -6,7 +6,9 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
+from typing import Any
 
 from face_reid_camera.common.param_table import ParamSpec, ParamTable, ParamValue
 from face_reid_master.core import MasterConfig
@@ -16,6 +18,25 @@ NODE_NAME = "face_reid_master"
 
 _M = MasterConfig()
 _T = TrackerConfig()
+
+_TRACKER_RANGES: dict[str, dict[str, Any]] = {
+    "accel_noise_mps2": dict(low=0.0, high=100.0, low_open=True),
+    "init_velocity_std_mps": dict(low=0.0, high=100.0, low_open=True),
+    "gate_probability": dict(low=0.0, high=1.0, low_open=True, high_open=True),
+    "detections_to_confirm": dict(low=1, high=1000),
+    "confirm_window_s": dict(low=0.0, high=3600.0, low_open=True),
+    "lost_after_s": dict(low=0.0, high=3600.0, low_open=True),
+    "delete_after_s": dict(low=0.0, high=86400.0),
+    "max_detection_delay_s": dict(low=0.0, high=60.0),
+    "max_future_stamp_s": dict(low=0.0, high=3600.0),
+    "clock_resync_frames": dict(low=0, high=100000),
+    "max_gate_distance_m": dict(low=0.0, high=math.inf, low_open=True),
+    "min_person_separation_m": dict(low=0.0, high=10.0),
+    "max_speed_mps": dict(low=0.0, high=100.0),
+    "coast_after_s": dict(low=0.0, high=3600.0),
+    "camera_window_s": dict(low=0.0, high=3600.0),
+    "max_tracks": dict(low=1, high=100000),
+}
 
 _TRACKER_DESCRIPTIONS: dict[str, str] = {
     "accel_noise_mps2": "Kalman white-acceleration noise std over 1 s (m/s^2).",
@@ -40,11 +61,14 @@ _TRACKER_DESCRIPTIONS: dict[str, str] = {
 def _tracker_specs() -> list[ParamSpec]:
     specs = []
     for f in dataclasses.fields(TrackerConfig):
-        specs.append(ParamSpec(f"tracker.{f.name}", getattr(_T, f.name), _TRACKER_DESCRIPTIONS[f.name]))
+        specs.append(ParamSpec(f"tracker.{f.name}", getattr(_T, f.name), _TRACKER_DESCRIPTIONS[f.name],
+                               **_TRACKER_RANGES[f.name]))
     return specs
 
 
 MASTER_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("autostart", True, "Configure and activate at start (false: wait for a lifecycle manager).",
+              read_only=True),
     ParamSpec("world_frame_id", "world", "Frame id of the published tracks (the cameras' shared world frame)."),
     ParamSpec(
         "camera_topics", [""],
@@ -54,7 +78,8 @@ MASTER_PARAMS: tuple[ParamSpec, ...] = (
         "camera_topic_regex", "^(/.*)?/face_reid/frames$",
         "Also subscribe to every discovered topic matching this regex ('' = off).",
     ),
-    ParamSpec("topic_discovery_period_s", 2.0, "How often new camera topics are looked for (s)."),
+    ParamSpec("topic_discovery_period_s", 2.0, "How often new camera topics are looked for (s).",
+              low=0.05, high=3600.0),
     ParamSpec("known_camera_ids", [""], "Accepted camera ids (list; [''] = accept any camera)."),
     ParamSpec("tracks_topic", "/tracks_named", "Where face_reid_msgs/NamedTrackArray is published."),
     ParamSpec(
@@ -64,40 +89,59 @@ MASTER_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "max_publish_rate_hz", 0.0,
         "Cap on /tracks_named messages per second (0 = one per camera frame; set e.g. 30 for large networks).",
+              low=0.0, high=1000.0,
     ),
-    ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz)."),
-    ParamSpec("method", _M.method, "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline)."),
-    ParamSpec("max_stamp_age_s", _M.max_stamp_age_s, "Frames older than this vs the master clock are rejected (s)."),
-    ParamSpec("max_stamp_future_s", _M.max_stamp_future_s, "Frames newer than this vs the clock are rejected (s)."),
+    ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz).",
+              low=0.1, high=1000.0),
+    ParamSpec("method", _M.method, "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline).",
+              choices=("bayes", "threshold")),
+    ParamSpec("max_stamp_age_s", _M.max_stamp_age_s, "Frames older than this vs the master clock are rejected (s).",
+              low=0.0, high=86400.0),
+    ParamSpec("max_stamp_future_s", _M.max_stamp_future_s, "Frames newer than this vs the clock are rejected (s).",
+              low=0.0, high=86400.0),
     ParamSpec("check_stamps_against_clock", True, "Reject stale/future frames using the node clock (bool)."),
-    ParamSpec("min_face_quality", _M.min_face_quality, "Embeddings with lower face quality are ignored (0..1)."),
+    ParamSpec("min_face_quality", _M.min_face_quality, "Embeddings with lower face quality are ignored (0..1).",
+              low=0.0, high=1.0),
     ParamSpec("publish_tentative", _M.publish_tentative, "Also publish tracks not confirmed yet (bool)."),
-    ParamSpec("posterior_threshold", _M.posterior_threshold, "Assign a face when its posterior exceeds this (0.5..1)."),
-    ParamSpec("prior_probability", _M.prior_probability, "Prior of a new cell of the face table (0..1)."),
-    ParamSpec("min_observations", _M.min_observations, "Face observations needed before a decision (count)."),
-    ParamSpec("new_person_scale_c", _M.new_person_scale_c, "The paper's c: larger = readier to call a face new."),
-    ParamSpec("max_features_per_face", _M.max_features_per_face, "Embeddings kept per face, a diverse subset (count)."),
+    ParamSpec("posterior_threshold", _M.posterior_threshold, "Assign a face when its posterior exceeds this (0.5..1).",
+              low=0.5, high=0.999, high_open=True),
+    ParamSpec("prior_probability", _M.prior_probability, "Prior of a new cell of the face table (0..1).",
+              low=0.0, high=1.0, low_open=True, high_open=True),
+    ParamSpec("min_observations", _M.min_observations, "Face observations needed before a decision (count).",
+              low=1, high=1000),
+    ParamSpec("new_person_scale_c", _M.new_person_scale_c, "The paper's c: larger = readier to call a face new.",
+              low=0.0, high=1e6, low_open=True),
+    ParamSpec("max_features_per_face", _M.max_features_per_face, "Embeddings kept per face, a diverse subset (count).",
+              low=1, high=10000),
     ParamSpec(
         "learn_only_consistent_features", _M.learn_only_consistent_features,
         "An identified track's embedding joins its face only if within the decision distance (guards "
         "faces against tracker swaps; false = the paper).",
     ),
-    ParamSpec("threshold_distance", _M.threshold_distance, "Threshold method: same face below this L2 distance."),
-    ParamSpec("threshold_votes", _M.threshold_votes, "Threshold method: observations per majority vote (count)."),
-    ParamSpec("name_threshold", _M.name_threshold, "A face gets a predefined name below this L2 distance."),
-    ParamSpec("min_face_features_for_name", _M.min_face_features_for_name, "Embeddings a face needs before naming."),
+    ParamSpec("threshold_distance", _M.threshold_distance, "Threshold method: same face below this L2 distance.",
+              low=0.0, high=4.0, low_open=True),
+    ParamSpec("threshold_votes", _M.threshold_votes, "Threshold method: observations per majority vote (count).",
+              low=1, high=1000),
+    ParamSpec("name_threshold", _M.name_threshold, "A face gets a predefined name below this L2 distance.",
+              low=0.0, high=4.0, low_open=True),
+    ParamSpec("min_face_features_for_name", _M.min_face_features_for_name, "Embeddings a face needs before naming.",
+              low=1, high=10000),
     ParamSpec("gallery_path", "", "Predefined people: a folder NAME/*.jpg or a .npz gallery ('' = none)."),
     ParamSpec("persist_faces", True, "Keep learned faces in the database across restarts (bool)."),
     ParamSpec("db_path", "", "Face database file ('' = $FACE_REID_DB or ~/.local/share/face_reid/faces.db)."),
-    ParamSpec("retention_unnamed_s", 0.0, "Forget unnamed faces not seen for this long (s; 0 = keep forever)."),
-    ParamSpec("save_interval_s", _M.save_interval_s, "Faces with new embeddings are saved at least this often (s)."),
+    ParamSpec("retention_unnamed_s", 0.0, "Forget unnamed faces not seen for this long (s; 0 = keep forever).",
+              low=0.0, high=1e9),
+    ParamSpec("save_interval_s", _M.save_interval_s, "Faces with new embeddings are saved at least this often (s).",
+              low=0.0, high=86400.0),
     ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
-    ParamSpec("stats_log_period_s", 30.0, "Counters are logged this often (s)."),
+    ParamSpec("no_input_warning_s", 5.0, "/diagnostics warns when no camera frame arrived for this long (s).",
+              low=0.0, high=3600.0, low_open=True),
+    ParamSpec("stats_log_period_s", 30.0, "Counters are logged this often (s).", low=0.1, high=86400.0),
     *_tracker_specs(),
 )
 
-TABLE = ParamTable(NODE_NAME, MASTER_PARAMS, "the face-reid master node (face-reid-master)")
 USAGE = "face-reid-master --ros-args --params-file config/master.yaml"
+TABLE = ParamTable(NODE_NAME, MASTER_PARAMS, "the face-reid master node (face-reid-master)", USAGE)
 
 
 def defaults() -> dict[str, ParamValue]:
@@ -137,4 +181,4 @@ def master_config(params: dict[str, ParamValue]) -> MasterConfig:
 
 def write_defaults_yaml(path: str | Path) -> None:
     """Write ``config/master.yaml``."""
-    TABLE.write_yaml(path, USAGE)
+    TABLE.write_yaml(path)

@@ -1,0 +1,107 @@
+"""Conversions between the master core's records and ROS messages (message classes only, no rclpy)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
+from face_reid_master.records import STATE_LOST, CameraFrameRecord, NamedTrackRecord, PersonRecord
+
+
+def frame_from_msg(msg: Any) -> CameraFrameRecord:
+    """CameraFrame message -> core record (no validation: the core validates and counts)."""
+    people = []
+    for p in msg.people:
+        emb = np.asarray(p.embedding, dtype=np.float32) if p.face_found and len(p.embedding) else None
+        people.append(
+            PersonRecord(
+                np.array([p.position_world.x, p.position_world.y, p.position_world.z]),
+                float(p.position_std_m), float(p.height_m), emb, float(p.face_score), float(p.face_quality),
+            )
+        )
+    return CameraFrameRecord(msg.camera_id, stamp_to_seconds(msg.header.stamp), tuple(people), msg.header.frame_id)
+
+
+def frame_record_to_msg(frame: CameraFrameRecord, stamp_s: float) -> Any:
+    """A core record -> face_reid_msgs/CameraFrame stamped ``stamp_s`` (the inverse of :func:`frame_from_msg`;
+    replays recorded frames, e.g. ``face-reid-eval --live``)."""
+    from face_reid_msgs.msg import CameraFrame, PersonObservation
+
+    msg = CameraFrame()
+    set_stamp(msg.header.stamp, stamp_s)
+    msg.header.frame_id = frame.frame_id
+    msg.camera_id = frame.camera_id
+    for person in frame.people:
+        m = PersonObservation()
+        m.position_world.x, m.position_world.y, m.position_world.z = (float(v) for v in person.position_world)
+        m.position_std_m = float(person.position_std_m)
+        m.height_m = float(person.height_m)
+        if person.embedding is not None:
+            m.face_found = True
+            m.face_score = float(person.face_score)
+            m.face_quality = float(person.face_quality)
+            m.embedding = np.asarray(person.embedding, dtype=np.float32).tolist()
+        msg.people.append(m)
+    return msg
+
+
+def tracks_to_msg(tracks: list[NamedTrackRecord], stamp_s: float, frame_id: str) -> Any:
+    """Core tracks -> face_reid_msgs/NamedTrackArray."""
+    from face_reid_msgs.msg import NamedTrack, NamedTrackArray
+
+    out = NamedTrackArray()
+    out.header.frame_id = frame_id
+    set_stamp(out.header.stamp, max(0.0, stamp_s))
+    for tr in tracks:
+        m = NamedTrack()
+        m.track_id, m.face_id, m.name = int(tr.track_id), int(tr.face_id), tr.name
+        m.identity_confidence = float(tr.identity_confidence)
+        m.face_observations = int(tr.face_observations)
+        m.position.x, m.position.y = float(tr.position_xy[0]), float(tr.position_xy[1])
+        m.velocity.x, m.velocity.y = float(tr.velocity_xy[0]), float(tr.velocity_xy[1])
+        m.covariance = [float(v) for v in np.asarray(tr.covariance, dtype=np.float64).reshape(16)]
+        m.height_m = float(tr.height_m) if math.isfinite(tr.height_m) else 0.0
+        m.state = int(tr.state)
+        set_stamp(m.first_seen, max(0.0, tr.first_seen_s))
+        set_stamp(m.last_seen, max(0.0, tr.last_seen_s))
+        m.cameras = list(tr.cameras)
+        out.tracks.append(m)
+    return out
+
+
+def markers_for(tracks: list[NamedTrackRecord], stamp_msg: Any, frame_id: str) -> Any:
+    """RViz markers: a cylinder per person and a text label (name, face id or track id)."""
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    arr = MarkerArray()
+    clear = Marker()
+    clear.action = Marker.DELETEALL
+    arr.markers.append(clear)
+    for tr in tracks:
+        height = tr.height_m if math.isfinite(tr.height_m) and tr.height_m > 0 else 1.7
+        body = Marker()
+        body.header.frame_id, body.header.stamp = frame_id, stamp_msg
+        body.ns, body.id, body.type, body.action = "people", int(tr.track_id) * 2, Marker.CYLINDER, Marker.ADD
+        body.pose.position.x, body.pose.position.y = float(tr.position_xy[0]), float(tr.position_xy[1])
+        body.pose.position.z = height / 2
+        body.pose.orientation.w = 1.0
+        body.scale.x = body.scale.y = 0.4
+        body.scale.z = height
+        named, lost = bool(tr.name), tr.state == STATE_LOST
+        body.color.r, body.color.g, body.color.b = (0.1, 0.8, 0.2) if named else (0.2, 0.5, 0.9)
+        body.color.a = 0.3 if lost else 0.8
+        label = Marker()
+        label.header = body.header
+        label.ns, label.id, label.type, label.action = "labels", int(tr.track_id) * 2 + 1, Marker.TEXT_VIEW_FACING, 0
+        label.pose.position.x, label.pose.position.y = body.pose.position.x, body.pose.position.y
+        label.pose.position.z = height + 0.3
+        label.pose.orientation.w = 1.0
+        label.scale.z = 0.25
+        label.color.r = label.color.g = label.color.b = label.color.a = 1.0
+        who = tr.name or (f"face {tr.face_id}" if tr.face_id else f"track {tr.track_id}")
+        label.text = f"{who} ({tr.identity_confidence:.2f})" if tr.face_id else who
+        arr.markers.extend([body, label])
+    return arr
