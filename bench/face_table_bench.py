@@ -1,4 +1,4 @@
-"""Per-frame latency of the face identity layer (face_table.FaceIdentityManager), single thread.
+"""Per-frame latency of the face identity layer (bayes_table.BayesIdentityManager), single thread.
 
 One "frame" = every track reports one face embedding (add_observations) + one step(), i.e. the whole
 per-camera-frame update including eq. 4 distances, likelihoods, Sinkhorn and decisions.  Wall-clock
@@ -25,7 +25,9 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from face_reid_master.identity.face_table import FaceIdentityManager, LearnedFace, sinkhorn_with_slack  # noqa: E402
+from face_reid_master.identity.bayes_table import BayesIdentityManager  # noqa: E402
+from face_reid_master.identity.records import LearnedFace  # noqa: E402
+from face_reid_master.identity.sinkhorn import sinkhorn_with_slack  # noqa: E402
 
 DIM = 128
 CENTRE_SCALE = 0.8 / np.sqrt(2 * DIM)  # different-person distance ~0.8
@@ -35,7 +37,7 @@ TARGET_MS = {(5, 20): 1.0, (20, 200): 2.0, (50, 2000): 10.0}
 
 def _setup(n_tracks: int, n_faces: int, n_unassigned: int, feats_per_face: int, rng: np.random.Generator):
     centres = rng.normal(0.0, CENTRE_SCALE, (n_faces + n_tracks, DIM)).astype(np.float32)
-    mgr = FaceIdentityManager(max_features_per_face=feats_per_face)
+    mgr = BayesIdentityManager(max_features_per_face=feats_per_face)
     mgr.import_faces(
         LearnedFace(
             j + 1,
@@ -105,7 +107,7 @@ def sinkhorn_slow_case(n_rows: int, n_faces: int) -> dict:
     for i in range(1, n_rows + 1):
         k[i, i] = 0.999
         k[0, i] = 1e-3
-    mgr = FaceIdentityManager()
+    mgr = BayesIdentityManager()
     times = []
     for _ in range(5):
         t0 = time.perf_counter()

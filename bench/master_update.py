@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from face_reid_master.core import MasterConfig, MasterCore  # noqa: E402
-from face_reid_master.identity.face_table import LearnedFace  # noqa: E402
+from face_reid_master.identity.records import LearnedFace  # noqa: E402
 from face_reid_master.records import CameraFrameRecord, PersonRecord  # noqa: E402
 
 DIM = 128

@@ -23,12 +23,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.identity.face_table import (
-    IdentityEventKind,
-    IdentityManagerBase,
-    LearnedFace,
-    make_identity_manager,
-)
+from face_reid_master.identity.algorithm1 import IdentityManagerBase
+from face_reid_master.identity.methods import make_identity_manager
+from face_reid_master.identity.records import IdentityEventKind, LearnedFace
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.predefined_people import PredefinedPeople
 from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, NamedTrackRecord

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from face_reid_master.identity.face_table import FaceIdentityManager, LearnedFace
+from face_reid_master.identity.bayes_table import BayesIdentityManager
+from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.face_store import (
     FaceStore,
     FaceStoreError,
@@ -114,14 +115,14 @@ def test_identity_manager_export_import_through_the_store(db: Path) -> None:
     rng = np.random.default_rng(5)
     centre = np.zeros(DIM, np.float32)
     centre[0] = 0.7
-    m = FaceIdentityManager(min_observations=2)
+    m = BayesIdentityManager(min_observations=2)
     for t in range(2):
         m.add_observations(1, (centre + rng.normal(0, 0.02, (1, DIM))).astype(np.float32), t)
         m.step(t)
     m.set_face_name(1, "Eve")
     with FaceStore(db) as store:
         store.save_faces(m.export_faces())
-    fresh = FaceIdentityManager(min_observations=2)
+    fresh = BayesIdentityManager(min_observations=2)
     with FaceStore(db) as store:
         fresh.import_faces(store.load_faces())
     assert fresh.face_ids() == [1] and fresh.face_name(1) == "Eve"
@@ -368,7 +369,7 @@ _WRITER = """
 import sys
 import numpy as np
 from face_reid_master.storage.face_store import FaceStore
-from face_reid_master.identity.face_table import LearnedFace
+from face_reid_master.identity.records import LearnedFace
 
 store = FaceStore(sys.argv[1], synchronous=sys.argv[2])
 for i in range(1, 100_000):

@@ -21,6 +21,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy import special as _special
 
+from face_reid_camera.common.checks import check_real
+
 __all__ = [
     "LIKELIHOOD_FILE",
     "LikelihoodModel",
@@ -57,15 +59,9 @@ class SkewNormal:
     omega: float
 
     def __post_init__(self) -> None:
-        for name in ("alpha", "xi", "omega"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-                raise ValueError(f"SkewNormal.{name} must be a real number, got {value!r}")
-            if not math.isfinite(float(value)):
-                raise ValueError(f"SkewNormal.{name} must be finite, got {value!r}")
-            object.__setattr__(self, name, float(value))
-        if self.omega <= 0.0:
-            raise ValueError(f"SkewNormal.omega (scale) must be > 0, got {self.omega}")
+        for name in ("alpha", "xi"):
+            object.__setattr__(self, name, check_real(f"SkewNormal.{name}", getattr(self, name)))
+        object.__setattr__(self, "omega", check_real("SkewNormal.omega (scale)", self.omega, 0.0, low_open=True))
 
     def pdf(self, d: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """2/omega * phi(z) * Phi(alpha z), z = (d - xi)/omega, vectorised (no scipy.stats overhead)."""
@@ -134,19 +130,10 @@ class LikelihoodModel:
     def __post_init__(self) -> None:
         if not isinstance(self.positive, SkewNormal) or not isinstance(self.negative, SkewNormal):
             raise ValueError("LikelihoodModel.positive and .negative must be SkewNormal instances")
-        c = self.new_person_scale_c
-        if isinstance(c, bool) or not isinstance(c, (int, float, np.floating, np.integer)):
-            raise ValueError(f"new_person_scale_c must be a real number, got {c!r}")
-        if not math.isfinite(float(c)) or float(c) <= 0.0:
-            raise ValueError(f"new_person_scale_c must be finite and > 0, got {c!r}")
-        object.__setattr__(self, "new_person_scale_c", float(c))
+        c = check_real("new_person_scale_c", self.new_person_scale_c, 0.0, low_open=True)
+        object.__setattr__(self, "new_person_scale_c", c)
         for name in ("k_exponent_positive", "k_exponent_negative"):
-            e = getattr(self, name)
-            if isinstance(e, bool) or not isinstance(e, (int, float, np.floating, np.integer)):
-                raise ValueError(f"{name} must be a real number, got {e!r}")
-            if not 0.0 <= float(e) <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {e!r}")
-            object.__setattr__(self, name, float(e))
+            object.__setattr__(self, name, check_real(name, getattr(self, name), 0.0, 1.0))
         object.__setattr__(self, "metadata", dict(self.metadata))
         lo, cross, hi = self._find_decision_points()
         object.__setattr__(self, "_monotone_range", (lo, hi))
@@ -218,11 +205,13 @@ class LikelihoodModel:
         k = np.asarray(n_features, dtype=np.float64)
         if not np.all(np.isfinite(k)) or np.any(k < 1.0):
             raise ValueError("n_features must be >= 1")
-        return self._log_ratio_unchecked(arr, k)
+        return self.log_ratio_trusted(arr, k)
 
-    def _log_ratio_unchecked(
+    def log_ratio_trusted(
         self, d: npt.NDArray[np.floating[Any]], n_features: npt.NDArray[np.floating[Any]] | float = 1.0
     ) -> npt.NDArray[np.float64]:
+        """:meth:`log_likelihood_ratio` without input checks, for callers that validated (float arrays,
+        no NaN / -inf distances, ``n_features`` >= 1): the per-observation hot path of the Bayes table."""
         lo, hi = self._monotone_range
         arr = np.clip(d, lo, hi)
         lr = self.positive._logpdf_unchecked(arr) - self.negative._logpdf_unchecked(arr)

@@ -1,7 +1,7 @@
 """Persistent memory of the master: learned faces (biometric data) in one SQLite file, private to the user.
 
 One file (default :func:`default_db_path`) holds every learned face: its id, optional name, counters and
-bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.face_table`).  Privacy measures:
+bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.records`).  Privacy measures:
 
 * the file, its ``-wal``/``-shm`` companions and backups are mode 0600, a directory we create is 0700;
   an existing file with broader permissions is fixed and a warning logged;
@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from face_reid_master.identity.face_table import LearnedFace
+from face_reid_master.identity.records import LearnedFace
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -533,7 +533,7 @@ class FaceStore:
 
         ``keep``: face ids never pruned (the node passes faces carried by live tracks, whose stored
         ``last_seen_s`` may be stale).  Returns the deleted ids ([] when retention is None).  The node
-        must also :meth:`~face_reid_master.identity.face_table.IdentityManagerBase.forget_face` them.
+        must also :meth:`~face_reid_master.identity.algorithm1.IdentityManagerBase.forget_face` them.
         """
         if isinstance(now_s, bool) or not isinstance(now_s, (int, float, np.floating, np.integer)):
             raise ValueError(f"now_s must be a number of seconds, got {now_s!r}")

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA_DIR, FACES_DIR
 
 from face_reid_master.identity.predefined_people import (
     NameMatch,
@@ -16,9 +16,7 @@ from face_reid_master.identity.predefined_people import (
     face_to_person_distance,
 )
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-FACES_DIR = REPO_ROOT / "test" / "data" / "faces"
-YUNET_PATH = REPO_ROOT / "models" / "face_detection_yunet_2023mar.onnx"
+YUNET_PATH = DATA_DIR.parents[1] / "models" / "face_detection_yunet_2023mar.onnx"
 
 
 def _pts(*rows: tuple[float, float]) -> np.ndarray:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA_DIR, FACES_DIR
 from scipy import stats
 
 from face_reid_camera.common.resources import model_path
@@ -22,9 +23,7 @@ from face_reid_master.identity.likelihood import (
     save_likelihood_model,
 )
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-FACES_DIR = REPO_ROOT / "test" / "data" / "faces"
-YUNET_PATH = REPO_ROOT / "models" / "face_detection_yunet_2023mar.onnx"
+YUNET_PATH = DATA_DIR.parents[1] / "models" / "face_detection_yunet_2023mar.onnx"
 
 PARAMS = [
     (1.595, 0.365, 0.0945),

@@ -1,0 +1,252 @@
+"""Bayesian face classification of Koide et al. 2017 (III-E): posterior table + Sinkhorn + decision.
+
+Posterior table (paper Fig. 5, OpenPTrack ``FaceRecognizerBayes``)::
+
+                 col 0 "new person"   col j = learned face available for assignment (face_list)
+    row 0         (unused, 0)          p(x_0j): face j's person is not tracked (slack)
+    row i         p(x_i0)              p(x_ij): unassigned track i is face j
+
+Likelihood, per face observation y of track i with eq. 4 distances d_ik to every face k of face_list:
+under x_ij (j >= 1) d_ij is a positive pair and every other d_ik a negative one; under x_i0 all are
+negative; c (``new_person_scale_c``) scales the "new person" hypothesis::
+
+    p(y | x_ij) = N_p(d_ij) * prod_{k != j} N_n(d_ik)          p(y | x_i0) = c * prod_k N_n(d_ik)
+
+Rows are renormalised, so dividing row i by prod_k N_n(d_ik) changes nothing and leaves the ratio form
+implemented: column j *= N_p(d_ij) / N_n(d_ij), column 0 *= c.  That is the paper's eq. 5 multiplied over
+all learned faces (OpenPTrack applies c once per learned face, this once per observation: identical for
+the paper's c = 1), at O(M) instead of O(M^2) per observation.  Evidence is summed in log space and
+rescaled by the row maximum, so nothing under/overflows.  Then Sinkhorn normalisation
+(:mod:`~face_reid_master.identity.sinkhorn`), clamping to [clamp, 1 - clamp], and a decision when
+p(x_ij) > posterior_threshold and the track has >= min_observations compared with j.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from face_reid_camera.common.checks import check_int, check_real
+from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry
+from face_reid_master.identity.likelihood import LikelihoodModel
+from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
+
+__all__ = ["BayesIdentityManager"]
+
+FloatArray = npt.NDArray[np.float64]
+F32Array = npt.NDArray[np.float32]
+
+
+class BayesIdentityManager(IdentityManagerBase):
+    """Algorithm 1 with the paper's Bayesian face classification (posterior table + Sinkhorn).
+
+    Parameters (OpenPTrack's values in brackets): ``prior_probability`` of new table cells [0.1],
+    ``posterior_threshold`` to decide [0.95], ``min_observations`` compared with the decided column [3],
+    ``clamp_probability`` applied after normalisation [1e-3], ``sinkhorn_tolerance`` on row sums [1e-3]
+    and ``sinkhorn_max_iterations`` [10]; ``sinkhorn_solver`` "newton" (same fixed point in a few
+    iterations) or "sinkhorn" (the paper's alternations).  ``max_abs_log_likelihood_ratio`` (None = the
+    paper) optionally bounds the evidence of a single observation, against wrong crops / track swaps.
+    The remaining arguments are those of :class:`IdentityManagerBase`.
+    """
+
+    def __init__(
+        self,
+        likelihood: LikelihoodModel | None = None,
+        *,
+        prior_probability: float = 0.1,
+        posterior_threshold: float = 0.95,
+        min_observations: int = 3,
+        clamp_probability: float = 1e-3,
+        sinkhorn_tolerance: float = 1e-6,
+        sinkhorn_max_iterations: int = 100,
+        sinkhorn_solver: str = "newton",
+        max_abs_log_likelihood_ratio: float | None = None,
+        embedding_dim: int = 128,
+        max_features_per_face: int = 50,
+        exact_search_max_features: int = 20_000,
+        shortlist_faces: int = 32,
+        feature_gate_distance: float | None = None,
+    ) -> None:
+        super().__init__(
+            embedding_dim=embedding_dim,
+            max_features_per_face=max_features_per_face,
+            exact_search_max_features=exact_search_max_features,
+            shortlist_faces=shortlist_faces,
+            feature_gate_distance=feature_gate_distance,
+        )
+        if likelihood is None:
+            likelihood = LikelihoodModel.default()
+        if not isinstance(likelihood, LikelihoodModel):
+            raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
+        self.likelihood = likelihood
+        self.prior_probability = check_real(
+            "prior_probability", prior_probability, 0.0, 1.0, low_open=True, high_open=True
+        )
+        self.clamp_probability = check_real("clamp_probability", clamp_probability, 0.0, 0.5, high_open=True)
+        self.posterior_threshold = check_real(
+            "posterior_threshold", posterior_threshold, 0.5, 1.0 - self.clamp_probability,
+            low_open=True, high_open=True,
+        )
+        self.min_observations = check_int("min_observations", min_observations, 1)
+        self.sinkhorn_tolerance = check_real(
+            "sinkhorn_tolerance", sinkhorn_tolerance, 0.0, 1.0, low_open=True, high_open=True
+        )
+        self.sinkhorn_max_iterations = check_int("sinkhorn_max_iterations", sinkhorn_max_iterations, 1)
+        if sinkhorn_solver not in ("newton", "sinkhorn"):
+            raise ValueError(f"sinkhorn_solver must be 'newton' or 'sinkhorn', got {sinkhorn_solver!r}")
+        self.sinkhorn_solver = sinkhorn_solver
+        if max_abs_log_likelihood_ratio is not None:
+            max_abs_log_likelihood_ratio = check_real(
+                "max_abs_log_likelihood_ratio", max_abs_log_likelihood_ratio, 0.0, math.inf,
+                low_open=True, high_open=True,
+            )
+        self.max_abs_log_likelihood_ratio = max_abs_log_likelihood_ratio
+        self._log_c = math.log(self.likelihood.new_person_scale_c)
+        self._table = np.zeros((1, 1))  # row 0 / column 0 slack; P[0, 0] unused (0)
+        self._counts = np.zeros((1, 1), dtype=np.int64)
+        self._rows: list[int] = []  # track ids of rows 1..N
+        self._row_of: dict[int, int] = {}
+        self._dirty = False
+        self._converged = True
+
+    # ------------------------------------------------------------------------------ queries
+    def posterior_table(self) -> tuple[FloatArray, list[int], list[int]]:
+        """(copy of the table, track ids of rows 1..N, face ids of columns 1..M)."""
+        return self._table.copy(), list(self._rows), list(self._available)
+
+    @property
+    def is_normalised(self) -> bool:
+        """True when the stored table is the (clamped) result of a converged Sinkhorn normalisation."""
+        return not self._dirty and self._converged
+
+    def observation_counts(self) -> npt.NDArray[np.int64]:
+        """Copy of the per-cell observation counts (same layout as the table)."""
+        return self._counts.copy()
+
+    def posterior_of(self, track_id: int) -> dict[int, float]:
+        row = self._row_of.get(track_id)
+        if row is None:
+            return {}
+        p = self._table[row]
+        out = {0: float(p[0])}
+        out.update({fid: float(v) for fid, v in zip(self._available, p[1:], strict=True)})
+        return out
+
+    def _current_confidence(self, track: TrackEntry) -> float:
+        row = self._row_of.get(track.track_id)
+        return 0.0 if row is None else float(self._table[row].max())
+
+    # ------------------------------------------------------------------------------ table structure
+    def _reindex_rows(self) -> None:
+        self._row_of = {tid: i + 1 for i, tid in enumerate(self._rows)}
+
+    def _add_row(self, track_id: int) -> None:
+        m1 = self._table.shape[1]
+        self._table = np.vstack([self._table, np.full((1, m1), self.prior_probability)])
+        self._counts = np.vstack([self._counts, np.zeros((1, m1), dtype=np.int64)])
+        self._rows.append(track_id)
+        self._row_of[track_id] = len(self._rows)
+        self._dirty = True
+
+    def _remove_rows(self, track_ids: list[int]) -> None:
+        idx = [self._row_of[t] for t in track_ids if t in self._row_of]
+        if not idx:
+            return
+        self._table = np.delete(self._table, idx, axis=0)
+        self._counts = np.delete(self._counts, idx, axis=0)
+        drop = set(track_ids)
+        self._rows = [t for t in self._rows if t not in drop]
+        self._reindex_rows()
+        self._dirty = True
+
+    def _on_face_available(self, face_id: int) -> None:
+        n1 = self._table.shape[0]
+        self._table = np.hstack([self._table, np.full((n1, 1), self.prior_probability)])
+        self._counts = np.hstack([self._counts, np.zeros((n1, 1), dtype=np.int64)])
+        self._dirty = True
+
+    def _on_faces_unavailable(self, column_indices: list[int]) -> None:
+        cols = [c + 1 for c in column_indices]
+        self._table = np.delete(self._table, cols, axis=1)
+        self._counts = np.delete(self._counts, cols, axis=1)
+        self._dirty = True
+
+    def _on_track_identified(self, track_id: int) -> None:
+        self._remove_rows([track_id])
+
+    def _on_track_forgotten(self, track_id: int) -> None:
+        self._remove_rows([track_id])
+
+    # ------------------------------------------------------------------------------ inference
+    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array]) -> None:
+        for tid in track_ids:
+            if tid not in self._row_of:
+                self._add_row(tid)
+        obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
+        sizes = np.array([o.shape[0] for o in observations])
+        rows = np.array([self._row_of[t] for t in track_ids])
+        m = len(self._available)
+        log_ev = np.empty((len(track_ids), m + 1))
+        log_ev[:, 0] = sizes * self._log_c  # column 0: c per observation (ratio form, see module doc)
+        if m:
+            d = self._available_distances(obs)
+            n_feats = self._bank.count[self._available_slots].astype(np.float64)[None, :]  # K of eq. 4
+            finite = np.isfinite(d)
+            if finite.all():
+                lr = self.likelihood.log_ratio_trusted(d, n_feats)
+            else:  # faces outside the search shortlist: the weakest evidence (distance d_hi or more)
+                far = self.likelihood.log_ratio_trusted(np.full(m, np.inf), n_feats[0])
+                lr = np.repeat(far[None, :], d.shape[0], axis=0)
+                lr[finite] = self.likelihood.log_ratio_trusted(
+                    d[finite], np.broadcast_to(n_feats, d.shape)[finite]
+                )
+            if self.max_abs_log_likelihood_ratio is not None:
+                np.clip(lr, -self.max_abs_log_likelihood_ratio, self.max_abs_log_likelihood_ratio, out=lr)
+            if len(sizes) == obs.shape[0]:
+                log_ev[:, 1:] = lr
+            else:
+                starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+                log_ev[:, 1:] = np.add.reduceat(lr, starts, axis=0)
+        log_ev -= log_ev.max(axis=1, keepdims=True)  # per-row rescale: exact after row normalisation
+        self._table[rows] *= np.exp(log_ev)
+        self._counts[rows] += sizes[:, None]
+        self._dirty = True
+
+    def _normalise(self) -> None:
+        if len(self._rows) == 0:
+            self._dirty = False
+            self._converged = True
+            return
+        res = sinkhorn_with_slack(
+            self._table, self.sinkhorn_tolerance, self.sinkhorn_max_iterations, self.sinkhorn_solver
+        )
+        self.stats.sinkhorn_runs += 1
+        self.stats.last_sinkhorn_iterations = res.iterations
+        self._converged = res.converged
+        if not res.converged:
+            self.stats.sinkhorn_not_converged += 1
+        table = np.clip(res.table, self.clamp_probability, 1.0 - self.clamp_probability)
+        table[0, 0] = 0.0
+        self._table = table
+        self._dirty = False
+
+    def _decide(self) -> list[tuple[int, int, float]]:
+        if self._dirty:
+            self._normalise()
+        if not self._rows:
+            return []
+        body = self._table[1:]
+        best = np.argmax(body, axis=1)
+        idx = np.arange(len(self._rows))
+        p = body[idx, best]
+        n_obs = self._counts[1:][idx, best]
+        ok = np.flatnonzero((p > self.posterior_threshold) & (n_obs >= self.min_observations))
+        decisions = []
+        for r in ok:
+            col = int(best[r])
+            face = 0 if col == 0 else self._available[col - 1]
+            decisions.append((self._rows[r], face, float(p[r])))
+        return decisions
+

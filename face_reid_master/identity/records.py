@@ -1,0 +1,86 @@
+"""Records exchanged with the face identity layer: identity events, learned faces, counters."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from face_reid_camera.common.checks import check_int
+
+__all__ = ["IdentityEvent", "IdentityEventKind", "IdentityStats", "LearnedFace"]
+
+F32Array = npt.NDArray[np.float32]
+
+
+class IdentityEventKind(str, enum.Enum):
+    """What happened to a track's face identity."""
+
+    ASSIGNED_KNOWN = "assigned_known"  # the track was recognised as a learned face (re-identification)
+    NEW_FACE = "new_face"  # the track is an unknown person: a new face id was created for it
+    RELEASED = "released"  # the track died: its face goes back to face_list (assignable again)
+
+
+@dataclass(frozen=True)
+class IdentityEvent:
+    """One identity change, returned by :meth:`~face_reid_master.identity.algorithm1.IdentityManagerBase.step`."""
+
+    kind: IdentityEventKind
+    track_id: int
+    face_id: int
+    stamp_s: float
+    confidence: float  # posterior (Bayes) or vote fraction (threshold) when the decision was made
+
+
+@dataclass
+class LearnedFace:
+    """A learned face for export/import (persistent memory): id, bounded feature set, optional name."""
+
+    face_id: int
+    features: F32Array  # (k, embedding_dim) float32, k >= 1
+    name: str | None = None
+    created_s: float = 0.0
+    last_seen_s: float = 0.0
+    n_observations: int = 0
+
+    def __post_init__(self) -> None:
+        self.face_id = check_int("LearnedFace.face_id", self.face_id, 1)
+        feats = np.asarray(self.features)
+        if feats.ndim != 2 or feats.shape[0] < 1 or feats.shape[1] < 1:
+            raise ValueError(f"LearnedFace.features must have shape (k >= 1, dim), got {feats.shape}")
+        if not np.issubdtype(feats.dtype, np.floating):
+            raise ValueError(f"LearnedFace.features must be floating point, got {feats.dtype}")
+        if not np.all(np.isfinite(feats)):
+            raise ValueError(f"LearnedFace {self.face_id}: features contain NaN or Inf")
+        self.features = np.ascontiguousarray(feats, dtype=np.float32)
+        if self.name is not None and not isinstance(self.name, str):
+            raise ValueError(f"LearnedFace.name must be a str or None, got {self.name!r}")
+        for attr in ("created_s", "last_seen_s"):
+            value = float(getattr(self, attr))
+            if not math.isfinite(value):
+                raise ValueError(f"LearnedFace.{attr} must be finite")
+            setattr(self, attr, value)
+        if int(self.n_observations) < 0:
+            raise ValueError("LearnedFace.n_observations must be >= 0")
+        self.n_observations = int(self.n_observations)
+
+
+@dataclass
+class IdentityStats:
+    """Counters for diagnostics (the node publishes/logs them)."""
+
+    steps: int = 0
+    observations_received: int = 0
+    observations_ignored_dead_track: int = 0
+    assigned_known: int = 0
+    new_faces: int = 0
+    released: int = 0
+    sinkhorn_runs: int = 0
+    sinkhorn_not_converged: int = 0
+    last_sinkhorn_iterations: int = 0
+    shortlist_searches: int = 0
+    faces_forgotten: int = 0
+    observations_not_learned_inconsistent: int = 0

@@ -1,0 +1,108 @@
+"""The threshold baseline of Koide et al. 2017's evaluation: nearest learned face by eq. 4, majority vote."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from face_reid_camera.common.checks import check_int, check_real
+from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry, Vote
+
+__all__ = ["ThresholdIdentityManager"]
+
+F32Array = npt.NDArray[np.float32]
+
+
+class ThresholdIdentityManager(IdentityManagerBase):
+    """The paper's baseline: per observation, nearest learned face if its eq. 4 distance is below
+    ``distance_threshold`` else "new"; decide by majority after ``n_votes`` observations.
+
+    Ties: a face beats "new" only with strictly more votes; among faces the smaller mean distance wins.
+    """
+
+    def __init__(
+        self,
+        *,
+        distance_threshold: float = 0.6,
+        n_votes: int = 5,
+        embedding_dim: int = 128,
+        max_features_per_face: int = 50,
+        exact_search_max_features: int = 20_000,
+        shortlist_faces: int = 32,
+        feature_gate_distance: float | None = None,
+    ) -> None:
+        super().__init__(
+            embedding_dim=embedding_dim,
+            max_features_per_face=max_features_per_face,
+            exact_search_max_features=exact_search_max_features,
+            shortlist_faces=shortlist_faces,
+            feature_gate_distance=feature_gate_distance,
+        )
+        self.distance_threshold = check_real(
+            "distance_threshold", distance_threshold, 0.0, math.inf, low_open=True, high_open=True
+        )
+        self.n_votes = check_int("n_votes", n_votes, 1)
+
+    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array]) -> None:
+        obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
+        d = self._available_distances(obs)
+        if d.shape[1]:
+            j = np.argmin(d, axis=1)
+            dmin = d[np.arange(d.shape[0]), j]
+        else:
+            j = np.zeros(obs.shape[0], dtype=np.intp)
+            dmin = np.full(obs.shape[0], np.inf)
+        pos = 0
+        for tid, o in zip(track_ids, observations, strict=True):
+            votes = self._tracks[tid].votes
+            for r in range(pos, pos + o.shape[0]):
+                if dmin[r] < self.distance_threshold:
+                    votes.append(Vote(self._available[int(j[r])], float(dmin[r])))
+                else:
+                    votes.append(Vote(0, float(dmin[r])))
+            pos += o.shape[0]
+
+    def _tally(self, track: TrackEntry) -> tuple[int, float]:
+        """(winner: face id or 0 = new, vote fraction) over votes for faces still in face_list."""
+        available = set(self._available)
+        counts: dict[int, list[float]] = {}
+        for vote in track.votes:
+            if vote.face_id == 0 or vote.face_id in available:
+                counts.setdefault(vote.face_id, []).append(vote.distance)
+        if not counts:
+            return 0, 0.0
+        total = sum(len(v) for v in counts.values())
+        faces = [(-len(v), float(np.mean(v)), fid) for fid, v in counts.items() if fid != 0]
+        n_new = len(counts.get(0, []))
+        if faces:
+            neg_n, _, fid = min(faces)
+            if -neg_n > n_new:
+                return fid, -neg_n / total
+        return 0, n_new / total
+
+    def _current_confidence(self, track: TrackEntry) -> float:
+        _, fraction = self._tally(track)
+        return fraction
+
+    def _decide(self) -> list[tuple[int, int, float]]:
+        decisions = []
+        taken: set[int] = set()
+        for track in self._tracks.values():
+            if track.face_id is not None or len(track.votes) < self.n_votes:
+                continue
+            track.votes = [v for v in track.votes if v.face_id not in taken]
+            winner, frac = self._tally(track)
+            if winner != 0:
+                taken.add(winner)
+            decisions.append((track.track_id, winner, frac))
+        return decisions
+
+    def _make_unavailable(self, face_ids: list[int]) -> None:
+        super()._make_unavailable(face_ids)
+        gone = set(face_ids)
+        for track in self._tracks.values():
+            if track.face_id is None and track.votes:
+                track.votes = [v for v in track.votes if v.face_id not in gone]
+
