@@ -15,6 +15,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 DATA_DIR = Path(__file__).parent / "data"
 FACES_DIR = DATA_DIR / "faces"
 RGBD_DIR = DATA_DIR / "rgbd"
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 _domain_counter = [0]
 
@@ -27,3 +28,34 @@ def ros_domain_id(monkeypatch: pytest.MonkeyPatch) -> int:
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return domain
+
+
+@pytest.fixture
+def ros_context(ros_domain_id: int):
+    """An rclpy context of this test only; ``ros_context(args)`` initialises it with command-line args."""
+    import rclpy
+    from rclpy.context import Context
+
+    made: list[Context] = []
+
+    def make(args: list[str] | None = None) -> Context:
+        ctx = Context()
+        rclpy.init(args=["test", *(args or [])], context=ctx)
+        made.append(ctx)
+        return ctx
+
+    yield make
+    for ctx in made:
+        rclpy.try_shutdown(context=ctx)
+
+
+def spin_until(executor, condition, timeout_s: float = 30.0) -> bool:
+    """Spin ``executor`` until ``condition()`` is true (a barrier, not a sleep); False on timeout."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        executor.spin_once(timeout_sec=0.05)
+    return True

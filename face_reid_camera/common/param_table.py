@@ -140,8 +140,7 @@ class ParamSpec:
         if kind in ("int", "float", "float_list") and (self.low is not None or self.high is not None):
             for v in value if isinstance(value, list) else [value]:
                 if not self._in_range(float(v)):
-                    unit = f" ({self.description})" if len(self.description) < 90 else ""
-                    raise ParamError(f"parameter {self.name!r} must be in {self.range_text()}, got {v!r}{unit}")
+                    raise ParamError(f"parameter {self.name!r} must be in {self.range_text()}, got {v!r}")
         return value
 
     def _in_range(self, v: float) -> bool:

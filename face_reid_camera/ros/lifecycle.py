@@ -97,7 +97,8 @@ class ManagedNode(LifecycleNode):
     # ------------------------------------------------------------------ parameters
     def _warn_unknown_overrides(self) -> None:
         known = set(self._parameters)
-        for name in sorted(set(getattr(self, "_parameter_overrides", {})) - known):
+        self.unknown_parameters = sorted(set(getattr(self, "_parameter_overrides", {})) - known)
+        for name in self.unknown_parameters:
             self.get_logger().warning(
                 f"parameter {name!r} given to {self.get_fully_qualified_name()} is not a parameter of this node: "
                 f"ignored{self.table.suggest(name)}"

@@ -8,12 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA_DIR
 
 from face_reid_camera.faces.photos import PhotoEmbedder
 from face_reid_master.identity.predefined_people import PredefinedPeople
 from face_reid_master.storage.gallery import GalleryResult, load_gallery, save_gallery_npz, validate_person_name
 
-DATA_DIR = Path(__file__).parent / "data"
+DATA_DIR = DATA_DIR
 FACES_DIR = DATA_DIR / "faces"
 DESK_FRAME = sorted((DATA_DIR / "rgbd" / "pcl_desk").glob("*_rgb.png"))[0]
 # folder name -> fixture identity; two gallery photos each, the other photos are "seen by the cameras"

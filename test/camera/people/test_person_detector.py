@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import RGBD_DIR
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.faces.head_roi import head_roi_px
@@ -25,7 +26,7 @@ from face_reid_camera.people.detector import (
 from face_reid_camera.people.ground_plane import GroundPlane, estimate_ground_plane, fit_ground_plane
 from face_reid_camera.tools.pcd_io import read_pcd
 
-DATA = Path(__file__).parent / "data" / "rgbd"
+DATA = RGBD_DIR
 DESK_FRAMES = sorted((DATA / "pcl_desk").glob("*_depth_mm.png"))
 KINECT = CameraIntrinsics.kinect_default()
 # A camera on a wall bracket: 2.5 m high, pitched 0.5 rad (29 deg) down, looking along world +x.

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import RGBD_DIR
 
 from face_reid_camera.camera_model import CameraIntrinsics
 from face_reid_camera.tools.pcd_io import (
@@ -18,7 +19,7 @@ from face_reid_camera.tools.pcd_io import (
     write_pcd,
 )
 
-PERSON_PCD = Path(__file__).parent / "data" / "rgbd" / "person.pcd"
+PERSON_PCD = RGBD_DIR / "person.pcd"
 
 
 def header(fields: str, size: str, type_: str, count: str, width: int, height: int, data: str) -> bytes:

@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import REPO_ROOT
 
 from face_reid_camera.common.errors import ModelChecksumError, ModelFormatError
 from face_reid_camera.faces.alignment import align_face
@@ -28,7 +29,7 @@ from face_reid_camera.tools.dlib_to_onnx import (
     read_dat_bytes,
 )
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = REPO_ROOT
 COMMITTED_ONNX = REPO_ROOT / "models" / EMBEDDER_MODEL_FILENAME
 COMMITTED_SHA256 = COMMITTED_ONNX.with_name(COMMITTED_ONNX.name + ".sha256")
 YUNET_PATH = REPO_ROOT / "models" / "face_detection_yunet_2023mar.onnx"

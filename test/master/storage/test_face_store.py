@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REPO_ROOT
 
 from face_reid_master.identity.bayes_table import BayesIdentityManager
 from face_reid_master.identity.records import LearnedFace
@@ -28,7 +29,7 @@ from face_reid_master.storage.face_store import (
 )
 from face_reid_master.tools.faces_cli import main as cli_main
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = REPO_ROOT
 DIM = 128
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import FACES_DIR
 from ros_procs import procs
 
 pytest.importorskip("rclpy")
@@ -20,7 +21,7 @@ pytest.importorskip("face_reid_msgs.msg")
 
 pytestmark = pytest.mark.ros
 
-FACES = Path(__file__).parent / "data" / "faces"
+FACES = FACES_DIR
 
 
 def _scene() -> dict:

@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA_DIR
 
 from face_reid_camera.faces.photos import (
     FaceFolderResult,
@@ -20,7 +21,7 @@ from face_reid_camera.faces.photos import (
     read_photo,
 )
 
-DATA_DIR = Path(__file__).parent / "data"
+DATA_DIR = DATA_DIR
 FACES_DIR = DATA_DIR / "faces"
 DESK_FRAME = sorted((DATA_DIR / "rgbd" / "pcl_desk").glob("*_rgb.png"))[0]
 IDS = ("lfw_Tony_Blair", "lfw_Colin_Powell", "deepface_id02")

@@ -5,10 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import REPO_ROOT
 
 from face_reid_camera.ros import params
 
-CONFIG = Path(__file__).resolve().parents[1] / "config" / "camera.yaml"
+CONFIG = REPO_ROOT / "config" / "camera.yaml"
 
 
 def test_config_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
@@ -19,9 +20,9 @@ def test_config_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
 
 
 def test_every_parameter_is_described_with_care() -> None:
-    names = [spec.name for spec in params.CAMERA_PARAMS]
+    names = params.TABLE.names()
     assert len(names) == len(set(names))
-    for spec in params.CAMERA_PARAMS:
+    for spec in params.TABLE.specs:
         assert len(spec.description) > 20, spec.name
         assert not spec.description.startswith("Person detector:"), f"{spec.name} has no real description"
 
@@ -38,7 +39,7 @@ def test_defaults_build_a_valid_pipeline_config() -> None:
 def test_overrides_nested_and_flat(tmp_path: Path) -> None:
     path = tmp_path / "p.yaml"
     path.write_text(
-        "face_reid_camera:\n  ros__parameters:\n    camera_id: cam7\n    head_roi_size_m: 1\n"
+        "/**:\n  ros__parameters:\n    camera_id: cam7\n    head_roi_size_m: 1\n"
         "    person:\n      voxel_size_m: 0.05\n"
     )
     values = params.load_params_yaml(path)
@@ -52,6 +53,8 @@ def test_overrides_nested_and_flat(tmp_path: Path) -> None:
     ("    detect_faces: 3\n", "detect_faces"),
     ("    camera_pose_xyz_m: [1.0, 2.0]\n", "camera_pose_xyz_m"),
     ("    head_roi_size_m: big\n", "head_roi_size_m"),
+    ("    head_roi_size_m: 9.0\n", r"must be in \[0.05, 2\], got 9.0"),
+    ("    person:\n      voxel_sise_m: 0.05\n", "did you mean 'person.voxel_size_m'"),
 ])
 def test_bad_values_are_named(tmp_path: Path, body: str, match: str) -> None:
     path = tmp_path / "p.yaml"

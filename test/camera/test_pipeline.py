@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA_DIR
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.faces.detector import YuNetDetector
@@ -21,7 +21,7 @@ from face_reid_camera.pipeline import (
 )
 from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene
 
-DATA = Path(__file__).parent / "data"
+DATA = DATA_DIR
 INTR = CameraIntrinsics.kinect_default()
 POSE = CameraPose.from_xyz_rpy(0.0, 0.0, 2.2, 0.0, 0.3, 0.0)
 IDS = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez"]

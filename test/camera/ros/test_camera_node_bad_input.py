@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import FACES_DIR
 from ros_procs import procs
 
 pytest.importorskip("rclpy")
@@ -18,7 +19,7 @@ pytest.importorskip("face_reid_msgs.msg")
 
 pytestmark = pytest.mark.ros
 
-FACES = Path(__file__).parent / "data" / "faces"
+FACES = FACES_DIR
 SCENE = {
     "camera_pose": [0.0, 0.0, 2.2, 0.0, 0.3, 0.0],
     "people": [
@@ -90,5 +91,5 @@ def test_help_lists_every_parameter() -> None:
         timeout=60, env=procs.ros_env(0),
     )
     assert result.returncode == 0
-    for spec in params.CAMERA_PARAMS:
+    for spec in params.TABLE.specs:
         assert spec.name in result.stdout

@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import FACES_DIR
 from ros_procs import procs
 
 pytest.importorskip("rclpy")
@@ -24,7 +25,7 @@ pytest.importorskip("face_reid_msgs.srv")
 
 pytestmark = pytest.mark.ros
 
-FACES = Path(__file__).parent / "data" / "faces"
+FACES = FACES_DIR
 IDS = {"tony": "lfw_Tony_Blair", "colin": "lfw_Colin_Powell"}
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA_DIR, REPO_ROOT
 
 from face_reid_camera.common.resources import model_path
 from face_reid_camera.faces.photos import PhotoEmbedder
@@ -28,7 +29,7 @@ from face_reid_master.tools.fit_likelihood import (
     sample_min_of_k_distances,
 )
 
-DATA_DIR = Path(__file__).parent / "data"
+DATA_DIR = DATA_DIR
 FACES_DIR = DATA_DIR / "faces"
 DESK_FRAME = sorted((DATA_DIR / "rgbd" / "pcl_desk").glob("*_rgb.png"))[0]
 SUBSET = (  # 6 identities, 54 photos: 4 x 10 lfw, 8 deepface, 6 facerec
@@ -225,7 +226,7 @@ def test_unusable_folders_exit_2_with_a_message(
     assert exc.value.code == 2
 
 
-SHARED_FACES = Path(os.environ.get("FACE_REID_SHARED_FACES", Path(__file__).parents[2] / "shared" / "data" / "faces"))
+SHARED_FACES = Path(os.environ.get("FACE_REID_SHARED_FACES", REPO_ROOT.parent / "shared" / "data" / "faces"))
 
 
 @pytest.mark.skipif(not os.environ.get("FACE_REID_REGENERATE_LIKELIHOOD") or not SHARED_FACES.is_dir(),

@@ -7,10 +7,11 @@ import shutil
 from pathlib import Path
 
 import pytest
+from conftest import RGBD_DIR
 
 from face_reid_camera.tools.replay import main
 
-RGBD = Path(__file__).parent / "data" / "rgbd"
+RGBD = RGBD_DIR
 
 
 def _lines(out: str) -> list[dict]:

@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import REPO_ROOT
 
 from face_reid_camera.common.errors import ModelLoadError
 from face_reid_camera.faces.alignment import ALIGN_TEMPLATE_150, align_face, align_faces, estimate_similarity
@@ -22,7 +23,7 @@ from face_reid_camera.faces.embedder import (
     models_dir,
 )
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = REPO_ROOT
 FACES_DIR = REPO_ROOT / "test" / "data" / "faces"
 YUNET_PATH = REPO_ROOT / "models" / "face_detection_yunet_2023mar.onnx"
 SAME_PERSON_L2 = 0.6

@@ -9,11 +9,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import REPO_ROOT
 
 from face_reid_camera.common.errors import ModelLoadError
 from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = REPO_ROOT
 MODELS_DIR = REPO / "models"
 FIXED_MODEL = MODELS_DIR / "face_detection_yunet_2023mar.onnx"
 DYNAMIC_MODEL = MODELS_DIR / "face_detection_yunet_2023mar_dynamic.onnx"

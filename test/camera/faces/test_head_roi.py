@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import RGBD_DIR
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.faces.head_roi import head_roi_px
@@ -13,7 +12,7 @@ from face_reid_camera.people.detector import PersonDetector
 from face_reid_camera.tools.pcd_io import read_pcd
 
 KINECT = CameraIntrinsics.kinect_default()
-DATA = Path(__file__).parent / "data" / "rgbd"
+DATA = RGBD_DIR
 
 
 def test_centred_head_gives_a_centred_square_of_metric_size() -> None:

@@ -1,0 +1,198 @@
+"""The camera node in-process: lifecycle transitions, /diagnostics, namespaced params files, parameter errors.
+
+Real rclpy (one context per test, loopback-only discovery), real ONNX models; the node's behaviour on real
+frames over DDS is in test_camera_node_dds.py.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import spin_until
+
+pytest.importorskip("rclpy")
+pytest.importorskip("face_reid_msgs.msg")
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import TransitionCallbackReturn
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+
+from face_reid_camera.ros import params as camera_params
+from face_reid_camera.ros.image_codec import encode_image
+from face_reid_camera.ros.node import CameraNode
+
+REPO = Path(__file__).resolve().parents[3]
+OK = TransitionCallbackReturn.SUCCESS
+
+
+def _sub_topics(node: Node) -> set[str]:
+    return {s.topic_name for s in node.subscriptions}
+
+
+def test_lifecycle_subscribes_only_while_active(ros_context) -> None:
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_lc"])
+    node = CameraNode(context=ctx)
+    try:
+        image_topics = {"/color/image_raw", "/depth_registered/image_raw", "/color/camera_info"}
+        assert _sub_topics(node) == set() and node.pipeline is None
+        assert node.trigger_configure() == OK
+        assert node.pipeline is not None and node.pipeline.face_detector is not None  # models loaded on configure
+        assert _sub_topics(node) == set() and node.publisher is None
+        assert node.trigger_activate() == OK
+        assert _sub_topics(node) == image_topics
+        assert node.publisher is not None and node.publisher.topic_name == "/face_reid/frames"
+        assert node.trigger_deactivate() == OK
+        assert _sub_topics(node) == set() and node.publisher is None
+        assert node.trigger_activate() == OK and _sub_topics(node) == image_topics  # again
+        assert node.trigger_deactivate() == OK
+        assert node.trigger_cleanup() == OK
+        assert node.pipeline is None
+        assert node.trigger_shutdown() == OK
+    finally:
+        node.destroy_node()
+
+
+def test_failed_configure_stays_unconfigured_and_says_why(ros_context, tmp_path: Path) -> None:
+    missing = tmp_path / "nope.onnx"
+    ctx = ros_context(["--ros-args", "-p", f"detector_model_path:={missing}"])
+    node = CameraNode(context=ctx)
+    try:
+        assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
+        assert str(missing) in node.failure and node.pipeline is None
+        assert node._state_machine.current_state[1] == "unconfigured"
+        assert node.trigger_activate() != OK  # cannot activate an unconfigured node
+    finally:
+        node.destroy_node()
+
+
+def _frame(stamp, node: Node):
+    color = np.full((480, 640, 3), 90, np.uint8)
+    depth = np.zeros((480, 640), np.uint16)
+    depth[240:] = 2500  # a floor-less wall of depth: no people
+    msgs = []
+    for img, enc in ((color, "bgr8"), (depth, "16UC1")):
+        m = Image()
+        m.header.stamp = stamp
+        m.height, m.width, m.step, data = encode_image(img, enc)
+        m.encoding, m.data = enc, data
+        msgs.append(m)
+    info = CameraInfo()
+    info.header.stamp = stamp
+    info.width, info.height = 640, 480
+    info.k = [525.0, 0.0, 319.5, 0.0, 525.0, 239.5, 0.0, 0.0, 1.0]
+    return msgs[0], msgs[1], info
+
+
+def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_diag", "-p", "detect_faces:=false"])
+    node = CameraNode(context=ctx)
+    probe = Node("probe", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    executor.add_node(probe)
+    got: list[DiagnosticArray] = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        color, depth, info = _frame(node.get_clock().now().to_msg(), node)
+        bad = Image()
+        bad.encoding, bad.height, bad.width, bad.step = "yuv422", 2, 2, 4  # unsupported: rejected and counted
+        node._on_color(bad)
+        node._on_info(info)
+        node._on_color(color)
+        node._on_depth(depth)
+        assert spin_until(executor, lambda: node.health is not None and node.health.frames_processed >= 1)
+        n_before = len(got)
+        assert spin_until(executor, lambda: len(got) > n_before and any(
+            kv.key == "frames_processed" and kv.value != "0" for kv in got[-1].status[0].values))
+        status = got[-1].status[0]
+        values = {kv.key: kv.value for kv in status.values}
+        assert status.name.endswith("camera cam_diag") and status.hardware_id == "cam_diag"
+        for key in ("frames_in", "frames_processed", "frames_dropped", "processing_time_p50_ms",
+                    "processing_time_p95_ms", "people_per_frame", "faces_per_frame", "publish_rate_hz",
+                    "rejected_bad_color", "rejected_bad_depth", "rejected_no_camera_info", "rejected_stale",
+                    "rejected_size_mismatch", "floor_found"):
+            assert key in values, key
+        assert values["frames_in"] == "1" and values["frames_processed"] == "1"
+        assert values["rejected_bad_color"] == "1"
+        assert float(values["processing_time_p95_ms"]) >= float(values["processing_time_p50_ms"]) > 0
+        assert float(values["people_per_frame"]) == 0.0
+        assert (status.level == b"\x01") == (values["floor_found"] == "False")  # floor lost: WARN
+        assert ("floor lost" in status.message) == (values["floor_found"] == "False")
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def test_diagnostics_warn_when_no_input(ros_context) -> None:
+    ctx = ros_context(["--ros-args", "-p", "detect_faces:=false", "-p", "no_input_warning_s:=0.01"])
+    node = CameraNode(context=ctx)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        report = node.diagnostics(node.now_s() + 1.0)
+        assert report.level == 1 and report.message.startswith("no input for")
+    finally:
+        node.destroy_node()
+
+
+def test_namespaced_camera_takes_its_id_and_pose_from_a_params_file(ros_context, tmp_path: Path) -> None:
+    params = tmp_path / "my_camera.yaml"
+    params.write_text(
+        "/**:\n  ros__parameters:\n    camera_id: kitchen\n    camera_pose_xyz_m: [1.5, -2.0, 2.4]\n"
+        "    camera_pose_rpy_rad: [0.0, 0.5, 1.57]\n    galery_path: x\n    person:\n      voxel_sise_m: 0.05\n"
+    )
+    ctx = ros_context(["--ros-args", "-r", "__ns:=/cam_kitchen", "--params-file", str(params),
+                       "-p", "detect_faces:=false"])
+    node = CameraNode(context=ctx)
+    try:
+        assert node.get_fully_qualified_name() == "/cam_kitchen/face_reid_camera"
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        assert node.pipeline is not None and node.pipeline.config.camera_id == "kitchen"
+        np.testing.assert_allclose(node.pipeline.camera_pose.translation, [1.5, -2.0, 2.4])
+        assert node.publisher.topic_name == "/cam_kitchen/face_reid/frames"
+        # misspelt parameters are named, with the closest real one
+        assert node.unknown_parameters == ["galery_path", "person.voxel_sise_m"]
+        assert "did you mean 'person.voxel_size_m'" in node.table.suggest("person.voxel_sise_m")
+    finally:
+        node.destroy_node()
+
+
+def test_shipped_yaml_applies_to_any_node_name(ros_context) -> None:
+    ctx = ros_context(["--ros-args", "-r", "__ns:=/cam_x", "-r", "__node:=other_name", "--params-file",
+                       str(REPO / "config" / "camera.yaml"), "-p", "camera_id:=cam_x"])
+    node = CameraNode(context=ctx)
+    try:
+        assert node.unknown_parameters == []
+        assert node.parameter_values() == {**camera_params.defaults(), "camera_id": "cam_x"}
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("override,expected", [
+    ("camera_pose_xyz_m:=[1, 2, 2]", "parameter 'camera_pose_xyz_m' must be a list of 3 floats"),
+    ("head_roi_size_m:=7.0", "parameter 'head_roi_size_m' must be in [0.05, 2], got 7.0"),
+    ("person.voxel_size_m:=0.0", "parameter 'person.voxel_size_m' must be in (0, 1], got 0.0"),
+])
+def test_bad_parameter_is_one_fatal_line(ros_domain_id: int, override: str, expected: str) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "face_reid_camera.ros.node", "--ros-args", "-p", override],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 2
+    lines = [line for line in (result.stderr + result.stdout).splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("[face-reid-camera] FATAL: cannot start: ") and expected in lines[0]
+
+
+def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
+    for spec in camera_params.TABLE.specs:
+        if spec.kind in ("int", "float", "float_list"):
+            assert spec.low is not None and spec.high is not None, spec.name
+        assert len(spec.description) > 20, spec.name

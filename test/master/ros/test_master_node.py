@@ -1,0 +1,239 @@
+"""The master node in-process: lifecycle, services, rejections, the publish-rate cap (sim time), /diagnostics.
+
+Real rclpy (one context per test, loopback-only discovery); frames are handed to the node's subscription
+callback directly, so every step is deterministic. The multi-process proof over DDS (two camera processes,
+leave and return, kill -9) is test_master_node_dds.py.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import spin_until
+
+pytest.importorskip("rclpy")
+pytest.importorskip("face_reid_msgs.srv")
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import TransitionCallbackReturn
+from rclpy.node import Node
+from rclpy.time import Time
+
+from face_reid_master.records import CameraFrameRecord, PersonRecord
+from face_reid_master.ros import params as master_params
+from face_reid_master.ros.convert import frame_record_to_msg
+from face_reid_master.ros.node import MasterNode
+from face_reid_msgs.msg import NamedTrackArray
+from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
+
+REPO = Path(__file__).resolve().parents[3]
+OK = TransitionCallbackReturn.SUCCESS
+CAM = "/cam_a/face_reid/frames"
+
+
+def _master(ros_context, tmp_path: Path, *extra: str) -> MasterNode:
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", f"camera_topics:=[{CAM}]",
+                       "-p", "camera_topic_regex:=''", *[a for p in extra for a in ("-p", p)]])
+    return MasterNode(context=ctx)
+
+
+def _unit(seed: int) -> np.ndarray:
+    v = np.random.default_rng(seed).normal(size=128).astype(np.float32)
+    return v / np.linalg.norm(v)
+
+
+def _frame(stamp_s: float, camera: str = "cam_a", emb: np.ndarray | None = None, frame_id: str = "world"):
+    person = PersonRecord(np.array([1.0, 2.0, 0.0]), 0.05, 1.7, emb, 0.9 if emb is not None else 0.0,
+                          0.8 if emb is not None else 0.0)
+    return frame_record_to_msg(CameraFrameRecord(camera, stamp_s, (person,), frame_id), stamp_s)
+
+
+def test_lifecycle_subscribes_only_while_active_and_keeps_faces(ros_context, tmp_path: Path) -> None:
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
+    try:
+        assert node.core is None and not list(node.subscriptions)
+        assert node.trigger_configure() == OK
+        assert node.core is not None and node.store is not None and not list(node.subscriptions)
+        assert node.tracks_pub is None
+        assert node.trigger_activate() == OK
+        assert {s.topic_name for s in node.subscriptions} == {CAM}
+        assert node.tracks_pub.topic_name == "/tracks_named"
+        for k in range(6):  # one person with the same face: a track and (after 3 observations) a face
+            node._on_frame(_frame(100.0 + 0.1 * k, emb=_unit(1)))
+        assert node.core.identity.face_ids() == [1]
+        assert node.trigger_deactivate() == OK
+        assert not list(node.subscriptions) and node.tracks_pub is None
+        assert node.trigger_cleanup() == OK  # saves every face and closes the database
+        assert node.core is None and node.store is None
+        assert node.trigger_configure() == OK  # reconfigure: the face comes back from the database
+        assert node.core.identity.face_ids() == [1]
+        assert node.trigger_shutdown() == OK
+    finally:
+        node.destroy_node()
+
+
+def test_parameters_are_read_on_configure_and_locked_while_configured(ros_context, tmp_path: Path) -> None:
+    from rclpy.parameter import Parameter
+
+    node = _master(ros_context, tmp_path)
+    try:
+        assert node.set_parameters([Parameter("method", value="threshold")])[0].successful
+        assert node.trigger_configure() == OK and node.core.config.method == "threshold"
+        result = node.set_parameters([Parameter("method", value="bayes")])[0]
+        assert not result.successful and "read on configure" in result.reason
+        bad = node.set_parameters([Parameter("posterior_threshold", value=2.0)])[0]
+        assert not bad.successful  # out of range, refused by the descriptor
+    finally:
+        node.destroy_node()
+
+
+def _call(executor, node: Node, client, request):
+    assert spin_until(executor, lambda: client.service_is_ready())
+    future = client.call_async(request)
+    assert spin_until(executor, future.done)
+    return future.result()
+
+
+def test_services_add_list_forget_and_refuse_hostile_requests(ros_context, tmp_path: Path) -> None:
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
+    client_node = Node("client", context=node.context)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    executor.add_node(client_node)
+    add = client_node.create_client(AddPerson, "/face_reid_master/add_person")
+    forget = client_node.create_client(ForgetFace, "/face_reid_master/forget_face")
+    listing = client_node.create_client(ListFaces, "/face_reid_master/list_faces")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        alice = _unit(7)
+        reply = _call(executor, node, add, AddPerson.Request(name="Alice", embeddings=np.tile(alice, 6).tolist()))
+        assert reply.success and reply.num_embeddings == 6
+        for req, why in (
+            (AddPerson.Request(name="", embeddings=alice.tolist()), "name must not be empty"),
+            (AddPerson.Request(name="Bob", embeddings=alice[:100].tolist()), "k x 128"),
+            (AddPerson.Request(name="Bob", embeddings=[math.nan] * 128), ""),
+            (AddPerson.Request(name="Bob", image_paths=[str(tmp_path / "missing.jpg")]), "missing.jpg"),
+        ):
+            reply = _call(executor, node, add, req)
+            assert not reply.success and why in reply.message
+        for k in range(8):  # Alice walks in and shows her face: a face, named from the gallery
+            node._on_frame(_frame(50.0 + 0.1 * k, emb=alice + 0.01 * _unit(100 + k)))
+        faces = _call(executor, node, listing, ListFaces.Request())
+        assert list(faces.face_ids) == [1] and list(faces.names) == ["Alice"] and faces.num_features[0] >= 3
+        assert not _call(executor, node, forget, ForgetFace.Request()).success  # neither id nor name
+        assert not _call(executor, node, forget, ForgetFace.Request(face_id=99)).success
+        gone = _call(executor, node, forget, ForgetFace.Request(name="Alice"))
+        assert gone.success and list(gone.forgotten_face_ids) == [1]
+        assert list(_call(executor, node, listing, ListFaces.Request()).face_ids) == []
+        assert node.store.load_faces() == []  # deleted from disk too
+    finally:
+        executor.shutdown()
+        client_node.destroy_node()
+        node.destroy_node()
+
+
+def test_bad_frames_are_rejected_counted_and_reported(ros_context, tmp_path: Path) -> None:
+    node = _master(ros_context, tmp_path, "known_camera_ids:=[cam_a]")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        now = node.now_s()
+        node._on_frame(_frame(now, camera="cam_zz"))  # unknown camera
+        node._on_frame(_frame(now, frame_id="map"))  # wrong world frame
+        node._on_frame(_frame(now - 3600.0))  # an hour old: skewed clock
+        node._on_frame(_frame(now + 3600.0))  # from the future
+        node._on_frame(_frame(now, emb=np.full(128, np.nan, np.float32)))  # accepted, embedding refused
+        short = _frame(now)
+        short.people[0].face_found = True
+        short.people[0].embedding = [0.1] * 12
+        node._on_frame(short)  # accepted, embedding refused
+        values = node.diagnostics(node.now_s()).values
+        assert values["rejected_unknown_camera"] == "1" and values["rejected_frame_id"] == "1"
+        assert values["rejected_stale_stamp"] == "1" and values["rejected_future_stamp"] == "1"
+        assert values["embeddings_rejected_nonfinite"] == "1" and values["embeddings_rejected_length"] == "1"
+        assert values["frames_applied"] == "2" and values["tracks"] == "0"  # a track needs 3 detections
+        assert node.core.identity.face_ids() == []
+    finally:
+        node.destroy_node()
+
+
+def test_publish_rate_cap_on_the_node_clock(ros_context, tmp_path: Path) -> None:
+    """30 frames/s for 2 s of sim time with the cap at 4 Hz: about 8 messages instead of 60."""
+
+    def published(cap_hz: float) -> int:
+        node = _master(ros_context, tmp_path / str(cap_hz), "use_sim_time:=true", f"max_publish_rate_hz:={cap_hz}",
+                       "tick_rate_hz:=0.1", "check_stamps_against_clock:=false", "persist_faces:=false")
+        try:
+            assert node.trigger_configure() == OK and node.trigger_activate() == OK
+            clock = node.get_clock()
+            for k in range(60):
+                t = 1000.0 + k / 30.0
+                clock.set_ros_time_override(Time(seconds=t))
+                node._on_frame(_frame(t, camera="cam_a" if k % 2 else "cam_b"))
+            return node.health.messages_published
+        finally:
+            node.destroy_node()
+
+    assert published(0.0) == 60  # no cap: one message per frame
+    capped = published(4.0)
+    assert 7 <= capped <= 9, capped
+
+
+def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path: Path) -> None:
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
+    probe = Node("probe", context=node.context)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    got: list[DiagnosticArray] = []
+    tracks: list[NamedTrackArray] = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+    probe.create_subscription(NamedTrackArray, "/tracks_named", tracks.append, 10)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        for k in range(5):
+            node._on_frame(_frame(10.0 + 0.1 * k, emb=_unit(3)))
+        assert spin_until(executor, lambda: got and got[-1].status[0].name == "face_reid_master"
+                          and any(kv.key == "frames_in" and kv.value == "5" for kv in got[-1].status[0].values))
+        values = {kv.key: kv.value for kv in got[-1].status[0].values}
+        for key in ("frames_in", "frames_processed", "frames_dropped", "processing_time_p50_ms",
+                    "processing_time_p95_ms", "people_per_frame", "faces_per_frame", "learned_faces", "tracks",
+                    "publish_rate_hz", "rejected_total"):
+            assert key in values, key
+        assert values["frames_processed"] == "5" and values["learned_faces"] == "1" and values["tracks"] == "1"
+        assert float(values["faces_per_frame"]) == 1.0
+        assert spin_until(executor, lambda: tracks and tracks[-1].tracks and tracks[-1].tracks[0].face_id == 1)
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("override,expected", [
+    ("posterior_threshold:=1.2", "parameter 'posterior_threshold' must be in [0.5, 0.999), got 1.2"),
+    ("method:=bayse", "parameter 'method' must be one of bayes, threshold; got 'bayse'"),
+    ("tracker.max_tracks:=0", "parameter 'tracker.max_tracks' must be in [1, 100000], got 0"),
+])
+def test_bad_parameter_is_one_fatal_line(ros_domain_id: int, tmp_path: Path, override: str, expected: str) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "face_reid_master.ros.node", "--ros-args", "-p", override,
+         "-p", f"db_path:={tmp_path / 'f.db'}"],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 2
+    lines = [line for line in (result.stderr + result.stdout).splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("[face-reid-master] FATAL: cannot start: ") and expected in lines[0]
+
+
+def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
+    for spec in master_params.TABLE.specs:
+        if spec.kind in ("int", "float", "float_list"):
+            assert spec.low is not None and spec.high is not None, spec.name
+        assert len(spec.description) > 20, spec.name
+    assert master_params.TABLE["method"].choices == ("bayes", "threshold")

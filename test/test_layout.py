@@ -1,0 +1,85 @@
+"""The house rules, read from the imports of every module (``import`` statements anywhere in a file):
+
+1. ``face_reid_camera`` never imports ``face_reid_master``;
+2. runtime code never imports the simulator, the evaluation, the demo or the tools;
+3. no core module (runtime code outside a ``ros/`` package) imports rclpy or a ROS message package.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+TOOLING = ("face_reid_master.sim", "face_reid_master.evaluation", "face_reid_master.demo", "face_reid_master.tools",
+           "face_reid_camera.tools")
+ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
+               "visualization_msgs", "diagnostic_msgs", "lifecycle_msgs", "face_reid_msgs")
+
+
+def _module_name(path: Path, root: Path) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+            out.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return out
+
+
+def _within(name: str, packages: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in packages)
+
+
+def violations(root: Path) -> list[str]:
+    """Every broken rule in the packages under ``root``, as 'module imports X (rule N)'."""
+    found = []
+    for package in ("face_reid_camera", "face_reid_master"):
+        for path in sorted((root / package).rglob("*.py")):
+            module = _module_name(path, root)
+            runtime = not _within(module, TOOLING)
+            core = runtime and not any(part == "ros" for part in module.split(".")[1:])
+            for name in sorted(_imports(path)):
+                if package == "face_reid_camera" and _within(name, ("face_reid_master",)):
+                    found.append(f"{module} imports {name} (rule 1: the camera never imports the master)")
+                if runtime and _within(name, TOOLING):
+                    found.append(f"{module} imports {name} (rule 2: runtime code never imports tooling)")
+                if core and _within(name, ROS_MODULES):
+                    found.append(f"{module} imports {name} (rule 3: core modules are ROS-free)")
+    return found
+
+
+def test_the_tree_keeps_the_import_rules() -> None:
+    assert violations(REPO) == []
+
+
+def test_a_violation_of_each_rule_is_found(tmp_path: Path) -> None:
+    files = {
+        "face_reid_camera/__init__.py": "",
+        "face_reid_camera/pipeline.py": "import numpy\nfrom face_reid_master.core import MasterCore\n",
+        "face_reid_camera/ros/node.py": "import rclpy\n",
+        "face_reid_master/__init__.py": "",
+        "face_reid_master/core.py": "def f():\n    from face_reid_master.sim import simulate\n",
+        "face_reid_master/tracking/tracker.py": "from rclpy.node import Node\n",
+        "face_reid_master/sim/simulate.py": "import rclpy\nfrom face_reid_master.core import MasterCore\n",
+    }
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    found = violations(tmp_path)
+    assert found == [
+        "face_reid_camera.pipeline imports face_reid_master.core (rule 1: the camera never imports the master)",
+        "face_reid_camera.pipeline imports face_reid_master.core.MasterCore "
+        "(rule 1: the camera never imports the master)",
+        "face_reid_master.core imports face_reid_master.sim (rule 2: runtime code never imports tooling)",
+        "face_reid_master.core imports face_reid_master.sim.simulate (rule 2: runtime code never imports tooling)",
+        "face_reid_master.tracking.tracker imports rclpy.node (rule 3: core modules are ROS-free)",
+        "face_reid_master.tracking.tracker imports rclpy.node.Node (rule 3: core modules are ROS-free)",
+    ]
