@@ -147,6 +147,8 @@ def role_subscriber(args: argparse.Namespace) -> int:
         from face_reid_msgs.msg import CameraFrame as Msg
 
         topics = [f"{args.prefix}/cam{c:02d}/face_reid/frames" for c in range(args.cameras)]
+    from face_reid_camera.common.stamps import stamp_to_seconds
+
     rclpy.init()
     node = rclpy.create_node("bench_listener")
     qos = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
@@ -157,7 +159,7 @@ def role_subscriber(args: argparse.Namespace) -> int:
         recv = time.time()
         st = msg.header.stamp
         if _is_marked(st.sec, st.nanosec):
-            got.append((st.sec + st.nanosec * 1e-9, recv))
+            got.append((stamp_to_seconds(st), recv))
         else:
             unmarked[0] += 1
 

@@ -45,6 +45,33 @@ def test_wrapper_runs_the_console_script() -> None:
     assert result.returncode == 0 and "face-reid-replay" in result.stdout
 
 
+@pytest.mark.skipif(not _installed_non_editable(), reason="face-reid is not pip-installed in this environment")
+def test_installed_master_loads_the_installed_likelihood(tmp_path: Path) -> None:
+    """Outside the checkout the installed packages find models/face_likelihood.json in <prefix>/share."""
+    probe = (
+        "import json, face_reid_master\n"
+        "from face_reid_camera.common.resources import model_path\n"
+        "from face_reid_master.core import MasterCore\n"
+        "from face_reid_master.identity.likelihood import LIKELIHOOD_FILE\n"
+        "core = MasterCore()\n"
+        "print(json.dumps({'package': face_reid_master.__file__, 'path': str(model_path(LIKELIHOOD_FILE)),\n"
+        "                  'decision': core.identity.likelihood.decision_distance}))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if not k.startswith("FACE_REID_") and k != "PYTHONPATH"}
+    result = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env=env, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    import json
+
+    from face_reid_master.identity.likelihood import load_likelihood_model
+
+    got = json.loads(result.stdout)
+    assert Path(got["package"]).is_relative_to(PREFIX), "the probe must import the installed copy"
+    assert Path(got["path"]) == PREFIX / "share" / "face_reid" / "models" / "face_likelihood.json"
+    shipped = load_likelihood_model(REPO / "models" / "face_likelihood.json")
+    assert got["decision"] == pytest.approx(shipped.decision_distance, abs=1e-12)
+
+
 @pytest.mark.skipif(shutil.which("colcon") is None and not (PREFIX / "bin" / "colcon").exists(),
                     reason="colcon is not installed")
 def test_face_reid_msgs_builds_with_colcon(tmp_path: Path) -> None:
