@@ -2,6 +2,6 @@
 
 import sys
 
-from face_reid_master.demo.demo import main
+from face_reid_master.demo.run import main
 
 sys.exit(main())

@@ -1,5 +1,5 @@
-"""Child processes of a live run (demo, live evaluation): each in its own process group, on a private ROS domain
-with discovery on loopback only, dying with the parent (Linux PR_SET_PDEATHSIG), stopped together.
+"""Child processes of a live run (demo, live evaluation, DDS tests): each in its own process group, on a private
+ROS domain with discovery on loopback only, dying with the parent (Linux PR_SET_PDEATHSIG), stopped together.
 
 No rclpy here: the children are plain ``python ARGS`` processes; the parent joins the domain itself.
 """
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ChildProcess", "child_env", "read_events", "start_child", "stop_children"]
+__all__ = ["ChildProcess", "child_env", "read_events", "spawn", "start_child", "stop_children", "stop_processes"]
 
 
 def _libc_prctl() -> Any:
@@ -64,9 +64,9 @@ class ChildProcess:
         return "\n".join(f"    {line}" for line in text[-lines:])
 
 
-def child_env(domain_id: int, run_id: str) -> dict[str, str]:
-    """Environment of a child: the given ROS domain, discovery on loopback only, this checkout importable,
-    ``FACE_REID_DEMO_RUN`` marking it as ours."""
+def child_env(domain_id: int, run_id: str | None = None) -> dict[str, str]:
+    """Environment of a child: the given ROS domain, discovery on loopback only, this checkout importable and,
+    with ``run_id``, ``FACE_REID_DEMO_RUN`` marking it as a child of that run."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -74,23 +74,32 @@ def child_env(domain_id: int, run_id: str) -> dict[str, str]:
     env["PYTHONUNBUFFERED"] = "1"
     env["OMP_NUM_THREADS"] = "1"
     env["RCUTILS_COLORIZED_OUTPUT"] = "0"
-    env["FACE_REID_DEMO_RUN"] = run_id
+    if run_id is not None:
+        env["FACE_REID_DEMO_RUN"] = run_id
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     return env
 
 
+def spawn(args: list[str], env: dict[str, str], *, stdin: Any = None, stdout: Any = None, stderr: Any = None,
+          cwd: Path | None = None) -> subprocess.Popen[str]:
+    """``python ARGS`` (text streams as given) in its own process group, dying with this process.
+
+    Start children before any thread of this process (``preexec_fn``).
+    """
+    return subprocess.Popen(
+        [sys.executable, *args], env=env, stdin=stdin, stdout=stdout, stderr=stderr, cwd=cwd, text=True,
+        start_new_session=True, preexec_fn=_die_with_parent(os.getpid()),
+    )
+
+
 def start_child(name: str, args: list[str], env: dict[str, str], log_dir: Path, talk: bool = False) -> ChildProcess:
-    """``python ARGS`` in its own process group (dies with this process), stderr (and stdout unless ``talk``:
-    then stdin/stdout are pipes) to ``log_dir/NAME.log``. Start children before any thread (preexec_fn)."""
+    """:func:`spawn` with stderr (and stdout unless ``talk``: then stdin/stdout are pipes) to ``log_dir/NAME.log``."""
     log_path = log_dir / f"{name}.log"
     log = open(log_path, "w")  # handed to the child, closed below
     try:
-        proc = subprocess.Popen(
-            [sys.executable, *args], env=env, stdin=subprocess.PIPE if talk else subprocess.DEVNULL,
-            stdout=subprocess.PIPE if talk else log, stderr=log, text=True, start_new_session=True,
-            preexec_fn=_die_with_parent(os.getpid()),  # safe: started before any thread of ours
-        )
+        proc = spawn(args, env, stdin=subprocess.PIPE if talk else subprocess.DEVNULL,
+                     stdout=subprocess.PIPE if talk else log, stderr=log)
     finally:
         log.close()
     return ChildProcess(name, proc, log_path)
@@ -106,24 +115,30 @@ def read_events(child: ChildProcess) -> None:
                 child.events.put(json.loads(line))
 
 
-def stop_children(children: Sequence[ChildProcess], timeout_s: float = 5.0) -> None:
+def stop_processes(procs: Sequence[subprocess.Popen[str]], timeout_s: float = 5.0) -> None:
     """SIGINT every process group, then SIGKILL what is still there after ``timeout_s``."""
-    for child in children:
-        if child.proc.poll() is None:
+    for proc in procs:
+        if proc.poll() is None:
             with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(child.proc.pid, signal.SIGINT)
+                os.killpg(proc.pid, signal.SIGINT)
     deadline = time.monotonic() + timeout_s
-    for child in children:
+    for proc in procs:
         try:
-            child.proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            proc.wait(timeout=max(0.1, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             pass
-    for child in children:
-        if child.proc.poll() is None:  # still there (not reaped: its pid, the group id, cannot have been reused)
+    for proc in procs:
+        if proc.poll() is None:  # still there (not reaped: its pid, the group id, cannot have been reused)
             with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(child.proc.pid, signal.SIGKILL)
+                os.killpg(proc.pid, signal.SIGKILL)
             with contextlib.suppress(subprocess.TimeoutExpired):
-                child.proc.wait(timeout=2.0)
+                proc.wait(timeout=2.0)
+
+
+def stop_children(children: Sequence[ChildProcess], timeout_s: float = 5.0) -> None:
+    """:func:`stop_processes` of the children, then close the pipes to them."""
+    stop_processes([child.proc for child in children], timeout_s)
+    for child in children:
         for stream in (child.proc.stdin, child.proc.stdout):
             if stream is not None:
                 with contextlib.suppress(OSError):

@@ -25,10 +25,11 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_master.demo.children import ChildProcess, child_env, start_child, stop_children
 from face_reid_master.evaluation.published_tracks import TrackMessage, TruthLookup, track_from_msg
 from face_reid_master.records import CameraFrameRecord
-from face_reid_master.ros.node import frame_record_to_msg
+from face_reid_master.ros.convert import frame_record_to_msg
 from face_reid_master.tracking.tracker import TrackerConfig
 
 __all__ = ["LiveError", "LiveRun", "run_live", "scenario_truth"]
@@ -141,7 +142,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from face_reid_msgs.msg import CameraFrame, NamedTrackArray, PersonObservation
+    from face_reid_msgs.msg import CameraFrame, NamedTrackArray
 
     def check_master() -> None:
         code = master.proc.poll()
@@ -209,7 +210,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
             q = max(round(now / _STAMP_QUANTUM_S), last_q + 1)  # unique, exactly recoverable stamps
             last_q = q
             stamp = q * _STAMP_QUANTUM_S
-            pubs[frame.camera_id].publish(frame_record_to_msg(CameraFrame, PersonObservation, frame, stamp))
+            pubs[frame.camera_id].publish(frame_record_to_msg(frame, stamp))
             sent[q] = now
             lags.append(now - due)
             detections += len(frame.people)
@@ -229,7 +230,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
     latencies: list[float] = []
     answered: set[int] = set()
     for recv, msg in received:
-        wall = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        wall = stamp_to_seconds(msg.header.stamp)
         q = round(wall / _STAMP_QUANTUM_S)
         if q in sent and q not in answered:
             answered.add(q)

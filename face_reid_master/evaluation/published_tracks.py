@@ -2,8 +2,8 @@
 
 A live run has no detection-level truth: each confirmed track of each message is attributed to the nearest
 true person in the room (within :data:`MATCH_RADIUS_M`), a track's person is its majority, and the result is
-an :class:`face_reid_master.evaluation.evaluate.RunLog` whose "detections" are these published samples, so that
-:func:`face_reid_master.evaluation.evaluate.evaluate_run` computes the same metrics as offline. Pure: no rclpy (the
+a :class:`~face_reid_master.evaluation.runner.RunLog` whose "detections" are these published samples, so that
+:func:`~face_reid_master.evaluation.metrics.evaluate_run` computes the same metrics as offline. Pure: no rclpy (the
 message conversion only reads fields).
 """
 
@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.stamps import stamp_to_seconds
+from face_reid_master.evaluation.runner import RunLog, TrackLog
 from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
 
 __all__ = ["MATCH_RADIUS_M", "TrackMessage", "TruthLookup", "nearest_person", "run_log_from_messages",
@@ -39,7 +41,7 @@ class TrackMessage:
 def track_from_msg(t: Any, to_scene: Callable[[float], float]) -> NamedTrackRecord:
     """A face_reid_msgs/NamedTrack -> record, its stamps mapped to scene seconds by ``to_scene``."""
     def secs(stamp: Any) -> float:
-        return to_scene(stamp.sec + stamp.nanosec * 1e-9)
+        return to_scene(stamp_to_seconds(stamp))
 
     return NamedTrackRecord(
         int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence), int(t.face_observations),
@@ -59,12 +61,10 @@ def nearest_person(xy: NDArray[np.float64], true_xy: NDArray[np.float64], inside
 
 
 def run_log_from_messages(messages: Sequence[TrackMessage], truth: TruthLookup, num_people: int,
-                          days: Sequence[tuple[int, float, float, Sequence[int]]], method: str = "bayes") -> Any:
-    """An :class:`face_reid_master.evaluation.evaluate.RunLog` from the published tracks: each confirmed track in each
+                          days: Sequence[tuple[int, float, float, Sequence[int]]], method: str = "bayes") -> RunLog:
+    """A :class:`~face_reid_master.evaluation.runner.RunLog` from the published tracks: each confirmed track in each
     message is a sample attributed to the nearest true person (the track's person is the majority); face
     ids and names are taken as published (a face id first shown on a track is "new", later "known")."""
-    from face_reid_master.evaluation.evaluate import RunLog, TrackLog
-
     tracks: dict[int, TrackLog] = {}
     faces: dict[int, tuple[float, int]] = {}
     current_face: dict[int, int] = {}

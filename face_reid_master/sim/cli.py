@@ -1,7 +1,7 @@
 """``face-reid-sim``: simulate a camera-network scenario with real face photos and write it to a directory.
 
 Example: ``face-reid-sim --faces FACES --people 6 --cameras 3 --duration 200 --seed 1 --out S``.
-The directory format is documented in :mod:`face_reid_master.sim.simulate`. Progress goes to stderr, the
+The directory format is documented in :mod:`face_reid_master.sim.scenario_files`. Progress goes to stderr, the
 summary (JSON) to stdout. Exit status: 0 done, 2 bad arguments or unusable faces folder, 1 other errors
 (e.g. missing models).
 """
@@ -15,7 +15,9 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from face_reid_master.sim.simulate import LEVELS, InsufficientFacesError, SimConfig, simulate, write_scenario
+from face_reid_master.sim.photos import InsufficientFacesError
+from face_reid_master.sim.scenario_files import write_scenario
+from face_reid_master.sim.simulate import LEVELS, SimConfig, simulate
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.common.checks import check_bgr_image, is_finite_number
 
 F32 = NDArray[np.float32]
 
@@ -78,7 +79,7 @@ class SyntheticPerson:
     def __post_init__(self) -> None:
         for name in ("x_m", "y_m", "facing_rad", "height_m", "shoulder_width_m", "face_crop_margin"):
             value = getattr(self, name)
-            if not _is_finite_number(value):
+            if not is_finite_number(value):
                 raise ValueError(f"SyntheticPerson.{name} must be a finite number, got {value!r}")
         if not 1.0 <= self.height_m <= 2.3:
             raise ValueError(f"SyntheticPerson.height_m must be in [1.0, 2.3] m, got {self.height_m!r}")
@@ -94,8 +95,7 @@ class SyntheticPerson:
             _check_colour(getattr(self, name), f"SyntheticPerson.{name}")
         face = self.face_image_bgr
         if face is not None:
-            if not _is_bgr_image(face):
-                raise ValueError("SyntheticPerson.face_image_bgr must be an HxWx3 uint8 BGR array")
+            _check_bgr(face, "SyntheticPerson.face_image_bgr")
             if min(face.shape[:2]) < 16:
                 raise ValueError(
                     f"SyntheticPerson.face_image_bgr is too small ({face.shape[1]}x{face.shape[0]} px), "
@@ -126,25 +126,20 @@ class RenderedFrame:
     person_ids: NDArray[np.int16]
 
 
-def _is_finite_number(value: object) -> bool:
-    real = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    return real and math.isfinite(float(value))  # type: ignore[arg-type]
-
-
-def _is_bgr_image(value: object) -> bool:
-    if not isinstance(value, np.ndarray):
-        return False
-    return value.dtype == np.uint8 and value.ndim == 3 and value.shape[2] == 3
-
-
 def _check_colour(value: object, name: str) -> None:
     """Colours are hashable (B, G, R) tuples of ints in [0, 255]."""
     if (
         not isinstance(value, tuple)
         or len(value) != 3
-        or not all(_is_finite_number(c) and float(c).is_integer() and 0 <= c <= 255 for c in value)
+        or not all(is_finite_number(c) and float(c).is_integer() and 0 <= c <= 255 for c in value)
     ):
         raise ValueError(f"{name} must be 3 integers in [0, 255] (B, G, R), got {value!r}")
+
+
+def _check_bgr(image: object, name: str) -> None:
+    """A non-empty HxWx3 uint8 array (:func:`check_bgr_image`, colour only)."""
+    if check_bgr_image(image, name).ndim != 3:
+        raise ValueError(f"{name} must be an HxWx3 uint8 BGR array, got shape {np.shape(image)}")
 
 
 @dataclass
@@ -654,9 +649,7 @@ def crop_face_for_rendering(
 
     Parts of the square outside the photo are filled by replicating its border.
     """
-    if not isinstance(photo_bgr, np.ndarray) or photo_bgr.dtype != np.uint8 or photo_bgr.ndim != 3 \
-            or photo_bgr.shape[2] != 3:
-        raise ValueError("photo_bgr must be an HxWx3 uint8 BGR image")
+    _check_bgr(photo_bgr, "photo_bgr")
     box = np.asarray(box_xywh, dtype=np.float64).reshape(-1)
     if box.size < 4 or not np.all(np.isfinite(box[:4])):
         raise ValueError(f"box_xywh must start with 4 finite numbers (x, y, w, h), got {box_xywh!r}")

@@ -29,7 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_master.sim.world import Room, Trajectory
+from face_reid_master.sim.motion import Trajectory
+from face_reid_master.sim.world import Room
 
 __all__ = ["PhotoSpan", "PlayedPerson", "PlayerSpec", "main"]
 
@@ -281,7 +282,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _play(node: Any, player: ScenePlayer, t0: float, pub_c: Any, pub_d: Any, pub_i: Any, image_cls: Any,
           info_cls: Any, encode_image: Any, truth_path: Path) -> int:
     """The real-time loop: one frame per slot, slots whose time has passed are skipped (counted)."""
-    from face_reid_camera.ros.convert import stamp_from_seconds
+    from face_reid_camera.common.stamps import set_stamp
 
     spec = player.spec
     intr = spec.intrinsics
@@ -306,9 +307,8 @@ def _play(node: Any, player: ScenePlayer, t0: float, pub_c: Any, pub_d: Any, pub
         r0 = time.perf_counter()
         frame, xy, inside, face_visible = player.render(stamp_s - t0, k)
         render_ms.append(1000.0 * (time.perf_counter() - r0))
-        sec, nanosec = stamp_from_seconds(stamp_s)
         info = info_cls()
-        info.header.stamp.sec, info.header.stamp.nanosec = sec, nanosec
+        set_stamp(info.header.stamp, stamp_s)
         info.header.frame_id = frame_id
         info.width, info.height = intr.width, intr.height
         info.k = [intr.fx, 0.0, intr.cx, 0.0, intr.fy, intr.cy, 0.0, 0.0, 1.0]
@@ -318,7 +318,7 @@ def _play(node: Any, player: ScenePlayer, t0: float, pub_c: Any, pub_d: Any, pub
         pub_i.publish(info)
         for pub, image, encoding in ((pub_c, frame.rgb_bgr, "bgr8"), (pub_d, frame.depth_mm, "16UC1")):
             msg = image_cls()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            set_stamp(msg.header.stamp, stamp_s)
             msg.header.frame_id = frame_id
             msg.height, msg.width, msg.step, msg.data = encode_image(image, encoding)
             msg.encoding = encoding

@@ -345,7 +345,7 @@ def _fail(message: str) -> int:
 
 def _scenario_identities(args: argparse.Namespace) -> set[str]:
     """Names of the identities of the ``--exclude-scenario`` scenarios; ValueError on an unreadable one."""
-    from face_reid_master.sim.simulate import ScenarioFormatError, load_scenario_document
+    from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario_document
 
     names: set[str] = set()
     for directory in args.exclude_scenario:
@@ -378,7 +378,7 @@ def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
 
     faces_dir: Path = args.faces_dir
     if args.camera_views:
-        from face_reid_master.sim.simulate import InsufficientFacesError, PhotoBank
+        from face_reid_master.sim.photos import InsufficientFacesError, PhotoBank
 
         try:
             bank = PhotoBank(faces_dir, args.cache, min_photos_per_identity=1)

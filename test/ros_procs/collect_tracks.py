@@ -26,6 +26,7 @@ def main() -> int:
     import rclpy
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+    from face_reid_camera.common.stamps import stamp_to_seconds
     from face_reid_msgs.msg import NamedTrackArray
 
     rclpy.init()
@@ -33,7 +34,7 @@ def main() -> int:
 
     def on_tracks(msg: NamedTrackArray) -> None:
         line = {
-            "stamp": msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
+            "stamp": stamp_to_seconds(msg.header.stamp),
             "frame_id": msg.header.frame_id,
             "tracks": [
                 {"track_id": t.track_id, "face_id": t.face_id, "name": t.name, "state": t.state,

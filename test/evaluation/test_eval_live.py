@@ -22,13 +22,12 @@ from face_reid_master.sim import cli as sim_cli
 
 def test_frame_record_round_trips_through_the_message() -> None:
     pytest.importorskip("face_reid_msgs.msg")
-    from face_reid_master.ros.node import frame_from_msg, frame_record_to_msg
-    from face_reid_msgs.msg import CameraFrame, PersonObservation
+    from face_reid_master.ros.convert import frame_from_msg, frame_record_to_msg
 
     emb = np.linspace(-0.2, 0.2, 128).astype(np.float32)
     frame = CameraFrameRecord("cam1", 12.5, (PersonRecord(np.array([1.0, -2.0, 0.9]), 0.07, 1.71, emb, 0.93, 0.61),
                                              PersonRecord(np.array([0.5, 0.25, 1.0]), 0.1, 1.6)))
-    back = frame_from_msg(frame_record_to_msg(CameraFrame, PersonObservation, frame, 1_700_000_000.1234))
+    back = frame_from_msg(frame_record_to_msg(frame, 1_700_000_000.1234))
     assert back.camera_id == "cam1" and back.frame_id == "world"
     assert back.stamp_s == pytest.approx(1_700_000_000.1234, abs=1e-6)
     assert len(back.people) == 2 and back.people[1].embedding is None

@@ -1,4 +1,4 @@
-"""Tests of the simulator's world model: room and cameras, motion, visibility geometry, losses, glances."""
+"""Tests of what the simulated cameras see: visibility geometry, occlusion, lone-person coverage, losses, glances."""
 
 from __future__ import annotations
 
@@ -8,21 +8,16 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_master.sim.world import (
-    MotionConfig,
-    Room,
-    SimCamera,
-    Trajectory,
+from face_reid_master.sim.visibility import (
     VisibilityConfig,
+    camera_views,
     camera_visibility,
     count_losses,
-    coverage_fraction,
+    floor_grid,
     glance_ids,
-    make_world,
-    plan_trajectory,
-    room_size_for,
-    sample_trajectories,
+    lone_person_visibility,
 )
+from face_reid_master.sim.world import SimCamera
 
 K = CameraIntrinsics.kinect_default()
 
@@ -39,111 +34,6 @@ def _vis(camera: SimCamera, people: list[tuple[float, float, float]], heights: l
     facing = np.radians(np.array([p[2] for p in people], dtype=float))[None]
     h = np.array(heights if heights is not None else [1.75] * len(people))
     return camera_visibility(camera, xy, facing, h, np.ones((1, len(people)), dtype=bool), config)
-
-
-# --- room, cameras, doors
-
-
-def test_reference_room_is_10_by_8_and_scales_with_cameras() -> None:
-    room = room_size_for(3)
-    assert (room.width_m, room.depth_m) == (10.0, 8.0)
-    big = room_size_for(6)
-    assert big.width_m * big.depth_m == pytest.approx(160.0, rel=0.03)
-    with pytest.raises(ValueError, match="num_cameras"):
-        room_size_for(0)
-    with pytest.raises(ValueError, match="width_m"):
-        Room(1.0, 8.0)
-
-
-def test_world_cameras_hang_on_walls_and_look_into_the_room() -> None:
-    world = make_world(3, np.random.default_rng(5))
-    half = world.room.half_extents
-    assert len(world.cameras) == 3 and len(world.doors) == 2
-    for cam in world.cameras:
-        x, y, z, roll, pitch, yaw = cam.xyz_rpy
-        on_wall = min(half[0] - abs(x), half[1] - abs(y))
-        assert 0.0 <= on_wall <= 0.06
-        assert 2.2 <= z <= 2.6 and math.radians(15) <= pitch <= math.radians(25) and roll == 0.0
-        # the optical axis points into the room: 2 m ahead is inside
-        ahead = np.array([x, y]) + 2.0 * np.array([math.cos(yaw), math.sin(yaw)])
-        assert world.room.contains(ahead)
-        # the camera sees part of the room
-        assert coverage_fraction(type(world)(world.room, (cam,), world.doors)) > 0.1
-    for door in world.doors:
-        assert not world.room.contains(door.outside_xy) and world.room.contains(door.inside_xy)
-        # doors keep away from the cameras
-        assert min(np.linalg.norm(door.centre_xy - c.position[:2]) for c in world.cameras) > 1.5
-    assert 0.45 <= coverage_fraction(world) <= 0.9
-    again = make_world(3, np.random.default_rng(5))
-    assert [c.xyz_rpy for c in again.cameras] == [c.xyz_rpy for c in world.cameras]
-
-
-# --- motion
-
-
-def test_motion_stays_in_the_room_except_through_doors() -> None:
-    world = make_world(3, np.random.default_rng(1))
-    cfg = MotionConfig()
-    t = np.arange(0.0, 300.0, 0.05)
-    outside_seen = 0
-    for seed in range(8):
-        traj = plan_trajectory(world, np.random.default_rng(seed), 300.0, cfg)
-        assert traj.t_s[-1] >= 300.0
-        xy, facing = traj.sample(t)
-        assert world.allowed(xy).all(), "a person left the room other than through a door"
-        outside = ~world.room.contains(xy)
-        outside_seen += int(outside.sum())
-        for k in np.flatnonzero(outside):
-            assert any(d.in_corridor(xy[k]) for d in world.doors)
-        # speed never above the maximum walking speed
-        step = np.linalg.norm(np.diff(xy, axis=0), axis=1) / 0.05
-        assert step.max() <= cfg.speed_range_mps[1] + 1e-6
-        # while walking, people face where they go
-        moving = step > 0.3
-        heading = np.arctan2(*np.diff(xy, axis=0)[moving][:, ::-1].T)
-        diff = np.angle(np.exp(1j * (heading - facing[1:][moving])))
-        assert np.mean(np.abs(diff) < 0.2) > 0.95
-        assert 1.55 <= traj.height_m <= 1.90
-    assert outside_seen > 0, "nobody ever went out: exits are not simulated"
-
-
-def test_trajectory_validation_and_sampling() -> None:
-    traj = Trajectory(np.array([0.0, 2.0]), np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.0, 0.0]), 1.7)
-    xy, _ = traj.sample(np.array([-1.0, 1.0, 5.0]))
-    np.testing.assert_allclose(xy, [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
-    with pytest.raises(ValueError, match="strictly increasing"):
-        Trajectory(np.array([0.0, 0.0]), np.zeros((2, 2)), np.zeros(2), 1.7)
-    with pytest.raises(ValueError, match="finite"):
-        Trajectory(np.array([0.0, 1.0]), np.array([[0.0, np.nan], [0.0, 0.0]]), np.zeros(2), 1.7)
-    with pytest.raises(ValueError, match="height_m"):
-        Trajectory(np.array([0.0, 1.0]), np.zeros((2, 2)), np.zeros(2), 3.0)
-    with pytest.raises(ValueError, match="exit_probability"):
-        MotionConfig(exit_probability=1.5)
-    with pytest.raises(ValueError, match="speed_range_mps"):
-        MotionConfig(speed_range_mps=(1.4, 0.6))
-    world = make_world(1, np.random.default_rng(0))
-    with pytest.raises(ValueError, match="duration_s"):
-        plan_trajectory(world, np.random.default_rng(0), float("nan"))
-
-
-def test_default_scenario_has_about_fifty_losses_in_200_s() -> None:
-    # the tuning target: 6 people, 3 cameras, 200 s -> ~50 track losses (the paper: 49 and 58)
-    totals = []
-    for seed in range(4):
-        world = make_world(3, np.random.default_rng([seed, 0]))
-        trajs = [plan_trajectory(world, np.random.default_rng([seed, 1, p]), 200.0) for p in range(6)]
-        t = np.arange(0.0, 200.0, 0.1)
-        xy, facing = sample_trajectories(trajs, t)
-        heights = np.array([tr.height_m for tr in trajs])
-        in_room = world.room.contains(xy)
-        seen = np.zeros(in_room.shape, dtype=bool)
-        for cam in world.cameras:
-            seen |= camera_visibility(cam, xy, facing, heights, in_room).detectable
-        totals.append(count_losses(t, seen.T).total_losses)
-    assert 35 <= np.mean(totals) <= 70, totals
-
-
-# --- visibility
 
 
 def test_person_in_front_facing_the_camera_is_detected_with_face() -> None:
@@ -221,6 +111,23 @@ def test_visibility_rejects_bad_shapes() -> None:
     with pytest.raises(ValueError, match="max_face_angle_deg"):
         VisibilityConfig(max_face_angle_deg=120.0)
 
+
+
+def test_lone_person_and_per_camera_views_agree_with_camera_visibility() -> None:
+    cams = (_camera(), _camera(yaw_deg=90.0))
+    grid = floor_grid(np.array([3.0, 2.0]), 0.5)
+    assert grid.shape == (12 * 8, 2) and grid.min() == pytest.approx(-2.75) and grid[:, 1].max() == pytest.approx(1.75)
+    facing = np.full(grid.shape[0], math.pi)
+    lone = lone_person_visibility(cams[0], grid, facing, 1.8)
+    inside = np.ones((grid.shape[0], 1), bool)
+    full = camera_visibility(cams[0], grid[:, None], facing[:, None], np.array([1.8]), inside)
+    np.testing.assert_array_equal(lone.face_visible, full.face_visible)
+    assert lone.detectable.any() and lone.face_visible.any()
+    xy = np.array([[[3.0, 0.0], [0.0, 3.0]]])
+    view, face = camera_views(cams, xy, np.array([[math.pi, -math.pi / 2]]), np.array([1.75, 1.75]),
+                              np.ones((1, 2), bool))
+    assert view.shape == face.shape == (1, 2, 2)
+    assert view[0].tolist() == [[True, False], [False, True]] and face[0].tolist() == [[True, False], [False, True]]
 
 # --- losses and glances
 

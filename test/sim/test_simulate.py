@@ -12,21 +12,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import FACES_DIR
 
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.sim.cli import main
-from face_reid_master.sim.simulate import (
-    NUM_VARIANTS,
-    InsufficientFacesError,
-    PhotoBank,
-    ScenarioFormatError,
-    SimConfig,
-    load_scenario,
-    simulate,
-    write_scenario,
-)
+from face_reid_master.sim.photos import NUM_VARIANTS, InsufficientFacesError, PhotoBank
+from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario, write_scenario
+from face_reid_master.sim.simulate import SimConfig, simulate
 
-FACES = Path(__file__).parent / "data" / "faces"
 # identities with >= 4 photos, copied into a small faces folder so the tests embed few photos
 IDENTITIES = ("lfw_Colin_Powell", "lfw_Tony_Blair", "deepface_id02", "deepface_id03", "facerec_obama")
 PHOTOS_PER_IDENTITY = 4
@@ -37,7 +30,7 @@ def faces(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("faces")
     for ident in IDENTITIES:
         (root / ident).mkdir()
-        for photo in sorted((FACES / ident).glob("*.jpg"))[:PHOTOS_PER_IDENTITY]:
+        for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:PHOTOS_PER_IDENTITY]:
             shutil.copy(photo, root / ident / photo.name)
     return root
 

@@ -4,13 +4,14 @@ detections of the real face photos it pastes on the heads."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from conftest import FACES_DIR
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose, depth_to_points
+from face_reid_camera.common.resources import model_path
 from face_reid_master.sim.renderer import (
     HEAD_SEMI_AXES_M,
     RenderedFrame,
@@ -19,9 +20,7 @@ from face_reid_master.sim.renderer import (
     render_scene,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-FACES = ROOT / "test" / "data" / "faces"
-YUNET = ROOT / "models" / "face_detection_yunet_2023mar.onnx"
+YUNET = model_path("face_detection_yunet_2023mar.onnx")
 K = CameraIntrinsics.kinect_default()  # 640x480, fx = fy = 525
 # 5-point template of dlib's 150x150 chip (see notes/models.md), to compare aligned faces
 TEMPLATE = np.array(
@@ -51,7 +50,7 @@ def _largest(faces: np.ndarray) -> np.ndarray:
 
 
 def _crop(rel: str) -> np.ndarray:
-    photo = cv2.imread(str(FACES / rel))
+    photo = cv2.imread(str(FACES_DIR / rel))
     assert photo is not None, rel
     return crop_face_for_rendering(photo, _largest(_detect(photo))[:4])
 

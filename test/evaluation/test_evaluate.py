@@ -1,4 +1,4 @@
-"""Tests of the offline evaluation (face_reid_master.evaluation.evaluate / eval_cli).
+"""Tests of the offline evaluation (face_reid_master.evaluation: runner, metrics, gallery, cli and plots).
 
 Metric definitions are checked on hand-made run logs with known answers (exact re-identification time,
 success / failure / none, recover rates, names, IDF1 = 1 for a perfect run and < 1 with a swap); the
@@ -15,26 +15,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import FACES_DIR
 
 from face_reid_camera.faces.photos import PhotoEmbedder
 from face_reid_master.core import MasterConfig
 from face_reid_master.evaluation.cli import main
-from face_reid_master.evaluation.evaluate import (
-    RunLog,
-    TrackLog,
-    default_gallery_people,
-    evaluate_run,
-    mot_metrics,
-    paired_reid_times,
-    run_master,
-    scenario_gallery,
-    track_outcomes,
-)
+from face_reid_master.evaluation.gallery import default_gallery_people, scenario_gallery
+from face_reid_master.evaluation.metrics import evaluate_run, mot_metrics, paired_reid_times, track_outcomes
+from face_reid_master.evaluation.runner import RunLog, TrackLog, run_master
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.tracking.tracker import TrackerConfig
 
-FACES = Path(__file__).parent / "data" / "faces"
 IDS = ("lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez")
 
 
@@ -169,7 +161,7 @@ def embeddings(embedder: PhotoEmbedder) -> dict[str, np.ndarray]:
     """identity -> (n, 128) real embeddings of the fixture photos (sorted by file name)."""
     out = {}
     for ident in IDS:
-        rows = [e.embedding for p in sorted((FACES / ident).glob("*.jpg")) if (e := embedder.embed_photo(p))]
+        rows = [e.embedding for p in sorted((FACES_DIR / ident).glob("*.jpg")) if (e := embedder.embed_photo(p))]
         out[ident] = np.stack(rows)
     return out
 
@@ -273,7 +265,7 @@ def test_default_gallery_people_is_half_of_day_one_and_deterministic() -> None:
 def test_scenario_gallery_uses_unused_photos_else_one_scenario_photo(tmp_path: Path, embedder) -> None:
     for ident, n in ((IDS[0], 3), (IDS[1], 2)):
         (tmp_path / ident).mkdir()
-        for p in sorted((FACES / ident).glob("*.jpg"))[:n]:
+        for p in sorted((FACES_DIR / ident).glob("*.jpg"))[:n]:
             shutil.copy(p, tmp_path / ident / p.name)
     files = {i: sorted(f.name for f in (tmp_path / i).iterdir()) for i in IDS[:2]}
     doc = {"faces_dir": str(tmp_path),
@@ -291,12 +283,13 @@ def test_scenario_gallery_uses_unused_photos_else_one_scenario_photo(tmp_path: P
 
 @pytest.fixture(scope="module")
 def scenario_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from face_reid_master.sim.simulate import SimConfig, simulate, write_scenario
+    from face_reid_master.sim.scenario_files import write_scenario
+    from face_reid_master.sim.simulate import SimConfig, simulate
 
     faces = tmp_path_factory.mktemp("faces")
     for ident in IDS:
         (faces / ident).mkdir()
-        for photo in sorted((FACES / ident).glob("*.jpg"))[:4]:
+        for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:4]:
             shutil.copy(photo, faces / ident / photo.name)
     out = tmp_path_factory.mktemp("scenario")
     write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=40.0, seed=5)), out)

@@ -14,32 +14,33 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import FACES_DIR, REPO_ROOT
 
-from face_reid_master.demo import demo
+from face_reid_master.demo import report, run
+from face_reid_master.demo import scenario as demo_scenario
 from face_reid_master.demo.children import start_child, stop_children
 from face_reid_master.evaluation.published_tracks import TrackMessage
 from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
+from face_reid_master.sim.motion import sample_trajectories
 from face_reid_master.sim.rgbd_player import PlayerSpec, ScenePlayer
-
-FACES = Path(__file__).parent / "data" / "faces"
-REPO = Path(__file__).resolve().parents[1]
+from face_reid_master.sim.visibility import camera_visibility
 
 
 @pytest.fixture(scope="module")
-def scenario() -> demo.DemoScenario:
-    return demo.build_scenario(FACES, demo.DEFAULT_SEED)
+def scenario() -> demo_scenario.DemoScenario:
+    return demo_scenario.build_scenario(FACES_DIR, demo_scenario.DEFAULT_SEED)
 
 
 def test_display_names() -> None:
-    assert demo.display_name("lfw_Colin_Powell") == "Colin Powell"
-    assert demo.display_name("facerec_obama") == "Obama"
-    assert demo.display_name("deepface_id01") == "Id01"
-    assert demo.display_name("Alice") == "Alice"
+    assert demo_scenario.display_name("lfw_Colin_Powell") == "Colin Powell"
+    assert demo_scenario.display_name("facerec_obama") == "Obama"
+    assert demo_scenario.display_name("deepface_id01") == "Id01"
+    assert demo_scenario.display_name("Alice") == "Alice"
 
 
-def test_default_scenario_is_the_advertised_one(scenario: demo.DemoScenario) -> None:
-    assert scenario.seed == demo.DEFAULT_SEED, "the default seed must pass the script checks by itself"
-    assert [p.identity for p in scenario.people] == list(demo.DEFAULT_IDENTITIES[:4])
+def test_default_scenario_is_the_advertised_one(scenario: demo_scenario.DemoScenario) -> None:
+    assert scenario.seed == demo_scenario.DEFAULT_SEED, "the default seed must pass the script checks by itself"
+    assert [p.identity for p in scenario.people] == list(demo_scenario.DEFAULT_IDENTITIES[:4])
     assert [p.in_gallery for p in scenario.people] == [True, True, False, False]
     assert len(scenario.cameras) == 2 and len(scenario.world.doors) == 4
     t = np.arange(0.0, scenario.duration_s, 0.1)
@@ -65,33 +66,33 @@ def test_default_scenario_is_the_advertised_one(scenario: demo.DemoScenario) -> 
             assert np.linalg.norm(xy[both, a] - xy[both, b], axis=1).min() >= 0.6
 
 
-def test_build_scenario_is_deterministic_and_validates(scenario: demo.DemoScenario) -> None:
-    again = demo.build_scenario(FACES, demo.DEFAULT_SEED)
+def test_build_scenario_is_deterministic_and_validates(scenario: demo_scenario.DemoScenario) -> None:
+    again = demo_scenario.build_scenario(FACES_DIR, demo_scenario.DEFAULT_SEED)
     for p, q in zip(scenario.people, again.people, strict=True):
         np.testing.assert_array_equal(p.trajectory.xy, q.trajectory.xy)
         assert p.photo_spans == q.photo_spans
     with pytest.raises(ValueError, match="num_people"):
-        demo.build_scenario(FACES, 0, num_people=0)
+        demo_scenario.build_scenario(FACES_DIR, 0, num_people=0)
     with pytest.raises(ValueError, match="duration_s"):
-        demo.build_scenario(FACES, 0, duration_s=5.0)
+        demo_scenario.build_scenario(FACES_DIR, 0, duration_s=5.0)
     with pytest.raises(ValueError, match="gallery_people"):
-        demo.build_scenario(FACES, 0, num_people=2, gallery_people=3)
+        demo_scenario.build_scenario(FACES_DIR, 0, num_people=2, gallery_people=3)
 
 
 def test_choose_identities_needs_enough_photos(tmp_path: Path) -> None:
     for ident in ("lfw_Colin_Powell", "lfw_Tony_Blair"):
         (tmp_path / ident).mkdir()
-        for f in sorted((FACES / ident).glob("*.jpg"))[:4]:
+        for f in sorted((FACES_DIR / ident).glob("*.jpg"))[:4]:
             shutil.copy(f, tmp_path / ident / f.name)
     (tmp_path / "too_few").mkdir()
-    shutil.copy(sorted((FACES / "lfw_Ariel_Sharon").glob("*.jpg"))[0], tmp_path / "too_few" / "a.jpg")
-    cast = demo.choose_identities(tmp_path, 2)
+    shutil.copy(sorted((FACES_DIR / "lfw_Ariel_Sharon").glob("*.jpg"))[0], tmp_path / "too_few" / "a.jpg")
+    cast = demo_scenario.choose_identities(tmp_path, 2)
     assert [name for name, _ in cast] == ["lfw_Colin_Powell", "lfw_Tony_Blair"]  # built-in cast first
     with pytest.raises(ValueError, match="has 2 identities with >= 4 photos"):
-        demo.choose_identities(tmp_path, 3)
+        demo_scenario.choose_identities(tmp_path, 3)
 
 
-def test_player_spec_round_trip_and_rendering(scenario: demo.DemoScenario, tmp_path: Path) -> None:
+def test_player_spec_round_trip_and_rendering(scenario: demo_scenario.DemoScenario, tmp_path: Path) -> None:
     spec = scenario.player_spec(0, 5.0)
     path = tmp_path / "spec.json"
     path.write_text(json.dumps(spec.to_json()))
@@ -119,15 +120,15 @@ def test_player_spec_round_trip_and_rendering(scenario: demo.DemoScenario, tmp_p
         np.testing.assert_array_equal(inside, true_in[0])
         shown[i] = face_visible
     cam1 = scenario.cameras[0]
-    xy, facing = demo.sample_trajectories([p.trajectory for p in scenario.people], t)
+    xy, facing = sample_trajectories([p.trajectory for p in scenario.people], t)
     heights = np.array([p.trajectory.height_m for p in scenario.people])
-    vis = demo.camera_visibility(cam1, xy, facing, heights, scenario.world.room.contains(xy))
+    vis = camera_visibility(cam1, xy, facing, heights, scenario.world.room.contains(xy))
     assert shown.any()
     # the analytic model and the renderer agree on most frames (they differ at the edges of the angle limits)
     assert (shown == vis.face_visible).mean() > 0.8
 
 
-def _perfect_messages(scenario: demo.DemoScenario, *, return_face_offset: int = 0, name_for: dict[int, str]
+def _perfect_messages(scenario: demo_scenario.DemoScenario, *, return_face_offset: int = 0, name_for: dict[int, str]
                       | None = None) -> list[TrackMessage]:
     """What an ideal master publishes: one track per visit at the true position, the person's face id on it
     (+ ``return_face_offset`` on the return visit: a new face id), gallery people named."""
@@ -150,8 +151,8 @@ def _perfect_messages(scenario: demo.DemoScenario, *, return_face_offset: int = 
     return messages
 
 
-def test_summary_of_a_perfect_run(scenario: demo.DemoScenario) -> None:
-    summary = demo.summarize(scenario, _perfect_messages(scenario))
+def test_summary_of_a_perfect_run(scenario: demo_scenario.DemoScenario) -> None:
+    summary = report.summarize(scenario, _perfect_messages(scenario))
     assert summary["reidentification"]["success"] == 4 and summary["reidentification"]["failure"] == 0
     assert summary["false_tracks"] == 0
     assert summary["median_position_error_m"] == pytest.approx(0.0707, abs=0.01)
@@ -162,12 +163,12 @@ def test_summary_of_a_perfect_run(scenario: demo.DemoScenario) -> None:
             assert (person["names_right"], person["names_wrong"], person["names_none"]) == (2, 0, 0)
         else:
             assert (person["names_right"], person["names_wrong"], person["names_none"]) == (0, 0, 2)
-    text = demo.format_summary(summary)
+    text = report.format_summary(summary)
     assert "Colin Powell (gallery)" in text and "4 correct, 0 wrong, 0 pending" in text
 
 
-def test_summary_counts_new_ids_and_wrong_names(scenario: demo.DemoScenario) -> None:
-    summary = demo.summarize(scenario, _perfect_messages(scenario, return_face_offset=10,
+def test_summary_counts_new_ids_and_wrong_names(scenario: demo_scenario.DemoScenario) -> None:
+    summary = report.summarize(scenario, _perfect_messages(scenario, return_face_offset=10,
                                                          name_for={2: "Colin Powell"}))
     assert summary["reidentification"]["success"] == 0
     assert summary["reidentification"]["failure_new_id"] == 4
@@ -176,16 +177,16 @@ def test_summary_counts_new_ids_and_wrong_names(scenario: demo.DemoScenario) -> 
     assert summary["predefined_people"]["other_tracks_named"] == 2
 
 
-def test_summary_without_messages(scenario: demo.DemoScenario) -> None:
-    summary = demo.summarize(scenario, [])
+def test_summary_without_messages(scenario: demo_scenario.DemoScenario) -> None:
+    summary = report.summarize(scenario, [])
     assert summary["messages"] == 0 and all(p["tracks"] == 0 for p in summary["people"])
     assert summary["median_position_error_m"] is None
 
 
-def test_table_rows(scenario: demo.DemoScenario) -> None:
+def test_table_rows(scenario: demo_scenario.DemoScenario) -> None:
     msgs = _perfect_messages(scenario)
     msg = msgs[100]  # t = 20 s
-    table = demo.format_table(scenario, msg, 20.0)
+    table = report.format_table(scenario, msg, 20.0)
     lines = table.splitlines()
     assert lines[1].split()[:3] == ["track", "who", "conf"]
     assert len(lines) == 2 + len(msg.tracks)
@@ -193,9 +194,9 @@ def test_table_rows(scenario: demo.DemoScenario) -> None:
         row = next(line for line in lines[2:] if line.split()[0] == str(tr.track_id))
         truth = scenario.people[tr.track_id // 10 - 1].name
         assert row.endswith(truth)
-    compact = demo.format_table(scenario, msg, 20.0, compact=True)
+    compact = report.format_table(scenario, msg, 20.0, compact=True)
     assert "\n" not in compact and f"{len(msg.tracks)} tracks" in compact
-    assert "no /tracks_named message yet" in demo.format_table(scenario, None, 1.0)
+    assert "no /tracks_named message yet" in report.format_table(scenario, None, 1.0)
 
 
 _IGNORES_SIGINT = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); print('up', flush=True); " \
@@ -230,7 +231,7 @@ def test_children_die_with_the_demo(tmp_path: Path) -> None:
         f"c = start_child('orphan', ['-c', {_IGNORES_SIGINT!r}], dict(os.environ), Path({str(tmp_path)!r})); "
         "print(c.proc.pid, flush=True); os._exit(0)"
     )
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=30)
     pid = int(out.stdout.split()[0])
     deadline = time.monotonic() + 5.0
@@ -240,11 +241,11 @@ def test_children_die_with_the_demo(tmp_path: Path) -> None:
 
 
 def test_cli_rejects_bad_arguments(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    assert demo.main(["--rate-hz", "0"]) == 2
+    assert run.main(["--rate-hz", "0"]) == 2
     assert "--rate-hz" in capsys.readouterr().err
-    assert demo.main(["--faces", str(tmp_path / "missing")]) == 2
+    assert run.main(["--faces", str(tmp_path / "missing")]) == 2
     assert "no face photos" in capsys.readouterr().err
-    assert demo.main(["--people", "9"]) == 2
+    assert run.main(["--people", "9"]) == 2
     assert "num_people" in capsys.readouterr().err
 
 
@@ -252,6 +253,6 @@ def test_demo_faces_dir_lookup(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) 
     from face_reid_camera.common.resources import demo_faces_dir
 
     monkeypatch.delenv("FACE_REID_DEMO_FACES_DIR", raising=False)
-    assert demo_faces_dir() == FACES.resolve()  # a source checkout: the test fixtures
+    assert demo_faces_dir() == FACES_DIR.resolve()  # a source checkout: the test fixtures
     monkeypatch.setenv("FACE_REID_DEMO_FACES_DIR", str(tmp_path))
     assert demo_faces_dir() == tmp_path

@@ -1,0 +1,134 @@
+"""Simulated camera messages in columns: per camera and day while simulating, then one flat frame table.
+
+The flat table is what ``frames.npz`` stores (:mod:`face_reid_master.sim.scenario_files`): frames in stamp
+order (ties: camera order), the detections of each frame (shuffled within it), the faces in detection order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from face_reid_master.records import EMBEDDING_DIM
+from face_reid_master.sim.streams import S_SHUFFLE, stream_rng
+
+__all__ = ["DetectionColumns", "FrameTable", "assemble_frames"]
+
+
+@dataclass
+class DetectionColumns:
+    """Detections of one camera over one day, columnar (frame = index into that camera's stamps)."""
+
+    frame: list[NDArray[np.int64]] = field(default_factory=list)
+    gt: list[NDArray[np.int32]] = field(default_factory=list)
+    position: list[NDArray[np.float64]] = field(default_factory=list)
+    std: list[NDArray[np.float32]] = field(default_factory=list)
+    height: list[NDArray[np.float32]] = field(default_factory=list)
+    has_face: list[NDArray[np.bool_]] = field(default_factory=list)
+    embedding: list[NDArray[np.float32]] = field(default_factory=list)  # rows only for faces
+    face_score: list[NDArray[np.float32]] = field(default_factory=list)
+    face_quality: list[NDArray[np.float32]] = field(default_factory=list)
+    face_photo: list[NDArray[np.int32]] = field(default_factory=list)
+    face_glance: list[NDArray[np.int32]] = field(default_factory=list)
+    face_variant: list[NDArray[np.int16]] = field(default_factory=list)
+
+    def append(self, frame: NDArray[Any], gt: NDArray[Any], pos: NDArray[Any], std: NDArray[Any],
+               height: NDArray[Any], has_face: NDArray[Any], emb: NDArray[Any], score: NDArray[Any],
+               quality: NDArray[Any], photo: NDArray[Any], glance: NDArray[Any], variant: NDArray[Any]) -> None:
+        """Add a batch of detections (the face columns hold rows for the detections with a face only)."""
+        self.frame.append(np.asarray(frame, dtype=np.int64))
+        self.gt.append(np.asarray(gt, dtype=np.int32))
+        self.position.append(np.asarray(pos, dtype=np.float64).reshape(-1, 3))
+        self.std.append(np.asarray(std, dtype=np.float32))
+        self.height.append(np.asarray(height, dtype=np.float32))
+        self.has_face.append(np.asarray(has_face, dtype=bool))
+        self.embedding.append(np.asarray(emb, dtype=np.float32).reshape(-1, EMBEDDING_DIM))
+        self.face_score.append(np.asarray(score, dtype=np.float32))
+        self.face_quality.append(np.asarray(quality, dtype=np.float32))
+        self.face_photo.append(np.asarray(photo, dtype=np.int32))
+        self.face_glance.append(np.asarray(glance, dtype=np.int32))
+        self.face_variant.append(np.asarray(variant, dtype=np.int16))
+
+
+@dataclass
+class FrameTable:
+    """All frames of the scenario, flat (what frames.npz stores)."""
+
+    camera: NDArray[np.int16]
+    stamp_s: NDArray[np.float64]
+    offsets: NDArray[np.int64]
+    det: dict[str, NDArray[Any]]
+    face: dict[str, NDArray[Any]]
+
+
+def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionColumns]], seed: int) -> FrameTable:
+    """Merge the cameras' columns into one frame table in stamp order, detections shuffled within frames."""
+    frame_cam, frame_stamp, frame_key = [], [], []
+    det_parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("frame", "gt", "position", "std", "height", "face")}
+    face_parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("embedding", "score", "quality", "photo", "glance",
+                                                                  "variant")}
+    n_frames = 0
+    n_faces = 0
+    for cam_index, stamps, cols in per_camera:
+        frame_cam.append(np.full(stamps.size, cam_index, dtype=np.int16))
+        frame_stamp.append(stamps)
+        frame_key.append(np.arange(stamps.size) + n_frames)
+        for i in range(len(cols.frame)):
+            det_parts["frame"].append(cols.frame[i] + n_frames)
+            det_parts["gt"].append(cols.gt[i])
+            det_parts["position"].append(cols.position[i])
+            det_parts["std"].append(cols.std[i])
+            det_parts["height"].append(cols.height[i])
+            face_row = np.full(cols.has_face[i].size, -1, dtype=np.int64)
+            k = int(cols.has_face[i].sum())
+            face_row[cols.has_face[i]] = np.arange(k) + n_faces
+            n_faces += k
+            det_parts["face"].append(face_row)
+            face_parts["embedding"].append(cols.embedding[i])
+            face_parts["score"].append(cols.face_score[i])
+            face_parts["quality"].append(cols.face_quality[i])
+            face_parts["photo"].append(cols.face_photo[i])
+            face_parts["glance"].append(cols.face_glance[i])
+            face_parts["variant"].append(cols.face_variant[i])
+        n_frames += stamps.size
+    cam = np.concatenate(frame_cam) if frame_cam else np.zeros(0, np.int16)
+    stamp = np.concatenate(frame_stamp) if frame_stamp else np.zeros(0)
+    order = np.lexsort((cam, stamp))  # by stamp, then camera
+    new_index = np.empty(order.size, dtype=np.int64)
+    new_index[order] = np.arange(order.size)
+
+    def cat(parts: list[NDArray[Any]], dtype: Any, width: int = 0) -> NDArray[Any]:
+        if parts:
+            return np.concatenate(parts).astype(dtype)
+        return np.zeros((0, width) if width else 0, dtype=dtype)
+
+    det_frame = new_index[cat(det_parts["frame"], np.int64)]
+    shuffle = stream_rng(seed, S_SHUFFLE).random(det_frame.size)
+    det_order = np.lexsort((shuffle, det_frame))
+    det = {
+        "position": cat(det_parts["position"], np.float64, 3)[det_order],
+        "std_m": cat(det_parts["std"], np.float32)[det_order],
+        "height_m": cat(det_parts["height"], np.float32)[det_order],
+        "gt_id": cat(det_parts["gt"], np.int32)[det_order],
+    }
+    face_row = cat(det_parts["face"], np.int64)[det_order]
+    # renumber faces in detection order
+    has = face_row >= 0
+    face_order = face_row[has]
+    det_face = np.full(face_row.size, -1, dtype=np.int32)
+    det_face[has] = np.arange(face_order.size, dtype=np.int32)
+    det["face"] = det_face
+    face = {
+        "embedding": cat(face_parts["embedding"], np.float32, EMBEDDING_DIM)[face_order],
+        "score": cat(face_parts["score"], np.float32)[face_order],
+        "quality": cat(face_parts["quality"], np.float32)[face_order],
+        "photo": cat(face_parts["photo"], np.int32)[face_order],
+        "glance": cat(face_parts["glance"], np.int32)[face_order],
+        "variant": cat(face_parts["variant"], np.int16)[face_order],
+    }
+    counts = np.bincount(det_frame, minlength=order.size)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return FrameTable(cam[order], stamp[order], offsets, det, face)

@@ -1,0 +1,114 @@
+"""Pixel level: every camera frame rendered (RGB-D, the glance's photo on the face) and run through the real
+:class:`~face_reid_camera.pipeline.CameraPipeline`; its detections are matched to the simulated people by
+position (within 0.5 m) for the ground truth.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, TextIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from face_reid_master.records import EMBEDDING_DIM
+from face_reid_master.sim.frame_table import DetectionColumns
+from face_reid_master.sim.motion import sample_trajectories
+from face_reid_master.sim.photos import IdentityPhotos, PhotoBank, glance_photos
+from face_reid_master.sim.streams import S_FACES, S_LOOK, S_RENDER, stream_rng
+from face_reid_master.sim.visibility import camera_visibility
+from face_reid_master.sim.world import World
+
+if TYPE_CHECKING:
+    from face_reid_master.sim.simulate import Day, SimConfig
+
+__all__ = ["pixel_camera_frames"]
+
+
+def pixel_camera_frames(
+    cfg: SimConfig, world: World, day: Day, per_cam_stamps: list[NDArray[np.float64]],
+    identities: list[IdentityPhotos], photo_offsets: list[int], heights: NDArray[np.float64],
+    bank: PhotoBank, glance_counter: list[int], log: TextIO | None, frames_done: list[int], frames_total: int,
+) -> list[DetectionColumns]:
+    """Render every camera frame of one day and run the real camera pipeline on it."""
+    from scipy.optimize import linear_sum_assignment
+
+    from face_reid_camera.faces.photos import read_photo
+    from face_reid_camera.pipeline import CameraPipeline, CameraPipelineConfig
+    from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene
+
+    photos_flat = [ph for ident in identities for ph in ident.photos]
+    crops: dict[int, NDArray[np.uint8]] = {}
+
+    def crop_of(photo: int) -> NDArray[np.uint8]:
+        if photo not in crops:
+            ph = photos_flat[photo]
+            crops[photo] = crop_face_for_rendering(read_photo(bank.faces_dir / ph.rel_path), ph.box_xywh)
+        return crops[photo]
+
+    embedder = bank.photo_embedder
+    look = stream_rng(cfg.seed, S_LOOK, day.day)
+    clothes = {gt: (tuple(int(c) for c in look.integers(20, 230, 3)), tuple(int(c) for c in look.integers(20, 120, 3)),
+                    tuple(int(c) for c in look.integers(10, 90, 3))) for gt in day.gt_ids}
+    floor = float(max(world.room.width_m, world.room.depth_m) + 4.0)
+    out: list[DetectionColumns] = []
+    step = max(1, frames_total // 10)
+    for cam_index, stamps in enumerate(per_cam_stamps):
+        camera = world.cameras[cam_index]
+        rng_face = stream_rng(cfg.seed, S_FACES, day.day, cam_index)
+        pipeline = CameraPipeline(CameraPipelineConfig(camera_id=camera.camera_id), camera.pose,
+                                  embedder.detector, embedder.embedder)
+        cols = DetectionColumns()
+        out.append(cols)
+        if stamps.size == 0:
+            continue
+        xy, facing = sample_trajectories(day.trajectories, stamps)
+        in_room = world.room.contains(xy)
+        vis = camera_visibility(camera, xy, facing, heights, in_room, cfg.visibility)
+        photo_of, glance_of = glance_photos(stamps, vis.face_visible, day.gt_ids, day.day, identities, photo_offsets,
+                                            cfg.glance_gap_s, rng_face, glance_counter)
+        for f in range(stamps.size):
+            people, index = [], []
+            for p, gt in enumerate(day.gt_ids):
+                if not in_room[f, p]:
+                    continue
+                face = crop_of(int(photo_of[f, p])) if photo_of[f, p] >= 0 else None
+                body, legs, hair = clothes[gt]
+                people.append(SyntheticPerson(float(xy[f, p, 0]), float(xy[f, p, 1]), float(heights[p]),
+                                              float(facing[f, p]), face_image_bgr=face, body_color_bgr=body,
+                                              legs_color_bgr=legs, hair_color_bgr=hair))
+                index.append(p)
+            frame = render_scene(people, camera.intrinsics, camera.pose,
+                                 rng=stream_rng(cfg.seed, S_RENDER, day.day, cam_index, f),
+                                 max_face_angle_deg=cfg.visibility.max_face_angle_deg, floor_size_m=floor,
+                                 max_range_m=cfg.visibility.max_range_m)  # the depth range of the world model
+            depth = frame.depth_mm.astype(np.float32) / np.float32(1000.0)
+            depth[frame.depth_mm == 0] = np.nan
+            result = pipeline.process(frame.rgb_bgr, depth, camera.intrinsics)
+            dets = result.people
+            gt_ids = np.full(len(dets), -1, dtype=np.int32)
+            matched_p = np.full(len(dets), -1, dtype=np.int64)
+            if dets and index:
+                det_xy = np.array([d.position_world[:2] for d in dets])
+                true_xy = xy[f, index]
+                cost = np.linalg.norm(det_xy[:, None] - true_xy[None], axis=2)
+                rows, cols_ = linear_sum_assignment(cost)
+                for r, c in zip(rows, cols_, strict=True):
+                    if cost[r, c] <= 0.5:
+                        matched_p[r] = index[c]
+                        gt_ids[r] = day.gt_ids[index[c]]
+            has_face = np.array([d.face is not None for d in dets], dtype=bool)
+            fi = np.flatnonzero(has_face)
+            emb = np.array([dets[i].face.embedding for i in fi], dtype=np.float32).reshape(-1, EMBEDDING_DIM)  # type: ignore[union-attr]
+            score = np.array([dets[i].face.detection.score for i in fi], dtype=np.float32)  # type: ignore[union-attr]
+            quality = np.array([dets[i].face.quality for i in fi], dtype=np.float32)  # type: ignore[union-attr]
+            photo = np.array([photo_of[f, matched_p[i]] if matched_p[i] >= 0 else -1 for i in fi], dtype=np.int32)
+            glance = np.array([glance_of[f, matched_p[i]] if matched_p[i] >= 0 else -1 for i in fi], dtype=np.int32)
+            cols.append(np.full(len(dets), f), gt_ids,
+                    np.array([d.position_world for d in dets]).reshape(-1, 3),
+                    np.array([d.position_std_m for d in dets]), np.array([d.height_m for d in dets]),
+                    has_face, emb, score, quality, photo, glance, np.full(fi.size, -1, np.int16))
+            frames_done[0] += 1
+            if log is not None and (frames_done[0] % step == 0 or frames_done[0] == frames_total):
+                log.write(f"  rendered + processed {frames_done[0]}/{frames_total} frames\n")
+                log.flush()
+    return out

@@ -1,0 +1,335 @@
+"""The scenario directory: what :func:`write_scenario` writes and :func:`load_scenario` reads back.
+
+- ``scenario.json``: ``format`` ("face-reid-scenario"), ``version``, ``level``, ``seed``,
+  ``parameters`` (every setting), ``room``, ``doors``, ``cameras`` (id, xyz_rpy, rotation, translation,
+  intrinsics, frame phase), ``photos`` (index, identity, path relative to ``faces_dir``),
+  ``identities`` (gt_id, name, height_m, days, photos per day as photo indices), ``days`` (day,
+  start_s, end_s, gt_ids) and ``summary`` (frames, detections, faces, glances, false positives, track
+  losses and visible segments per person and in total, coverage, skipped photos).
+- ``frames.npz``: camera frames in stamp order (ties: camera order) and their detections, flat:
+  ``frame_camera`` (F,) int16 index into cameras, ``frame_stamp_s`` (F,) float64, ``frame_offsets``
+  (F+1,) int64: detections of frame i are rows offsets[i]:offsets[i+1] of ``det_position`` (D, 3)
+  float64 world m, ``det_std_m`` (D,) float32, ``det_height_m`` (D,) float32, ``det_gt_id`` (D,) int32
+  (-1 = false positive), ``det_face`` (D,) int32 row into the face arrays or -1; ``face_embedding``
+  (E, 128) float32, ``face_score``, ``face_quality`` (E,) float32, ``face_photo`` (E,) int32 photo
+  index (-1 unknown), ``face_glance`` (E,) int32, ``face_variant`` (E,) int16 (-1 at pixel level).
+- ``ground_truth.npz``: ``t_s`` (T,) at ``ground_truth_rate_hz`` for each day, ``day`` (T,) int8,
+  ``gt_id`` (P,) int32, ``xy`` (P, T, 2) float32 (NaN when the person is absent that day),
+  ``facing_rad`` (P, T) float32, ``in_room`` (P, T), ``in_view`` (P, T, M), ``face_visible`` (P, T, M) bool.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, PersonRecord
+from face_reid_master.sim.visibility import coverage_fraction
+from face_reid_master.sim.world import SimCamera, World
+
+if TYPE_CHECKING:
+    from face_reid_master.sim.frame_table import FrameTable
+    from face_reid_master.sim.photos import IdentityPhotos, PhotoBank
+    from face_reid_master.sim.simulate import Day, SimConfig
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "GroundTruth",
+    "Scenario",
+    "ScenarioFormatError",
+    "SimResult",
+    "load_scenario",
+    "load_scenario_document",
+    "scenario_document",
+    "write_npz",
+    "write_scenario",
+]
+
+FORMAT_NAME = "face-reid-scenario"
+FORMAT_VERSION = 1
+
+class ScenarioFormatError(ValueError):
+    """A scenario directory is missing files or holds inconsistent data."""
+
+
+@dataclass
+class SimResult:
+    """What :func:`~face_reid_master.sim.simulate.simulate` produced: the json document, the frame table, the
+    ground truth arrays (the contents of a scenario directory)."""
+
+    document: dict[str, Any]
+    frames: FrameTable
+    ground_truth: dict[str, NDArray[Any]]
+
+
+def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities: list[IdentityPhotos],
+                      photo_offsets: list[int], days: list[Day], heights: NDArray[np.float64],
+                      phases: NDArray[np.float64], table: FrameTable, gt: dict[str, NDArray[Any]],
+                      loss_info: list[dict[str, Any]], n_glances: int) -> dict[str, Any]:
+    """The ``scenario.json`` document of a simulated scenario."""
+    photos = []
+    for ident, offset in zip(identities, photo_offsets, strict=True):
+        for k, ph in enumerate(ident.photos):
+            photos.append({"index": int(offset + k), "identity": ident.name, "path": ph.rel_path})
+    ident_docs = []
+    for gt_id, (ident, offset) in enumerate(zip(identities, photo_offsets, strict=True)):
+        present = [d.day for d in days if gt_id in d.gt_ids]
+        ident_docs.append({
+            "gt_id": gt_id,
+            "name": ident.name,
+            "height_m": round(float(heights[gt_id]), 4),
+            "days": present,
+            "photos": {str(d): [int(offset + i) for i in ident.day_photos[0 if d == 1 else 1]] for d in present},
+        })
+    n_det = int(table.det["gt_id"].size)
+    summary = {
+        "duration_s": cfg.duration_s,
+        "days": len(days),
+        "people_per_day": cfg.num_people,
+        "identities": len(identities),
+        "cameras": len(world.cameras),
+        "frames": int(table.stamp_s.size),
+        "detections": n_det,
+        "false_positives": int((table.det["gt_id"] < 0).sum()),
+        "face_detections": int(table.face["score"].size),
+        "glances": int(n_glances),
+        "losses": int(sum(d["losses"] for d in loss_info)),
+        "visible_segments": int(sum(d["visible_segments"] for d in loss_info)),
+        "coverage_fraction": round(coverage_fraction(world, cfg.visibility), 4),
+        "per_day": loss_info,
+        "skipped_unreadable": sorted(set(bank.skipped_unreadable)),
+        "skipped_no_face": sorted(set(bank.skipped_no_face)),
+        "identities_with_too_few_photos": sorted(set(bank.too_few_photos)),
+    }
+    return {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "generator": "face-reid-sim",
+        "level": cfg.level,
+        "seed": int(cfg.seed),
+        "faces_dir": str(bank.faces_dir),
+        "parameters": cfg.to_json(),
+        "room": {"width_m": world.room.width_m, "depth_m": world.room.depth_m},
+        "doors": [{"centre_xy": [round(float(v), 4) for v in d.centre_xy],
+                   "inward_normal": [float(v) for v in d.inward_normal], "width_m": d.width_m} for d in world.doors],
+        "cameras": [{
+            "camera_id": c.camera_id,
+            "xyz_rpy": [round(float(v), 6) for v in c.xyz_rpy],
+            "rotation": np.round(c.pose.rotation, 9).tolist(),
+            "translation": np.round(c.pose.translation, 9).tolist(),
+            "intrinsics": {"fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy,
+                           "width": c.intrinsics.width, "height": c.intrinsics.height},
+            "frame_phase_s": round(float(ph), 9),
+        } for c, ph in zip(world.cameras, phases, strict=True)],
+        "photos": photos,
+        "identities": ident_docs,
+        "days": [{"day": d.day, "start_s": d.start_s, "end_s": d.start_s + cfg.duration_s, "gt_ids": d.gt_ids}
+                 for d in days],
+        "summary": summary,
+    }
+
+
+def write_npz(path: Path, arrays: dict[str, NDArray[Any]]) -> None:
+    """An uncompressed .npz with fixed zip timestamps (byte-identical for identical arrays), atomically."""
+    tmp = path.with_name(path.name + ".tmp")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for name in sorted(arrays):
+            buf = io.BytesIO()
+            np.lib.format.write_array(buf, np.ascontiguousarray(arrays[name]), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, buf.getvalue())
+    os.replace(tmp, path)
+
+
+def write_scenario(result: SimResult, out_dir: str | Path) -> Path:
+    """Write scenario.json, frames.npz and ground_truth.npz into ``out_dir`` (created if needed)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    table = result.frames
+    arrays = {
+        "frame_camera": table.camera, "frame_stamp_s": table.stamp_s, "frame_offsets": table.offsets,
+        "det_position": table.det["position"], "det_std_m": table.det["std_m"], "det_height_m": table.det["height_m"],
+        "det_gt_id": table.det["gt_id"], "det_face": table.det["face"],
+        "face_embedding": table.face["embedding"], "face_score": table.face["score"],
+        "face_quality": table.face["quality"], "face_photo": table.face["photo"], "face_glance": table.face["glance"],
+        "face_variant": table.face["variant"],
+    }
+    write_npz(out / "frames.npz", arrays)
+    write_npz(out / "ground_truth.npz", result.ground_truth)
+    tmp = out / "scenario.json.tmp"
+    tmp.write_text(json.dumps(result.document, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    os.replace(tmp, out / "scenario.json")
+    return out
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """True state sampled on a regular grid per day (see the module doc for shapes)."""
+
+    t_s: NDArray[np.float64]
+    day: NDArray[np.int8]
+    gt_id: NDArray[np.int32]
+    xy: NDArray[np.float32]
+    facing_rad: NDArray[np.float32]
+    in_room: NDArray[np.bool_]
+    in_view: NDArray[np.bool_]
+    face_visible: NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A loaded scenario: the frames as master-core records in stamp order, plus parallel ground truth.
+
+    ``frame_gt_ids[i][j]`` is the true person (gt_id, -1 = false positive) of ``frames[i].people[j]``;
+    ``frame_face_photos[i][j]`` the photo index its face came from (-1: no face / unknown).
+    """
+
+    directory: Path
+    document: dict[str, Any]
+    cameras: tuple[SimCamera, ...]
+    frames: list[CameraFrameRecord]
+    frame_gt_ids: list[NDArray[np.int32]]
+    frame_face_photos: list[NDArray[np.int32]]
+    ground_truth: GroundTruth
+
+    @property
+    def level(self) -> str:
+        return str(self.document["level"])
+
+    @property
+    def seed(self) -> int:
+        return int(self.document["seed"])
+
+    @property
+    def identities(self) -> list[dict[str, Any]]:
+        return list(self.document["identities"])
+
+    @property
+    def days(self) -> list[dict[str, Any]]:
+        return list(self.document["days"])
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        return dict(self.document["summary"])
+
+
+_FRAME_KEYS = ("frame_camera", "frame_stamp_s", "frame_offsets", "det_position", "det_std_m", "det_height_m",
+               "det_gt_id", "det_face", "face_embedding", "face_score", "face_quality", "face_photo", "face_glance",
+               "face_variant")
+_GT_KEYS = ("t_s", "day", "gt_id", "xy", "facing_rad", "in_room", "in_view", "face_visible")
+
+
+def _read_npz(path: Path, keys: Sequence[str]) -> dict[str, NDArray[Any]]:
+    if not path.is_file():
+        raise ScenarioFormatError(f"scenario file {path} is missing")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [k for k in keys if k not in data.files]
+            if missing:
+                raise ScenarioFormatError(f"{path} lacks arrays {missing}")
+            return {k: data[k] for k in keys}
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+        if isinstance(exc, ScenarioFormatError):
+            raise
+        raise ScenarioFormatError(f"{path} is not a readable npz file: {exc}") from exc
+
+
+def load_scenario_document(directory: str | Path) -> dict[str, Any]:
+    """The checked ``scenario.json`` of a scenario directory; ScenarioFormatError if missing or foreign."""
+    base = Path(directory)
+    doc_path = base / "scenario.json"
+    if not doc_path.is_file():
+        raise ScenarioFormatError(f"{base} is not a scenario directory (no scenario.json)")
+    try:
+        doc = json.loads(doc_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ScenarioFormatError(f"{doc_path} is not valid JSON: {exc}") from exc
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT_NAME:
+        raise ScenarioFormatError(f"{doc_path} is not a {FORMAT_NAME} document")
+    if doc.get("version") != FORMAT_VERSION:
+        raise ScenarioFormatError(f"{doc_path} has format version {doc.get('version')!r}, this reader knows "
+                                  f"{FORMAT_VERSION}")
+    if not isinstance(doc.get("identities"), list):
+        raise ScenarioFormatError(f"{doc_path} has no identities list")
+    return doc
+
+
+def load_scenario(directory: str | Path) -> Scenario:
+    """Read a scenario directory written by :func:`write_scenario`; ScenarioFormatError if it is broken."""
+    base = Path(directory)
+    doc_path = base / "scenario.json"
+    doc = load_scenario_document(base)
+    try:
+        cameras = tuple(
+            SimCamera(c["camera_id"], CameraIntrinsics(**c["intrinsics"]),
+                       CameraPose(np.array(c["rotation"], dtype=np.float64),
+                                  np.array(c["translation"], dtype=np.float64)),
+                       tuple(float(v) for v in c["xyz_rpy"]))
+            for c in doc["cameras"])
+        n_ids = len(doc["identities"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ScenarioFormatError(f"{doc_path} has malformed cameras/identities: {exc}") from exc
+    a = _read_npz(base / "frames.npz", _FRAME_KEYS)
+    n_f, n_d, n_e = a["frame_stamp_s"].size, a["det_gt_id"].size, a["face_score"].size
+    offsets = a["frame_offsets"]
+    problems = []
+    if a["frame_camera"].shape != (n_f,) or offsets.shape != (n_f + 1,):
+        problems.append("frame arrays disagree in length")
+    elif offsets[0] != 0 or offsets[-1] != n_d or np.any(np.diff(offsets) < 0):
+        problems.append("frame_offsets are not a monotone 0..detections partition")
+    if n_f and (a["frame_camera"].min() < 0 or a["frame_camera"].max() >= len(cameras)):
+        problems.append("frame_camera index out of range")
+    if n_f > 1 and np.any(np.diff(a["frame_stamp_s"]) < 0):
+        problems.append("frames are not in stamp order")
+    if a["det_position"].shape != (n_d, 3) or any(a[k].shape != (n_d,) for k in ("det_std_m", "det_height_m",
+                                                                                   "det_face")):
+        problems.append("detection arrays disagree in shape")
+    if a["face_embedding"].shape != (n_e, EMBEDDING_DIM) or any(
+            a[k].shape != (n_e,) for k in ("face_quality", "face_photo", "face_glance", "face_variant")):
+        problems.append("face arrays disagree in shape")
+    if n_d and (a["det_face"].max() >= n_e or a["det_face"].min() < -1 or a["det_gt_id"].max() >= n_ids
+                or a["det_gt_id"].min() < -1):
+        problems.append("det_face / det_gt_id out of range")
+    if not (np.isfinite(a["det_position"]).all() and np.isfinite(a["face_embedding"]).all()
+            and np.isfinite(a["frame_stamp_s"]).all()):
+        problems.append("non-finite positions, stamps or embeddings")
+    if problems:
+        raise ScenarioFormatError(f"{base / 'frames.npz'}: " + "; ".join(problems))
+    g = _read_npz(base / "ground_truth.npz", _GT_KEYS)
+    ground_truth = GroundTruth(**g)
+    frames: list[CameraFrameRecord] = []
+    gt_ids: list[NDArray[np.int32]] = []
+    face_photos: list[NDArray[np.int32]] = []
+    camera_ids = [c.camera_id for c in cameras]
+    pos, std, height, det_face, det_gt = (a["det_position"], a["det_std_m"].tolist(), a["det_height_m"].tolist(),
+                                          a["det_face"].tolist(), a["det_gt_id"])
+    emb, f_score, f_quality, f_photo = a["face_embedding"], a["face_score"].tolist(), a["face_quality"].tolist(), \
+        a["face_photo"]
+    for i in range(n_f):
+        lo, hi = int(offsets[i]), int(offsets[i + 1])
+        people = []
+        photos = np.full(hi - lo, -1, dtype=np.int32)
+        for j in range(lo, hi):
+            k = det_face[j]
+            if k >= 0:
+                people.append(PersonRecord(pos[j], std[j], height[j], emb[k], f_score[k], f_quality[k]))
+                photos[j - lo] = f_photo[k]
+            else:
+                people.append(PersonRecord(pos[j], std[j], height[j]))
+        frames.append(CameraFrameRecord(camera_ids[int(a["frame_camera"][i])], float(a["frame_stamp_s"][i]),
+                                        tuple(people)))
+        gt_ids.append(det_gt[lo:hi])
+        face_photos.append(photos)
+    return Scenario(base, doc, cameras, frames, gt_ids, face_photos, ground_truth)
