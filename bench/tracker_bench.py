@@ -5,7 +5,7 @@ min(10, N) detections per frame (rotating through the people, so every track sta
 Also timed: a frame applied 50 ms late (out-of-order path), ``snapshots()`` and, as the baseline
 that motivated the vectorised filter, one filterpy ``KalmanFilter`` object per track.
 
-Run: PYTHONPATH=. python bench/tracker_bench.py [--frames 1500]
+Run: python bench/tracker_bench.py [--frames 1500]
 """
 
 from __future__ import annotations
@@ -13,12 +13,18 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout, not an installed copy
+
+from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.kalman import ConstantVelocityModel
-from face_reid_master.tracking.tracker import Detection, Tracker, TrackerConfig
+from face_reid_master.tracking.records import Detection
+from face_reid_master.tracking.tracker import Tracker
 
 RATE_HZ = 30.0
 VELOCITY = np.array([0.5, 0.2])
@@ -34,7 +40,7 @@ def _frame(start: np.ndarray, k: int, n_det: int, rng: np.random.Generator) -> t
     n = start.shape[0]
     idx = [(k * n_det + j) % n for j in range(n_det)]
     pos = start[idx] + VELOCITY * t + rng.normal(scale=0.05, size=(n_det, 2))
-    return t, [Detection(p, "cam", 0.05) for p in pos]
+    return t, [Detection(p, 0.05) for p in pos]
 
 
 def _stats_ms(samples: list[float]) -> dict[str, float]:
@@ -58,7 +64,7 @@ def bench_tracker(n_tracks: int, n_frames: int) -> dict[str, object]:
         times.append(time.perf_counter() - t0)
         if k % 10 == 5:  # an extra frame from a second camera, 50 ms in the past
             t_late = t - 0.05
-            late = [Detection(d.position_xy - VELOCITY * 0.05, "cam2", 0.05) for d in dets]
+            late = [Detection(d.position_xy - VELOCITY * 0.05, 0.05) for d in dets]
             t0 = time.perf_counter()
             tracker.update(late, t_late, "cam2")
             late_times.append(time.perf_counter() - t0)

@@ -29,7 +29,9 @@ from face_reid_master.identity.records import IdentityEventKind, LearnedFace
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.predefined_people import PredefinedPeople
 from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, NamedTrackRecord
-from face_reid_master.tracking.tracker import Detection, FrameStatus, Tracker, TrackerConfig, TrackState
+from face_reid_master.tracking.config import TrackerConfig
+from face_reid_master.tracking.records import FrameStatus, TrackState
+from face_reid_master.tracking.tracker import Tracker
 
 
 @dataclass(frozen=True)
@@ -197,9 +199,9 @@ class MasterCore:
         if cfg.known_camera_ids and frame.camera_id not in cfg.known_camera_ids:
             st.frames_rejected_unknown_camera += 1
             return FrameOutcome(False, f"unknown camera id {frame.camera_id!r}")
-        if not frame.camera_id:
+        if not isinstance(frame.camera_id, str) or not frame.camera_id:
             st.frames_rejected_unknown_camera += 1
-            return FrameOutcome(False, "empty camera id")
+            return FrameOutcome(False, "empty camera id" if frame.camera_id == "" else "camera id is not a str")
         if now_s is not None:
             if stamp < now_s - cfg.max_stamp_age_s:
                 st.frames_rejected_stale += 1
@@ -208,8 +210,8 @@ class MasterCore:
                 st.frames_rejected_future += 1
                 return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)")
 
-        detections, embeddings, person_index = self._detections(frame)
-        result = self.tracker.update(detections, stamp, frame.camera_id)
+        positions, stds, heights, embeddings, person_index = self._detections(frame)
+        result = self.tracker.update_arrays(positions, stds, heights, stamp, frame.camera_id)
         if result.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             st.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})")
@@ -248,18 +250,21 @@ class MasterCore:
 
     def _detections(
         self, frame: CameraFrameRecord
-    ) -> tuple[list[Detection], dict[int, NDArray[np.float32]], list[int]]:
-        """Valid detections, their usable embeddings by detection index, and detection -> person index.
+    ) -> tuple[
+        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], dict[int, NDArray[np.float32]], list[int]
+    ]:
+        """The frame's valid detections as tracker input (positions (N, 2), stds (N,), heights (N,)),
+        their usable embeddings by detection index, and detection -> person index.
 
-        Positions and embeddings are validated in one vectorised pass over the frame (this runs for
-        every person of every camera frame).
+        This is the one place a frame's people are validated (the tracker and the face table are handed
+        checked values), in one vectorised pass: it runs for every person of every camera frame.
         """
         cfg, st = self.config, self.stats
         people = frame.people
         n = len(people)
         st.detections_received += n
         if n == 0:
-            return [], {}, []
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0), {}, []
         xy = np.full((n, 2), np.nan)
         std = np.full(n, np.nan)
         for i, person in enumerate(people):
@@ -270,21 +275,22 @@ class MasterCore:
         valid = np.isfinite(xy).all(axis=1) & np.isfinite(std) & (std > 0)
         st.detections_rejected_position += int(n - np.count_nonzero(valid))
         person_index = [int(i) for i in np.flatnonzero(valid)]
-        detections = [
-            Detection(xy[i], frame.camera_id, float(std[i]), float(people[i].height_m), payload_index=k)
-            for k, i in enumerate(person_index)
-        ]
+        tracker_input = (
+            xy[valid],
+            std[valid],
+            np.array([float(people[i].height_m) for i in person_index], dtype=np.float64),
+        )
         with_face = [
             (k, i) for k, i in enumerate(person_index)
             if people[i].embedding is not None and np.size(people[i].embedding) > 0
         ]
         embeddings: dict[int, NDArray[np.float32]] = {}
         if not with_face:
-            return detections, embeddings, person_index
+            return *tracker_input, embeddings, person_index
         good_len = [(k, i) for k, i in with_face if np.size(people[i].embedding) == EMBEDDING_DIM]
         st.embeddings_rejected_length += len(with_face) - len(good_len)
         if not good_len:
-            return detections, embeddings, person_index
+            return *tracker_input, embeddings, person_index
         stacked = np.stack([np.asarray(people[i].embedding, dtype=np.float32).reshape(-1) for _, i in good_len])
         finite = np.isfinite(stacked).all(axis=1)
         quality = np.array([people[i].face_quality for _, i in good_len], dtype=np.float64)
@@ -293,7 +299,7 @@ class MasterCore:
         st.embeddings_skipped_quality += int(np.count_nonzero(finite & ~good_quality))
         for row in np.flatnonzero(finite & good_quality):
             embeddings[good_len[row][0]] = stacked[row]
-        return detections, embeddings, person_index
+        return *tracker_input, embeddings, person_index
 
     # ------------------------------------------------------------------------------ identities
     def _identity_step(self, deleted: Iterable[int], stamp: float) -> list[Any]:

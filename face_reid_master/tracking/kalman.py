@@ -8,9 +8,8 @@ predicting over ``a`` then ``b`` seconds gives exactly the same covariance as pr
 
 The model is *defined* with filterpy (:meth:`ConstantVelocityModel.to_filterpy` builds the
 equivalent ``filterpy.kalman.KalmanFilter``, and the tests check the two agree to 1e-12), but the hot
-path runs in numpy on stacked ``(N, 4)`` / ``(N, 4, 4)`` arrays: with one filterpy object per track,
-predicting 50 tracks and updating 10 alone takes 2-3 ms (bench/tracker_bench.py), three to five
-times the whole vectorised tracker update, far above the 1 ms budget.
+path runs in numpy on stacked ``(N, 4)`` / ``(N, 4, 4)`` arrays, all tracks at once (one filterpy
+object per track is too slow for the per-frame budget; see bench/tracker_bench.py).
 """
 
 from __future__ import annotations
@@ -20,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from filterpy.common import Q_continuous_white_noise
 from filterpy.kalman import KalmanFilter
+
+from face_reid_camera.common.checks import check_real
 
 __all__ = ["ConstantVelocityModel", "mahalanobis_sq"]
 
@@ -42,11 +43,7 @@ class ConstantVelocityModel:
 
     def __post_init__(self) -> None:
         for name in ("accel_noise_mps2", "init_velocity_std_mps"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool):
-                raise ValueError(f"{name} must be a real number, got {type(value).__name__}")
-            if not np.isfinite(value) or value <= 0.0:
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+            check_real(name, getattr(self, name), 0.0, low_open=True)
 
     @property
     def spectral_density(self) -> float:

@@ -8,19 +8,18 @@ identity), and the predefined-people gallery names it.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from conftest import FACES_DIR
 
 from face_reid_camera.faces.detector import YuNetDetector
 from face_reid_camera.faces.embedder import FaceEmbedder
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord, PersonRecord
-from face_reid_master.tracking.tracker import TrackerConfig
+from face_reid_master.tracking.config import TrackerConfig
 
-FACES = Path(__file__).parent / "data" / "faces"
 IDS = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez"]
 
 
@@ -31,7 +30,7 @@ def embeddings() -> dict[str, np.ndarray]:
     out = {}
     for ident in IDS:
         rows = []
-        for path in sorted((FACES / ident).glob("*.jpg")):
+        for path in sorted((FACES_DIR / ident).glob("*.jpg")):
             photo = cv2.imread(str(path))
             best = max(detector.detect(photo), key=lambda d: float(d.box_xywh[2] * d.box_xywh[3]))
             rows.append(embedder.embed_faces(photo, [best.landmarks])[0])
@@ -125,6 +124,34 @@ def test_bad_input_is_counted_not_raised(embeddings) -> None:
     assert s.detections_rejected_position == 2
     assert (s.embeddings_rejected_length, s.embeddings_rejected_nonfinite) == (1, 1)
     assert s.embeddings_used == 0
+
+
+@pytest.mark.parametrize("bad", [(math.nan, 0.0), (0.0, math.inf), (-math.inf, math.nan), (1.0,), ()])
+def test_bad_positions_are_rejected_and_counted_the_others_tracked(bad: tuple[float, ...]) -> None:
+    # The core is the one place a frame is validated: the tracker only ever sees the valid rows.
+    core = MasterCore(_config())
+    people = (PersonRecord(np.array([1.0, 1.0, 0.0]), 0.05), PersonRecord(np.array(bad), 0.05),
+              PersonRecord(np.array([3.0, 3.0, 0.0]), 0.05))
+    out = core.process_frame(CameraFrameRecord("cam_a", 0.0, people))
+    assert out.accepted and sorted(out.track_of_person) == [0, 2] and len(out.tracks_created) == 2
+    assert (core.stats.detections_received, core.stats.detections_rejected_position) == (3, 1)
+    assert core.tracker.stats.detections_received == 2
+    assert all(np.isfinite(s.position_xy).all() for s in core.tracker.snapshots())
+
+
+@pytest.mark.parametrize("std", [0.0, -0.1, math.nan, math.inf])
+def test_bad_position_std_is_rejected_and_counted(std: float) -> None:
+    core = MasterCore(_config())
+    out = core.process_frame(CameraFrameRecord("cam_a", 0.0, (PersonRecord(np.array([1.0, 1.0, 0.0]), std),)))
+    assert out.accepted and out.track_of_person == {} and out.tracks_created == ()
+    assert core.stats.detections_rejected_position == 1 and core.tracker.num_tracks == 0
+
+
+def test_a_camera_id_that_is_not_a_str_is_rejected_and_counted() -> None:
+    core = MasterCore(_config())
+    out = core.process_frame(CameraFrameRecord(7, 0.0, (PersonRecord(np.zeros(3), 0.05),)))  # type: ignore[arg-type]
+    assert not out.accepted and "str" in out.reason
+    assert core.stats.frames_rejected_unknown_camera == 1 and core.tracker.stats.frames_processed == 0
 
 
 def test_config_validation() -> None:

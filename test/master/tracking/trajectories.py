@@ -19,7 +19,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.tracking.tracker import Detection, UpdateResult
+from face_reid_master.tracking.records import Detection, UpdateResult
 
 FloatArray = NDArray[np.float64]
 
@@ -129,18 +129,12 @@ class Scenario:
     latency_s: float = 0.0
     latency_jitter_s: float = 0.0
     reported_std_m: float | None = None  # std given to the tracker; default max(noise, 0.02)
-    embedding_dim: int = 0  # > 0: per-person unit embeddings (+ noise) on every detection
     seed: int = 0
 
     def frames(self) -> list[SyntheticFrame]:
         """All frames of all cameras, sorted by arrival time (ties by stamp)."""
         rng = np.random.default_rng(self.seed)
         std = self.reported_std_m if self.reported_std_m is not None else max(self.noise_std_m, 0.02)
-        protos: dict[int, FloatArray] = {}
-        if self.embedding_dim:
-            for w in self.walkers:
-                v = rng.normal(size=self.embedding_dim)
-                protos[w.person_id] = v / np.linalg.norm(v)
         out: list[SyntheticFrame] = []
         for cam in self.cameras:
             n_frames = math.floor((self.duration_s - cam.phase_s) * cam.rate_hz + 1e-9) + 1
@@ -153,17 +147,13 @@ class Scenario:
                     if p is None or not cam.sees(p)[0] or rng.random() < self.miss_probability:
                         continue
                     z = p + np.asarray(cam.bias_xy) + rng.normal(scale=self.noise_std_m, size=2)
-                    emb = None
-                    if self.embedding_dim:
-                        e = protos[w.person_id] + rng.normal(scale=0.05, size=self.embedding_dim)
-                        emb = e / np.linalg.norm(e)
-                    dets.append(Detection(z, cam.camera_id, std, height_m=1.7, embedding=emb, face_score=0.9))
+                    dets.append(Detection(z, std, height_m=1.7))
                     gts.append(w.person_id)
                 for _ in range(rng.poisson(self.false_positives_per_frame)):
                     ang = cam.yaw_rad + rng.uniform(-cam.hfov_rad / 2, cam.hfov_rad / 2)
                     r = rng.uniform(cam.min_range_m, cam.max_range_m)
                     z = np.asarray(cam.position_xy) + r * np.array([math.cos(ang), math.sin(ang)])
-                    dets.append(Detection(z, cam.camera_id, std))
+                    dets.append(Detection(z, std))
                     gts.append(-1)
                 order = rng.permutation(len(dets))  # detector output order carries no information
                 arrival = t + self.latency_s + rng.uniform(0.0, self.latency_jitter_s)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.records import CameraFrameRecord, PersonRecord
-from face_reid_master.tracking.tracker import TrackerConfig
+from face_reid_master.tracking.config import TrackerConfig
 
 _floats = st.one_of(
     st.floats(-20, 20), st.just(math.nan), st.just(math.inf), st.just(-math.inf), st.floats(-1e12, 1e12)
