@@ -23,11 +23,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.checks import check_real
+from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
-from face_reid_master.identity.methods import make_identity_manager
-from face_reid_master.identity.records import IdentityEventKind, LearnedFace
 from face_reid_master.identity.likelihood import LikelihoodModel
+from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
+from face_reid_master.identity.records import IdentityEventKind, LearnedFace
 from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, NamedTrackRecord
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.records import FrameStatus, TrackState
@@ -49,43 +51,45 @@ class MasterConfig:
     swapped onto another person does not teach the face that person (our extension; False = the paper).
     """
 
-    method: str = "bayes"
+    method: str = param("bayes", "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline).",
+                        choices=("bayes", "threshold"))
     known_camera_ids: tuple[str, ...] = ()
-    max_stamp_age_s: float = 10.0
-    max_stamp_future_s: float = 2.0
-    min_face_quality: float = 0.0
-    publish_tentative: bool = False
-    save_interval_s: float = 30.0
+    max_stamp_age_s: float = param(10.0, "Frames older than this vs the master clock are rejected (s).",
+                                   low=0.0, high=86400.0)
+    max_stamp_future_s: float = param(2.0, "Frames newer than this vs the clock are rejected (s).",
+                                      low=0.0, high=86400.0)
+    min_face_quality: float = param(0.0, "Embeddings with lower face quality are ignored (0..1).", low=0.0, high=1.0)
+    publish_tentative: bool = param(False, "Also publish tracks not confirmed yet (bool).")
+    save_interval_s: float = param(30.0, "Faces with new embeddings are saved at least this often (s).",
+                                   low=0.0, high=86400.0)
     name_update_interval_s: float = 0.5
     prune_interval_s: float = 60.0
     # identity (Bayesian)
-    posterior_threshold: float = 0.95
-    prior_probability: float = 0.1
-    min_observations: int = 3
-    new_person_scale_c: float = 1.0
-    max_features_per_face: int = 50
-    learn_only_consistent_features: bool = True
+    posterior_threshold: float = param(0.95, "Assign a face when its posterior exceeds this (0.5..1).",
+                                       low=0.5, high=0.999, high_open=True)
+    prior_probability: float = param(0.1, "Prior of a new cell of the face table (0..1).",
+                                     low=0.0, high=1.0, low_open=True, high_open=True)
+    min_observations: int = param(3, "Face observations needed before a decision (count).", low=1, high=1000)
+    new_person_scale_c: float = param(1.0, "The paper's c: larger = readier to call a face new.",
+                                      low=0.0, high=1e6, low_open=True)
+    max_features_per_face: int = param(50, "Embeddings kept per face, a diverse subset (count).", low=1, high=10000)
+    learn_only_consistent_features: bool = param(
+        True, "An identified track's embedding joins its face only if within the decision distance (guards "
+        "faces against tracker swaps; false = the paper).")
     # identity (threshold baseline)
-    threshold_distance: float = 0.6
-    threshold_votes: int = 5
+    threshold_distance: float = param(0.6, "Threshold method: same face below this L2 distance.",
+                                      low=0.0, high=4.0, low_open=True)
+    threshold_votes: int = param(5, "Threshold method: observations per majority vote (count).", low=1, high=1000)
     # predefined people
-    name_threshold: float = 0.45
-    min_face_features_for_name: int = 5
+    name_threshold: float = param(0.45, "A face gets a predefined name below this L2 distance.",
+                                  low=0.0, high=4.0, low_open=True)
+    min_face_features_for_name: int = param(5, "Embeddings a face needs before naming.", low=1, high=10000)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
-        if self.method not in ("bayes", "threshold"):
-            raise ValueError(f"method must be 'bayes' or 'threshold', got {self.method!r}")
-        for name in (
-            "max_stamp_age_s", "max_stamp_future_s", "save_interval_s", "name_update_interval_s", "prune_interval_s"
-        ):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0 seconds, got {value!r}")
-        if not 0.0 <= self.min_face_quality <= 1.0:
-            raise ValueError(f"min_face_quality must be within [0, 1], got {self.min_face_quality!r}")
-        if not (math.isfinite(self.new_person_scale_c) and self.new_person_scale_c > 0):
-            raise ValueError(f"new_person_scale_c must be > 0, got {self.new_person_scale_c!r}")
+        validate_fields(self)
+        for name in ("name_update_interval_s", "prune_interval_s"):
+            check_real(name, getattr(self, name), 0.0)
 
 
 @dataclass
@@ -224,7 +228,7 @@ class MasterCore:
             emb = embeddings.get(det_index)
             if emb is None:
                 continue
-            if self.identity.add_observations(track_id, emb[None, :], stamp):
+            if self.identity.add_validated_observations(track_id, emb[None, :], stamp):  # validated above
                 self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
                 touched_tracks.add(track_id)
                 st.embeddings_used += 1

@@ -30,7 +30,7 @@ from face_reid_master.demo.children import ChildProcess, child_env, start_child,
 from face_reid_master.evaluation.published_tracks import TrackMessage, TruthLookup, track_from_msg
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros.convert import frame_record_to_msg
-from face_reid_master.tracking.tracker import TrackerConfig
+from face_reid_master.tracking.config import TrackerConfig
 
 __all__ = ["LiveError", "LiveRun", "run_live", "scenario_truth"]
 

@@ -147,10 +147,15 @@ class IdentityManagerBase:
             raise ValueError(f"embeddings of track {tid} contain NaN or Inf")
         if emb.shape[0] == 0:
             return True
+        return self.add_validated_observations(tid, np.ascontiguousarray(emb, dtype=np.float32), stamp)
+
+    def add_validated_observations(self, tid: int, emb: F32Array, stamp: float) -> bool:
+        """:meth:`add_observations` for input already validated (MasterCore checks each frame once):
+        ``emb`` a finite C-contiguous float32 (K >= 1, embedding_dim) array, ``stamp`` finite seconds."""
         if tid in self._dead or tid in self._pending_deleted:
             self.stats.observations_ignored_dead_track += emb.shape[0]
             return False
-        self._pending_obs.setdefault(tid, []).append(np.ascontiguousarray(emb, dtype=np.float32))
+        self._pending_obs.setdefault(tid, []).append(emb)
         self.stats.observations_received += emb.shape[0]
         track = self._tracks.get(tid)
         if track is not None:

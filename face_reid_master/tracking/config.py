@@ -7,26 +7,14 @@ from dataclasses import dataclass
 
 from scipy.stats import chi2
 
-from face_reid_camera.common.checks import check_int, check_real
+from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.tracking.kalman import ConstantVelocityModel
 
 __all__ = ["TrackerConfig"]
 
-_POSITIVE = ("accel_noise_mps2", "init_velocity_std_mps", "confirm_window_s", "lost_after_s")
-_NON_NEGATIVE = (
-    "delete_after_s",
-    "max_detection_delay_s",
-    "max_future_stamp_s",
-    "camera_window_s",
-    "min_person_separation_m",
-    "max_speed_mps",
-    "coast_after_s",
-)
-
-
 @dataclass(frozen=True)
 class TrackerConfig:
-    """Tracker parameters (metres, seconds).  Validated on construction; ValueError on bad values.
+    """Tracker parameters (metres, seconds), the ROS parameters ``tracker.*``; ValueError on bad values.
 
     ``accel_noise_mps2``: white-acceleration noise std over 1 s (spectral density = its square).
     ``init_velocity_std_mps``: velocity prior std of a new track.
@@ -58,33 +46,57 @@ class TrackerConfig:
     ``max_tracks``: cap on live tracks (bounded latency under clutter); extra detections are dropped.
     """
 
-    accel_noise_mps2: float = 1.0
-    init_velocity_std_mps: float = 1.0
-    gate_probability: float = 0.99
-    detections_to_confirm: int = 3
-    confirm_window_s: float = 1.0
-    lost_after_s: float = 1.0
-    delete_after_s: float = 3.0
-    max_detection_delay_s: float = 0.3
-    max_future_stamp_s: float = 2.0
-    clock_resync_frames: int = 5
-    max_gate_distance_m: float = 1.0
-    min_person_separation_m: float = 0.4
-    max_speed_mps: float = 2.0
-    coast_after_s: float = 0.25
-    camera_window_s: float = 0.5
-    max_tracks: int = 200
+    accel_noise_mps2: float = param(
+        1.0, "Kalman white-acceleration noise std over 1 s (m/s^2).",
+        low=0.0, high=100.0, low_open=True)
+    init_velocity_std_mps: float = param(
+        1.0, "Velocity prior std of a new track (m/s).",
+        low=0.0, high=100.0, low_open=True)
+    gate_probability: float = param(
+        0.99, "Chi-square (2 dof) gate: detections outside this probability are not associated (0..1).",
+        low=0.0, high=1.0, low_open=True, high_open=True)
+    detections_to_confirm: int = param(
+        3, "Detections within confirm_window_s that confirm a new track (count).",
+        low=1, high=1000)
+    confirm_window_s: float = param(
+        1.0, "A tentative track not confirmed within this time is deleted (s).",
+        low=0.0, high=3600.0, low_open=True)
+    lost_after_s: float = param(
+        1.0, "A confirmed track without detections for this long becomes LOST (s).",
+        low=0.0, high=3600.0, low_open=True)
+    delete_after_s: float = param(
+        3.0, "A LOST track is deleted after this much longer; its face is released (s).",
+        low=0.0, high=86400.0)
+    max_detection_delay_s: float = param(
+        0.3, "Frames up to this much older than the newest are applied in stamp order (s).",
+        low=0.0, high=60.0)
+    max_future_stamp_s: float = param(
+        2.0, "Frames further ahead of the newest stamp are rejected (s).",
+        low=0.0, high=3600.0)
+    clock_resync_frames: int = param(
+        5, "Consecutive rejected frames taken as a clock jump (count; 0 = never).",
+        low=0, high=100000)
+    max_gate_distance_m: float = param(
+        1.0, "Euclidean gate around a track's predicted position (m; inf = off).",
+        low=0.0, high=math.inf, low_open=True)
+    min_person_separation_m: float = param(
+        0.4, "Two people are assumed never closer than this (m).",
+        low=0.0, high=10.0)
+    max_speed_mps: float = param(
+        2.0, "Fastest walking speed assumed when re-gating turning/stopping people (m/s).",
+        low=0.0, high=100.0)
+    coast_after_s: float = param(
+        0.25, "Confirmed tracks undetected this long get detections after fresh ones (s).",
+        low=0.0, high=3600.0)
+    camera_window_s: float = param(
+        0.5, "A track's cameras are those that detected it within this window (s).",
+        low=0.0, high=3600.0)
+    max_tracks: int = param(
+        200, "Cap on live tracks; extra detections are dropped and counted (count).",
+        low=1, high=100000)
 
     def __post_init__(self) -> None:
-        for name in _POSITIVE:
-            check_real(name, getattr(self, name), 0.0, low_open=True)
-        for name in _NON_NEGATIVE:
-            check_real(name, getattr(self, name), 0.0)
-        check_real("gate_probability", self.gate_probability, 0.0, 1.0, low_open=True, high_open=True)
-        check_real("max_gate_distance_m", self.max_gate_distance_m, 0.0, math.inf, low_open=True, allow_inf=True)
-        check_int("detections_to_confirm", self.detections_to_confirm, 1)
-        check_int("clock_resync_frames", self.clock_resync_frames, 0)
-        check_int("max_tracks", self.max_tracks, 1)
+        validate_fields(self)
 
     @property
     def gate_mahalanobis_sq(self) -> float:

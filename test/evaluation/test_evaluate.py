@@ -25,7 +25,7 @@ from face_reid_master.evaluation.metrics import evaluate_run, mot_metrics, paire
 from face_reid_master.evaluation.runner import RunLog, TrackLog, run_master
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
 from face_reid_master.records import CameraFrameRecord, PersonRecord
-from face_reid_master.tracking.tracker import TrackerConfig
+from face_reid_master.tracking.config import TrackerConfig
 
 IDS = ("lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez")
 

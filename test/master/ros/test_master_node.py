@@ -237,3 +237,12 @@ def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
             assert spec.low is not None and spec.high is not None, spec.name
         assert len(spec.description) > 20, spec.name
     assert master_params.TABLE["method"].choices == ("bayes", "threshold")
+
+
+def test_config_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
+    shipped = REPO / "config" / "master.yaml"
+    assert master_params.TABLE.load_yaml(shipped) == master_params.defaults()
+    regenerated = tmp_path / "master.yaml"
+    master_params.write_defaults_yaml(regenerated)
+    assert regenerated.read_text() == shipped.read_text(), "regenerate config/master.yaml from the declarations"
+    assert master_params.master_config(master_params.defaults()) == master_params.MasterConfig()
