@@ -59,3 +59,14 @@ def spin_until(executor, condition, timeout_s: float = 30.0) -> bool:
             return False
         executor.spin_once(timeout_sec=0.05)
     return True
+
+
+def start_up_output(module: str, *ros_args: str) -> tuple[int, list[str]]:
+    """Exit status and non-empty output lines of ``python -m MODULE --ros-args ROS_ARGS`` (a node that should
+    refuse to start: bounded by a 60 s timeout)."""
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", module, "--ros-args", *ros_args], cwd=REPO_ROOT,
+                            capture_output=True, text=True, timeout=60)
+    return result.returncode, [line for line in (result.stderr + result.stdout).splitlines() if line.strip()]

@@ -24,6 +24,7 @@ p(x_ij) > posterior_threshold and the track has >= min_observations compared wit
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -63,19 +64,9 @@ class BayesIdentityManager(IdentityManagerBase):
         sinkhorn_max_iterations: int = 100,
         sinkhorn_solver: str = "newton",
         max_abs_log_likelihood_ratio: float | None = None,
-        embedding_dim: int = 128,
-        max_features_per_face: int = 50,
-        exact_search_max_features: int = 20_000,
-        shortlist_faces: int = 32,
-        feature_gate_distance: float | None = None,
+        **bank_args: Any,
     ) -> None:
-        super().__init__(
-            embedding_dim=embedding_dim,
-            max_features_per_face=max_features_per_face,
-            exact_search_max_features=exact_search_max_features,
-            shortlist_faces=shortlist_faces,
-            feature_gate_distance=feature_gate_distance,
-        )
+        super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
         if likelihood is None:
             likelihood = LikelihoodModel.default()
         if not isinstance(likelihood, LikelihoodModel):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +21,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
     ``distance_threshold`` else "new"; decide by majority after ``n_votes`` observations.
 
     Ties: a face beats "new" only with strictly more votes; among faces the smaller mean distance wins.
+    The remaining arguments are those of :class:`IdentityManagerBase`.
     """
 
     def __init__(
@@ -27,19 +29,9 @@ class ThresholdIdentityManager(IdentityManagerBase):
         *,
         distance_threshold: float = 0.6,
         n_votes: int = 5,
-        embedding_dim: int = 128,
-        max_features_per_face: int = 50,
-        exact_search_max_features: int = 20_000,
-        shortlist_faces: int = 32,
-        feature_gate_distance: float | None = None,
+        **bank_args: Any,
     ) -> None:
-        super().__init__(
-            embedding_dim=embedding_dim,
-            max_features_per_face=max_features_per_face,
-            exact_search_max_features=exact_search_max_features,
-            shortlist_faces=shortlist_faces,
-            feature_gate_distance=feature_gate_distance,
-        )
+        super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
         self.distance_threshold = check_real(
             "distance_threshold", distance_threshold, 0.0, math.inf, low_open=True, high_open=True
         )

@@ -6,13 +6,11 @@ frames over DDS is in test_camera_node_dds.py.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import spin_until
+from conftest import spin_until, start_up_output
 
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
@@ -181,13 +179,8 @@ def test_shipped_yaml_applies_to_any_node_name(ros_context) -> None:
     ("person.voxel_size_m:=0.0", "parameter 'person.voxel_size_m' must be in (0, 1], got 0.0"),
 ])
 def test_bad_parameter_is_one_fatal_line(ros_domain_id: int, override: str, expected: str) -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "face_reid_camera.ros.node", "--ros-args", "-p", override],
-        cwd=REPO, capture_output=True, text=True, timeout=60,
-    )
-    assert result.returncode == 2
-    lines = [line for line in (result.stderr + result.stdout).splitlines() if line.strip()]
-    assert len(lines) == 1, lines
+    status, lines = start_up_output("face_reid_camera.ros.node", "-p", override)
+    assert status == 2 and len(lines) == 1, lines
     assert lines[0].startswith("[face-reid-camera] FATAL: cannot start: ") and expected in lines[0]
 
 

@@ -8,13 +8,11 @@ leave and return, kill -9) is test_master_node_dds.py.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import spin_until
+from conftest import spin_until, start_up_output
 
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.srv")
@@ -220,14 +218,8 @@ def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path:
     ("tracker.max_tracks:=0", "parameter 'tracker.max_tracks' must be in [1, 100000], got 0"),
 ])
 def test_bad_parameter_is_one_fatal_line(ros_domain_id: int, tmp_path: Path, override: str, expected: str) -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "face_reid_master.ros.node", "--ros-args", "-p", override,
-         "-p", f"db_path:={tmp_path / 'f.db'}"],
-        cwd=REPO, capture_output=True, text=True, timeout=60,
-    )
-    assert result.returncode == 2
-    lines = [line for line in (result.stderr + result.stdout).splitlines() if line.strip()]
-    assert len(lines) == 1, lines
+    status, lines = start_up_output("face_reid_master.ros.node", "-p", override, "-p", f"db_path:={tmp_path / 'f.db'}")
+    assert status == 2 and len(lines) == 1, lines
     assert lines[0].startswith("[face-reid-master] FATAL: cannot start: ") and expected in lines[0]
 
 
