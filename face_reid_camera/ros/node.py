@@ -50,6 +50,7 @@ class CameraNode(ManagedNode):
         self._slot: tuple[float, Any, Any] | None = None
         self._cond = threading.Condition()
         self._running = False
+        self._busy = False  # the worker is processing a pair
         self._worker: threading.Thread | None = None
         self._subs: list[Any] = []
         self.publisher: Any = None
@@ -184,11 +185,15 @@ class CameraNode(ManagedNode):
                 if not self._running:
                     return
                 pair, self._slot = self._slot, None
+                self._busy = True
             assert pair is not None
             try:
                 self._process(*pair)
             except Exception as exc:  # a bug must not kill the camera: log, count, go on
                 self._reject("pipeline_errors", f"frame processing failed: {type(exc).__name__}: {exc}")
+            finally:
+                with self._cond:
+                    self._busy = False
 
     def _process(self, stamp_s: float, color: np.ndarray, depth: np.ndarray) -> None:
         intr, pipeline, health = self._intrinsics, self.pipeline, self.health

@@ -23,9 +23,6 @@ def main() -> int:
     parser.add_argument("--rate-hz", type=float, default=10.0)
     parser.add_argument("--wait-s", type=float, default=20.0)
     parser.add_argument("--depth-encoding", default="16UC1")
-    parser.add_argument("--bad-first", action="store_true",
-                        help="first publish malformed input (no CameraInfo yet, bad encodings, truncated data, "
-                             "size mismatch, all-NaN depth), then the good frames")
     args = parser.parse_args()
     scene = json.loads(args.scene)
 
@@ -63,10 +60,10 @@ def main() -> int:
             return 1
         rclpy.spin_once(node, timeout_sec=0.05)
     # The subscriber side may match our writers a little later than we see it (loaded machines): what
-    # is sent before is lost. Bad-input runs must not lose their few bad frames, so they wait longer.
-    time.sleep(2.0 if args.bad_first else 0.5)
+    # is sent before is lost.
+    time.sleep(0.5)
 
-    def send(color_img, color_enc, depth_img, depth_enc, info_size=(intr.width, intr.height), truncate=False):
+    def send(color_img, color_enc, depth_img, depth_enc, info_size=(intr.width, intr.height)):
         stamp = node.get_clock().now().to_msg()
         if info_size is not None:
             info = CameraInfo()
@@ -80,7 +77,7 @@ def main() -> int:
             msg.height, msg.width, msg.step, data = encode_image(image, enc if enc in ("bgr8", "16UC1", "32FC1")
                                                                else "bgr8")
             msg.encoding = enc
-            msg.data = data[: len(data) // 2] if (truncate and pub is pub_d) else data
+            msg.data = data
             pub.publish(msg)
         time.sleep(1.0 / args.rate_hz)
 
@@ -89,19 +86,6 @@ def main() -> int:
             return frame.depth_mm
         return np.where(frame.depth_mm > 0, frame.depth_mm / 1000.0, np.nan).astype(np.float32)
 
-    if args.bad_first:
-        good = frames[0]
-        for _ in range(24):  # no CameraInfo yet (long: the first large images of a new reader can be lost)
-            send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, info_size=None)
-        for _ in range(6):  # unsupported colour encoding
-            send(good.rgb_bgr, "yuv422", depth_of(good), args.depth_encoding)
-        for _ in range(6):  # truncated depth data
-            send(good.rgb_bgr, "bgr8", depth_of(good), args.depth_encoding, truncate=True)
-        for _ in range(6):  # depth smaller than CameraInfo says
-            send(good.rgb_bgr, "bgr8", depth_of(good)[::2, ::2], args.depth_encoding)
-        nan_depth = np.full((intr.height, intr.width), np.nan, np.float32)
-        for _ in range(6):  # all-NaN depth: a valid frame with nobody in it
-            send(good.rgb_bgr, "bgr8", nan_depth, "32FC1")
     for i in range(args.frames):
         frame = frames[i % len(frames)]
         send(frame.rgb_bgr, "bgr8", depth_of(frame), args.depth_encoding)

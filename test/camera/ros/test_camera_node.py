@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import spin_until, start_up_output
+from conftest import FACES_DIR, spin_until, start_up_output
 
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
@@ -19,6 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from face_reid_camera.ros import params as camera_params
@@ -127,6 +128,84 @@ def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
         executor.shutdown()
         probe.destroy_node()
         node.destroy_node()
+
+
+def _images(color: np.ndarray, color_enc: str, depth: np.ndarray, depth_enc: str, stamp, truncate: bool = False):
+    out = []
+    for img, enc in ((color, color_enc), (depth, depth_enc)):
+        m = Image()
+        m.header.stamp = stamp
+        m.height, m.width, m.step, data = encode_image(img, enc if enc in ("bgr8", "16UC1", "32FC1") else "bgr8")
+        m.encoding = enc
+        m.data = data[: len(data) // 2] if (truncate and img is depth) else data
+        out.append(m)
+    return out
+
+
+def test_malformed_input_is_logged_counted_and_survived(ros_context) -> None:
+    """Each kind of bad input is rejected by reason and counted; good frames afterwards carry the person."""
+    import cv2
+
+    from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+    from face_reid_camera.faces.detector import YuNetDetector
+    from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene
+
+    intr = CameraIntrinsics.kinect_default()
+    photo = cv2.imread(str(sorted((FACES_DIR / "lfw_Tony_Blair").glob("*.jpg"))[0]), cv2.IMREAD_COLOR)
+    best = max(YuNetDetector().detect(photo), key=lambda d: d.box_xywh[2] * d.box_xywh[3])
+    person = SyntheticPerson(2.4, 0.0, 1.75, 3.14159, crop_face_for_rendering(photo, best.box_xywh))
+    frame = render_scene([person], intr, CameraPose.from_xyz_rpy(0.0, 0.0, 2.2, 0.0, 0.3, 0.0),
+                         rng=np.random.default_rng(0))
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_bad", "-p", "camera_pose_xyz_m:=[0.0, 0.0, 2.2]",
+                       "-p", "camera_pose_rpy_rad:=[0.0, 0.3, 0.0]", "-p", "max_frame_age_s:=0.0"])
+    node = CameraNode(context=ctx)
+    sent: list = []
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        node.publisher.publish = sent.append  # what the node would send, in order
+        t = [1000.0]
+
+        def feed(color_enc="bgr8", depth=frame.depth_mm, depth_enc="16UC1", info=True, truncate=False) -> None:
+            t[0] += 0.1
+            stamp = Time(seconds=t[0]).to_msg()
+            if info:
+                msg = CameraInfo()
+                msg.header.stamp, msg.width, msg.height = stamp, intr.width, intr.height
+                msg.k = [intr.fx, 0.0, intr.cx, 0.0, intr.fy, intr.cy, 0.0, 0.0, 1.0]
+                node._on_info(msg)
+            color_msg, depth_msg = _images(frame.rgb_bgr, color_enc, depth, depth_enc, stamp, truncate)
+            node._on_color(color_msg)
+            node._on_depth(depth_msg)
+            n = node.health.frames_in
+            assert spin_until_idle(node, n)
+
+        feed(info=False)  # no CameraInfo yet
+        feed(color_enc="yuv422")  # unsupported colour encoding
+        feed(truncate=True)  # truncated depth data
+        feed(depth=frame.depth_mm[::2, ::2])  # depth smaller than CameraInfo says
+        feed(depth=np.full((intr.height, intr.width), np.nan, np.float32), depth_enc="32FC1")  # all NaN: empty
+        for _ in range(3):
+            feed()
+        rejected = node.health.rejected
+        assert rejected == {"no_camera_info": 1, "bad_color": 1, "bad_depth": 1, "size_mismatch": 1}, rejected
+        assert node._worker is not None and node._worker.is_alive()
+        assert [len(m.people) for m in sent] == [0, 1, 1, 1] and not sent[0].ground_plane_found
+        assert all(len(m.people[0].embedding) == 128 for m in sent[1:])
+    finally:
+        node.destroy_node()
+
+
+def spin_until_idle(node: CameraNode, frames_in: int, timeout_s: float = 30.0) -> bool:
+    """Wait until the worker has taken the newest pair (processed or rejected) - a barrier, not a sleep."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with node._cond:
+            if node._slot is None and not node._busy:
+                return True
+        time.sleep(0.005)
+    return False
 
 
 def test_diagnostics_warn_when_no_input(ros_context) -> None:

@@ -76,6 +76,21 @@ def test_lifecycle_subscribes_only_while_active_and_keeps_faces(ros_context, tmp
         node.destroy_node()
 
 
+def test_corrupt_database_is_set_aside_and_a_fresh_one_started(ros_context, tmp_path: Path) -> None:
+    db = tmp_path / "faces.db"
+    db.write_bytes(b"this is not a database" * 100)
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        backups = list(tmp_path.glob("faces.db.corrupt-*"))
+        assert len(backups) == 1 and backups[0].read_bytes().startswith(b"this is not a database")
+        for k in range(6):
+            node._on_frame(_frame(100.0 + 0.1 * k, emb=_unit(5)))
+        assert node.core.identity.face_ids() == [1] and [f.face_id for f in node.store.load_faces()] == [1]
+    finally:
+        node.destroy_node()
+
+
 def test_parameters_are_read_on_configure_and_locked_while_configured(ros_context, tmp_path: Path) -> None:
     from rclpy.parameter import Parameter
 
