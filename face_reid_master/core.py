@@ -121,10 +121,12 @@ class MasterStats:
 
 @dataclass(frozen=True)
 class FrameOutcome:
-    """What :meth:`MasterCore.process_frame` did with one frame (``reason`` when rejected)."""
+    """What :meth:`MasterCore.process_frame` did with one frame (``reason`` and its short ``code``, e.g.
+    ``stale_stamp``, when rejected: the node counts rejections by code)."""
 
     accepted: bool
     reason: str = ""
+    code: str = ""
     track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> track id
     tracks_created: tuple[int, ...] = ()
     tracks_deleted: tuple[int, ...] = ()
@@ -199,26 +201,29 @@ class MasterCore:
         stamp = float(frame.stamp_s) if isinstance(frame.stamp_s, int | float) else math.nan
         if not math.isfinite(stamp):
             st.frames_rejected_bad_stamp += 1
-            return FrameOutcome(False, "stamp is not a finite number")
+            return FrameOutcome(False, "stamp is not a finite number", "bad_stamp")
         if cfg.known_camera_ids and frame.camera_id not in cfg.known_camera_ids:
             st.frames_rejected_unknown_camera += 1
-            return FrameOutcome(False, f"unknown camera id {frame.camera_id!r}")
+            return FrameOutcome(False, f"unknown camera id {frame.camera_id!r}", "unknown_camera")
         if not isinstance(frame.camera_id, str) or not frame.camera_id:
             st.frames_rejected_unknown_camera += 1
-            return FrameOutcome(False, "empty camera id" if frame.camera_id == "" else "camera id is not a str")
+            return FrameOutcome(False, "empty camera id" if frame.camera_id == "" else "camera id is not a str",
+                                "unknown_camera")
         if now_s is not None:
             if stamp < now_s - cfg.max_stamp_age_s:
                 st.frames_rejected_stale += 1
-                return FrameOutcome(False, f"stamp {now_s - stamp:.2f} s in the past (> max_stamp_age_s)")
+                return FrameOutcome(False, f"stamp {now_s - stamp:.2f} s in the past (> max_stamp_age_s)",
+                                    "stale_stamp")
             if stamp > now_s + cfg.max_stamp_future_s:
                 st.frames_rejected_future += 1
-                return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)")
+                return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)",
+                                    "future_stamp")
 
         positions, stds, heights, embeddings, person_index = self._detections(frame)
         result = self.tracker.update_arrays(positions, stds, heights, stamp, frame.camera_id)
         if result.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             st.frames_rejected_tracker_late += 1
-            return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})")
+            return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})", "tracker_late")
         st.frames_applied += 1
         st.detections_rejected_position += len(result.rejected_detections)
         self._last_stamp = max(self._last_stamp, stamp)
@@ -239,9 +244,8 @@ class MasterCore:
                 self._dirty_faces.setdefault(fid, stamp)
         self._maintain_faces(stamp)
         track_of_person = {person_index[det]: tid for tid, det in result.associations}
-        return FrameOutcome(
-            True, "", track_of_person, tuple(result.created), tuple(result.deleted), tuple(events)
-        )
+        return FrameOutcome(True, track_of_person=track_of_person, tracks_created=tuple(result.created),
+                            tracks_deleted=tuple(result.deleted), identity_events=tuple(events))
 
     def tick(self, now_s: float) -> None:
         """Advance time without a frame (tracks time out, released faces are saved)."""

@@ -61,9 +61,9 @@ class DiagnosticReport:
 class NodeHealth:
     """What a node counts between reports: inputs, processed/dropped frames, timings, rejections by reason.
 
-    The node calls :meth:`frame_in`, :meth:`frame_processed`, :meth:`dropped`, :meth:`rejected` and
-    :meth:`published` as things happen (times in seconds of the node's clock), and :meth:`report` once
-    per period. Totals are since start; rates are over the last report period.
+    The node calls :meth:`frame_in`, :meth:`frame_processed`, :meth:`reject` and :meth:`published` as things
+    happen (times in seconds of the node's clock), sets ``frames_dropped`` (only it can count them), and
+    calls :meth:`report` once per period. Totals are since start; rates are over the last report period.
     """
 
     name: str
@@ -97,9 +97,6 @@ class NodeHealth:
         self.timings_ms.add(processing_ms)
         self.people_per_frame.add(people)
         self.faces_per_frame.add(faces)
-
-    def dropped(self, count: int = 1) -> None:
-        self.frames_dropped += count
 
     def reject(self, reason: str) -> int:
         """Count one rejected input of ``reason``; returns the total for that reason."""

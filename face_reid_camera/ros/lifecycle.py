@@ -7,6 +7,7 @@ exception in ``configure`` fails the transition with its message in :attr:`Manag
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from collections.abc import Callable
@@ -80,7 +81,7 @@ class ManagedNode(LifecycleNode):
             except InvalidParameterTypeException:
                 given = self._parameter_overrides.get(spec.name)
                 raise ParamError(
-                    f"parameter {spec.name!r} must be a {spec.type_text()} like {_json(spec.default)}, got "
+                    f"parameter {spec.name!r} must be a {spec.type_text()} like {json.dumps(spec.default)}, got "
                     f"{given.value if given is not None else '?'!r}"
                     + (" (write numbers with a decimal point, e.g. 2.0)" if spec.kind in ("float", "float_list")
                        else "")
@@ -227,12 +228,6 @@ class ManagedNode(LifecycleNode):
         if total is not None:
             text += f" [{key}: {total} so far]"
         (self.get_logger().warning if warn else self.get_logger().error)(text)
-
-
-def _json(value: Any) -> str:
-    import json
-
-    return json.dumps(value)
 
 
 def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], ManagedNode],

@@ -146,24 +146,23 @@ class CameraNode(ManagedNode):
             self._camera_frame_id = msg.header.frame_id
 
     def _on_color(self, msg: Any) -> None:
-        try:
-            img = to_bgr(decode_image(msg.encoding, msg.height, msg.width, msg.step, msg.data,
-                                      bool(msg.is_bigendian)), msg.encoding)
-        except ImageDecodeError as exc:
-            self._reject("bad_color", f"colour image rejected: {exc}")
-            return
-        if self._sync is not None:
+        img = self._decode(msg, to_bgr, "bad_color", "colour")
+        if img is not None and self._sync is not None:
             self._offer(self._sync.add_color(stamp_to_seconds(msg.header.stamp), img))
 
     def _on_depth(self, msg: Any) -> None:
-        try:
-            depth = depth_to_metres(decode_image(msg.encoding, msg.height, msg.width, msg.step, msg.data,
-                                                 bool(msg.is_bigendian)), msg.encoding)
-        except ImageDecodeError as exc:
-            self._reject("bad_depth", f"depth image rejected: {exc}")
-            return
-        if self._sync is not None:
+        depth = self._decode(msg, depth_to_metres, "bad_depth", "depth")
+        if depth is not None and self._sync is not None:
             self._offer(self._sync.add_depth(stamp_to_seconds(msg.header.stamp), depth))
+
+    def _decode(self, msg: Any, convert: Any, reason: str, what: str) -> np.ndarray | None:
+        """The image of a sensor_msgs/Image through ``convert`` (to BGR / to metres), or None: rejected, counted."""
+        try:
+            return convert(decode_image(msg.encoding, msg.height, msg.width, msg.step, msg.data,
+                                        bool(msg.is_bigendian)), msg.encoding)
+        except ImageDecodeError as exc:
+            self._reject(reason, f"{what} image rejected: {exc}")
+            return None
 
     def _offer(self, pair: tuple[float, Any, Any] | None) -> None:
         if pair is None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ from visualization_msgs.msg import MarkerArray
 
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_master.core import FrameOutcome, MasterCore
+from face_reid_master.core import MasterCore
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.convert import frame_from_msg, markers_for, tracks_to_msg
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray
@@ -32,17 +33,6 @@ The face-reid master node (a lifecycle node; autostart:=false waits for a lifecy
 face_reid_msgs/CameraFrame in, named tracks on /tracks_named out, status on /diagnostics.
 Parameters (all declared with descriptions and ranges; `ros2 param describe` lists them):
 """
-
-# MasterCore's rejection messages -> the reason counted on /diagnostics
-_REASONS = (("unknown camera", "unknown_camera"), ("empty camera id", "unknown_camera"),
-            ("in the past", "stale_stamp"), ("in the future", "future_stamp"), ("not a finite", "bad_stamp"),
-            ("tracker rejected", "tracker_late"))
-
-
-def rejection_reason(outcome: FrameOutcome) -> str:
-    """A short key for a rejected frame's reason (``rejected_<key>`` on /diagnostics)."""
-    return next((key for text, key in _REASONS if text in outcome.reason), "other")
-
 
 class MasterNode(ManagedNode):
     """The master node; see the module docstring."""
@@ -190,12 +180,12 @@ class MasterNode(ManagedNode):
             self._reject("frame_id", f"frame from {record.camera_id!r} is in frame {record.frame_id!r}, "
                                      f"expected {self.values['world_frame_id']!r}")
             return
-        t0 = self.get_clock().now().nanoseconds
+        t0 = time.perf_counter()
         outcome = core.process_frame(record, now if self.values["check_stamps_against_clock"] else None)
         if not outcome.accepted:
-            self._reject(rejection_reason(outcome), f"frame from {record.camera_id!r} rejected: {outcome.reason}")
+            self._reject(outcome.code, f"frame from {record.camera_id!r} rejected: {outcome.reason}")
             return
-        health.frame_processed((self.get_clock().now().nanoseconds - t0) * 1e-6, len(record.people),
+        health.frame_processed((time.perf_counter() - t0) * 1e3, len(record.people),
                                sum(1 for p in record.people if p.embedding is not None))
         for ev in outcome.identity_events:
             self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")

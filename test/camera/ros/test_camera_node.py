@@ -70,22 +70,25 @@ def test_failed_configure_stays_unconfigured_and_says_why(ros_context, tmp_path:
         node.destroy_node()
 
 
-def _frame(stamp, node: Node):
-    color = np.full((480, 640, 3), 90, np.uint8)
-    depth = np.zeros((480, 640), np.uint16)
-    depth[240:] = 2500  # a floor-less wall of depth: no people
-    msgs = []
-    for img, enc in ((color, "bgr8"), (depth, "16UC1")):
-        m = Image()
-        m.header.stamp = stamp
-        m.height, m.width, m.step, data = encode_image(img, enc)
-        m.encoding, m.data = enc, data
-        msgs.append(m)
+def _camera_info(stamp):
     info = CameraInfo()
     info.header.stamp = stamp
     info.width, info.height = 640, 480
-    info.k = [525.0, 0.0, 319.5, 0.0, 525.0, 239.5, 0.0, 0.0, 1.0]
-    return msgs[0], msgs[1], info
+    info.k = [525.0, 0.0, 319.5, 0.0, 525.0, 239.5, 0.0, 0.0, 1.0]  # CameraIntrinsics.kinect_default()
+    return info
+
+
+def _images(color: np.ndarray, color_enc: str, depth: np.ndarray, depth_enc: str, stamp, truncate: bool = False):
+    """Colour and depth sensor_msgs/Image; ``color_enc`` may name an unsupported encoding (bgr8 bytes)."""
+    out = []
+    for img, enc in ((color, color_enc), (depth, depth_enc)):
+        m = Image()
+        m.header.stamp = stamp
+        m.height, m.width, m.step, data = encode_image(img, enc if enc in ("bgr8", "16UC1", "32FC1") else "bgr8")
+        m.encoding = enc
+        m.data = data[: len(data) // 2] if (truncate and img is depth) else data
+        out.append(m)
+    return out
 
 
 def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
@@ -99,7 +102,11 @@ def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
     probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
-        color, depth, info = _frame(node.get_clock().now().to_msg(), node)
+        stamp = node.get_clock().now().to_msg()
+        depth_mm = np.zeros((480, 640), np.uint16)
+        depth_mm[240:] = 2500  # a floor-less wall of depth: no people
+        color, depth = _images(np.full((480, 640, 3), 90, np.uint8), "bgr8", depth_mm, "16UC1", stamp)
+        info = _camera_info(stamp)
         bad = Image()
         bad.encoding, bad.height, bad.width, bad.step = "yuv422", 2, 2, 4  # unsupported: rejected and counted
         node._on_color(bad)
@@ -130,18 +137,6 @@ def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
         node.destroy_node()
 
 
-def _images(color: np.ndarray, color_enc: str, depth: np.ndarray, depth_enc: str, stamp, truncate: bool = False):
-    out = []
-    for img, enc in ((color, color_enc), (depth, depth_enc)):
-        m = Image()
-        m.header.stamp = stamp
-        m.height, m.width, m.step, data = encode_image(img, enc if enc in ("bgr8", "16UC1", "32FC1") else "bgr8")
-        m.encoding = enc
-        m.data = data[: len(data) // 2] if (truncate and img is depth) else data
-        out.append(m)
-    return out
-
-
 def test_malformed_input_is_logged_counted_and_survived(ros_context) -> None:
     """Each kind of bad input is rejected by reason and counted; good frames afterwards carry the person."""
     import cv2
@@ -169,10 +164,7 @@ def test_malformed_input_is_logged_counted_and_survived(ros_context) -> None:
             t[0] += 0.1
             stamp = Time(seconds=t[0]).to_msg()
             if info:
-                msg = CameraInfo()
-                msg.header.stamp, msg.width, msg.height = stamp, intr.width, intr.height
-                msg.k = [intr.fx, 0.0, intr.cx, 0.0, intr.fy, intr.cy, 0.0, 0.0, 1.0]
-                node._on_info(msg)
+                node._on_info(_camera_info(stamp))
             color_msg, depth_msg = _images(frame.rgb_bgr, color_enc, depth, depth_enc, stamp, truncate)
             node._on_color(color_msg)
             node._on_depth(depth_msg)
