@@ -86,10 +86,10 @@ class ManagedNode(LifecycleNode):
                     + (" (write numbers with a decimal point, e.g. 2.0)" if spec.kind in ("float", "float_list")
                        else "")
                 ) from None
-            except InvalidParameterValueException:
+            except InvalidParameterValueException:  # out of the descriptor's range: the spec says so in its words
                 given = self._parameter_overrides.get(spec.name)
-                raise ParamError(f"parameter {spec.name!r} must be in {spec.range_text()}, got "
-                                 f"{given.value if given is not None else '?'!r}") from None
+                spec.check(given.value if given is not None else None)
+                raise ParamError(f"parameter {spec.name!r} must be in {spec.range_text()}") from None
         self._warn_unknown_overrides()
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diagnostics_pub: Any = None
@@ -98,7 +98,7 @@ class ManagedNode(LifecycleNode):
     # ------------------------------------------------------------------ parameters
     def _warn_unknown_overrides(self) -> None:
         known = set(self._parameters)
-        self.unknown_parameters = sorted(set(getattr(self, "_parameter_overrides", {})) - known)
+        self.unknown_parameters = sorted(set(self._parameter_overrides) - known)
         for name in self.unknown_parameters:
             self.get_logger().warning(
                 f"parameter {name!r} given to {self.get_fully_qualified_name()} is not a parameter of this node: "
