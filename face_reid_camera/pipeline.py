@@ -17,12 +17,11 @@ from numpy.typing import NDArray
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
-from face_reid_camera.faces.embedder import FaceEmbedder
+from face_reid_camera.faces.embedder import CombinedEmbedder, FaceEmbedder
+from face_reid_camera.faces.embedding_schedule import EmbeddingScheduler
 from face_reid_camera.faces.head_roi import head_roi_px
 from face_reid_camera.people.detector import PersonDetector, PersonDetectorConfig
 from face_reid_camera.people.ground_plane import GroundPlane
-
-EMBEDDING_DIM = 128
 
 
 @dataclass(frozen=True)
@@ -51,6 +50,10 @@ class CameraPipelineConfig:
     detect_faces: bool = param(True, "Run face detection and embedding (false = people positions only).")
     max_faces_per_frame: int = param(16, "Faces embedded per frame, nearest first (count).", low=0, high=1000)
     min_face_quality: float = param(0.0, "Faces below this quality (0..1) are not embedded.", low=0.0, high=1.0)
+    embed_budget_ms: float = param(
+        0.0, "Embedding time per frame (ms; 0 = embed every face found). Over budget, faces not embedded "
+        "for longest go first, best quality first; the others are reported without an embedding.",
+        low=0.0, high=10000.0)
     position_std_base_m: float = param(0.05, "Position uncertainty at 0 m range (m).", low=0.0, high=5.0,
                                        low_open=True)
     position_std_per_m2: float = param(0.005, "Uncertainty growth with range squared (m/m^2).", low=0.0, high=1.0)
@@ -65,13 +68,15 @@ class CameraPipelineConfig:
 
 @dataclass(frozen=True)
 class FaceObservation:
-    """A face found in a person's head ROI, with its embedding."""
+    """A face found in a person's head ROI, with its embedding (None: not embedded in this frame, the
+    embedding budget went to other faces) in space ``embedding_space``."""
 
     detection: FaceDetection
     quality: float
     yaw_deg: float
     eye_distance_px: float
-    embedding: NDArray[np.float32]
+    embedding: NDArray[np.float32] | None
+    embedding_space: str = ""
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,7 @@ class PersonObservation:
             out["face_box"] = [round(float(v), 1) for v in self.face.detection.box_xywh]
             out["face_quality"] = round(self.face.quality, 3)
             out["face_yaw_deg"] = round(self.face.yaw_deg, 1)
+            out["face_embedded"] = self.face.embedding is not None
         return out
 
 
@@ -118,6 +124,10 @@ class FrameResult:
     @property
     def num_faces(self) -> int:
         return sum(1 for p in self.people if p.face is not None)
+
+    @property
+    def num_embedded(self) -> int:
+        return sum(1 for p in self.people if p.face is not None and p.face.embedding is not None)
 
 
 def face_pose_from_landmarks(landmarks: NDArray[np.floating]) -> tuple[float, float]:
@@ -152,7 +162,8 @@ class CameraPipeline:
     """Runs the per-frame pipeline of one camera.
 
     ``face_detector`` / ``embedder`` may be None when ``config.detect_faces`` is false (people
-    only). The person detector keeps the floor estimate between frames (see PersonDetector).
+    only). The person detector keeps the floor estimate between frames (see PersonDetector); the
+    embedding schedule keeps which heads were embedded when (see EmbeddingScheduler).
     """
 
     def __init__(
@@ -160,7 +171,7 @@ class CameraPipeline:
         config: CameraPipelineConfig,
         camera_pose: CameraPose,
         face_detector: YuNetDetector | None = None,
-        embedder: FaceEmbedder | None = None,
+        embedder: FaceEmbedder | CombinedEmbedder | None = None,
         seed_ground_from_pose: bool = True,
     ) -> None:
         if config.detect_faces and (face_detector is None or embedder is None):
@@ -170,6 +181,7 @@ class CameraPipeline:
         self.face_detector = face_detector
         self.embedder = embedder
         self.person_detector = PersonDetector(config.person, camera_pose if seed_ground_from_pose else None)
+        self.schedule = EmbeddingScheduler(config.embed_budget_ms)
 
     def process(
         self,
@@ -177,14 +189,18 @@ class CameraPipeline:
         depth_m: NDArray[np.floating],
         intrinsics: CameraIntrinsics,
         color_intrinsics: CameraIntrinsics | None = None,
+        stamp_s: float | None = None,
     ) -> FrameResult:
         """Detect people in ``depth_m`` (metres, NaN/0 invalid) and their faces in ``color_bgr``.
 
         ``intrinsics`` describe the depth image; ``color_intrinsics`` the colour image (default:
-        registered, i.e. the depth intrinsics scaled to the colour size). ``color_bgr`` None
-        means people only.
+        registered, i.e. the depth intrinsics scaled to the colour size): faces are detected and
+        embedded on the colour image's own pixels, whatever its resolution. ``color_bgr`` None
+        means people only. ``stamp_s``: capture time (s) for the embedding schedule (None: the
+        monotonic clock).
         """
         t0 = time.perf_counter()
+        stamp = time.monotonic() if stamp_s is None else float(stamp_s)
         detection = self.person_detector.detect_depth(depth_m, intrinsics)
         t1 = time.perf_counter()
         if color_bgr is not None and color_intrinsics is None:
@@ -218,7 +234,7 @@ class CameraPipeline:
             )
         timings = {"people_ms": (t1 - t0) * 1e3, "face_detect_ms": 0.0, "embed_ms": 0.0}
         if self.config.detect_faces and color_bgr is not None and people:
-            people = self._add_faces(color_bgr, people, rois, timings)
+            people = self._add_faces(color_bgr, people, rois, timings, stamp)
         timings["total_ms"] = (time.perf_counter() - t0) * 1e3
         return FrameResult(
             people, detection.ground_plane is not None, timings, detection.ground_plane, detection.ground_plane_source
@@ -230,6 +246,7 @@ class CameraPipeline:
         people: list[PersonObservation],
         rois: list[tuple[int, int, int, int] | None],
         timings: dict[str, float],
+        stamp_s: float,
     ) -> list[PersonObservation]:
         assert self.face_detector is not None and self.embedder is not None
         # Nearest people first, so the per-frame face budget goes to the best-resolved heads.
@@ -252,12 +269,21 @@ class CameraPipeline:
                 continue
             found.append((i, face, quality, yaw, eye_dist))
         if found:
-            embeddings = self.embedder.embed_faces(color_bgr, [f[1].landmarks for f in found])
+            heads = np.array([people[f[0]].position_camera for f in found], dtype=np.float64)
+            chosen = self.schedule.choose(stamp_s, heads, np.array([f[2] for f in found]))
+            t_embed = time.perf_counter()
+            embeddings = self.embedder.embed_faces(color_bgr, [found[k][1].landmarks for k in chosen])
+            self.schedule.embedded(stamp_s, chosen, (time.perf_counter() - t_embed) * 1e3)
+            embedding_of = dict(zip(chosen, embeddings, strict=True))
             people = list(people)
-            for (i, face, quality, yaw, eye_dist), emb in zip(found, embeddings, strict=True):
-                if not np.all(np.isfinite(emb)):
+            space = self.embedder.space
+            for k, (i, face, quality, yaw, eye_dist) in enumerate(found):
+                emb = embedding_of.get(k)
+                if emb is not None and not np.all(np.isfinite(emb)):
                     continue
-                obs = FaceObservation(face, quality, yaw, eye_dist, np.asarray(emb, dtype=np.float32))
+                obs = FaceObservation(face, quality, yaw, eye_dist,
+                                      None if emb is None else np.asarray(emb, dtype=np.float32),
+                                      space if emb is not None else "")
                 people[i] = dataclasses.replace(people[i], face=obs)
         t2 = time.perf_counter()
         timings["face_detect_ms"] = (t1 - t0) * 1e3

@@ -24,16 +24,25 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import check_real
+from face_reid_camera.common.embedding_spaces import (
+    DLIB_SPACE,
+    EMBEDDER_CHOICES,
+    embedder_space,
+    extract_space,
+    space_dim,
+)
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
 from face_reid_master.identity.records import IdentityEventKind, LearnedFace
-from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, NamedTrackRecord
+from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.records import FrameStatus, TrackState
 from face_reid_master.tracking.tracker import Tracker
+
+_SPACE_CHOICES = tuple(embedder_space(choice) for choice in EMBEDDER_CHOICES)
 
 
 @dataclass(frozen=True)
@@ -53,6 +62,10 @@ class MasterConfig:
 
     method: str = param("bayes", "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline).",
                         choices=("bayes", "threshold"))
+    embedding_space: str = param(
+        DLIB_SPACE, "Embedder space compared for identity: dlib_resnet_v1, sface_2021dec or "
+        "dlib_resnet_v1+sface_2021dec (cameras must send it, or a joint space containing it; other "
+        "embeddings are not used, logged once per camera).", choices=_SPACE_CHOICES, read_only=True)
     known_camera_ids: tuple[str, ...] = ()
     max_stamp_age_s: float = param(10.0, "Frames older than this vs the master clock are rejected (s).",
                                    low=0.0, high=86400.0)
@@ -107,6 +120,7 @@ class MasterStats:
     detections_rejected_position: int = 0
     embeddings_used: int = 0
     embeddings_rejected_length: int = 0
+    embeddings_rejected_space: int = 0
     embeddings_rejected_nonfinite: int = 0
     embeddings_skipped_quality: int = 0
     faces_created: int = 0
@@ -131,6 +145,7 @@ class FrameOutcome:
     tracks_created: tuple[int, ...] = ()
     tracks_deleted: tuple[int, ...] = ()
     identity_events: tuple[Any, ...] = ()
+    notices: tuple[str, ...] = ()  # things the node should log once (e.g. a camera of another embedder space)
 
 
 class FaceStoreLike:
@@ -166,20 +181,24 @@ class MasterCore:
             self.identity: IdentityManagerBase = make_identity_manager(
                 "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
                 prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
-                max_features_per_face=cfg.max_features_per_face,
+                max_features_per_face=cfg.max_features_per_face, embedding_dim=space_dim(cfg.embedding_space),
                 feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             )
         else:
             self.identity = make_identity_manager(
                 "threshold", distance_threshold=cfg.threshold_distance, n_votes=cfg.threshold_votes,
-                max_features_per_face=cfg.max_features_per_face,
+                max_features_per_face=cfg.max_features_per_face, embedding_dim=space_dim(cfg.embedding_space),
                 feature_gate_distance=cfg.threshold_distance if cfg.learn_only_consistent_features else None,
             )
         self.people = PredefinedPeople(
-            gallery or {}, name_threshold=cfg.name_threshold, min_face_features=cfg.min_face_features_for_name
+            gallery or {}, name_threshold=cfg.name_threshold, min_face_features=cfg.min_face_features_for_name,
+            embedding_dim=space_dim(cfg.embedding_space),
         )
         self.store = store
         self.stats = MasterStats()
+        self._dim = space_dim(cfg.embedding_space)
+        self._space_noticed: dict[str, str] = {}  # camera id -> the unusable space it was last logged for
+        self._notices: list[str] = []
         self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed
         self._dirty_faces: dict[int, float] = {}  # face id -> first unsaved change (s)
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
@@ -244,8 +263,9 @@ class MasterCore:
                 self._dirty_faces.setdefault(fid, stamp)
         self._maintain_faces(stamp)
         track_of_person = {person_index[det]: tid for tid, det in result.associations}
+        notices, self._notices = tuple(self._notices), []
         return FrameOutcome(True, track_of_person=track_of_person, tracks_created=tuple(result.created),
-                            tracks_deleted=tuple(result.deleted), identity_events=tuple(events))
+                            tracks_deleted=tuple(result.deleted), identity_events=tuple(events), notices=notices)
 
     def tick(self, now_s: float) -> None:
         """Advance time without a frame (tracks time out, released faces are saved)."""
@@ -295,19 +315,43 @@ class MasterCore:
         embeddings: dict[int, NDArray[np.float32]] = {}
         if not with_face:
             return *tracker_input, embeddings, person_index
-        good_len = [(k, i) for k, i in with_face if np.size(people[i].embedding) == EMBEDDING_DIM]
-        st.embeddings_rejected_length += len(with_face) - len(good_len)
+        vectors = [(k, i, self._in_space(people[i], frame.camera_id)) for k, i in with_face]
+        in_space = [(k, i, v) for k, i, v in vectors if v is not None]
+        st.embeddings_rejected_space += len(vectors) - len(in_space)
+        good_len = [(k, i, v) for k, i, v in in_space if v.size == self._dim]
+        st.embeddings_rejected_length += len(in_space) - len(good_len)
         if not good_len:
             return *tracker_input, embeddings, person_index
-        stacked = np.stack([np.asarray(people[i].embedding, dtype=np.float32).reshape(-1) for _, i in good_len])
+        stacked = np.stack([v for _, _, v in good_len])
         finite = np.isfinite(stacked).all(axis=1)
-        quality = np.array([people[i].face_quality for _, i in good_len], dtype=np.float64)
+        quality = np.array([people[i].face_quality for _, i, _ in good_len], dtype=np.float64)
         good_quality = quality >= cfg.min_face_quality
         st.embeddings_rejected_nonfinite += int(np.count_nonzero(~finite))
         st.embeddings_skipped_quality += int(np.count_nonzero(finite & ~good_quality))
         for row in np.flatnonzero(finite & good_quality):
             embeddings[good_len[row][0]] = stacked[row]
         return *tracker_input, embeddings, person_index
+
+    def _in_space(self, person: Any, camera_id: str) -> NDArray[np.float32] | None:
+        """The person's embedding in the master's space (part of a joint one is fine); None: another space.
+
+        An empty array for a length that does not match its space. The first embedding of a space the master
+        cannot use, per camera, becomes a notice for the node to log."""
+        space = person.embedding_space if isinstance(person.embedding_space, str) else ""
+        values = np.asarray(person.embedding, dtype=np.float32).reshape(-1)
+        want = self.config.embedding_space
+        try:
+            if space != want and values.size != space_dim(space):
+                return np.zeros(0, dtype=np.float32)
+            part = extract_space(values, space, want)
+            why = f"its face embeddings are of space {space[:64]!r}, this master compares {want!r}"
+        except ValueError as exc:
+            part, why = None, f"its face embeddings are unusable ({exc})"
+        if part is None and self._space_noticed.get(camera_id) != space:
+            self._space_noticed[camera_id] = space
+            self._notices.append(f"camera {camera_id[:64]!r}: {why}: they are not used for identity (its "
+                                 "positions still are); see the embedder / embedding_space parameters")
+        return part
 
     # ------------------------------------------------------------------------------ identities
     def _identity_step(self, deleted: Iterable[int], stamp: float) -> list[Any]:

@@ -29,6 +29,8 @@ class PersonRecord:
     embedding: NDArray[np.float32] | None = None
     face_score: float = 0.0
     face_quality: float = 0.0
+    embedding_space: str = "dlib_resnet_v1"  # which network produced ``embedding`` (embedding_spaces)
+    face_eye_distance_px: float = 0.0  # face size in the colour image (0 = unknown)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,10 @@
-"""Face alignment: warp a face to dlib's 150x150 embedder chip from YuNet's five landmarks.
+"""Face alignment: warp a face to an embedder's chip (dlib 150x150, SFace 112x112) from YuNet's five landmarks.
 
 A least-squares similarity transform (rotation, uniform scale, translation; closed-form Umeyama, so it is
-deterministic, unlike RANSAC) maps the detected landmarks onto :data:`ALIGN_TEMPLATE_150`, which was
-fitted against dlib's own ``get_face_chip`` (padding 0.25); the face is then resampled bilinearly.
+deterministic, unlike RANSAC) maps the detected landmarks onto the embedder's template — for dlib
+:data:`ALIGN_TEMPLATE_150`, fitted against dlib's own ``get_face_chip`` (padding 0.25); for SFace
+:data:`ALIGN_TEMPLATE_SFACE_112`, the template of OpenCV's ``FaceRecognizerSF.alignCrop`` — and the face
+is resampled bilinearly.
 """
 
 from __future__ import annotations
@@ -17,7 +19,9 @@ from face_reid_camera.common.checks import check_bgr_image
 
 __all__ = [
     "ALIGN_TEMPLATE_150",
+    "ALIGN_TEMPLATE_SFACE_112",
     "CHIP_SIZE_PX",
+    "SFACE_CHIP_SIZE_PX",
     "align_face",
     "align_faces",
     "estimate_similarity",
@@ -38,6 +42,20 @@ ALIGN_TEMPLATE_150: NDArray[np.float64] = np.array(
     dtype=np.float64,
 )
 ALIGN_TEMPLATE_150.setflags(write=False)
+
+SFACE_CHIP_SIZE_PX = 112
+# OpenCV's FaceRecognizerSF.alignCrop destination points (the ArcFace 112x112 template), same order.
+ALIGN_TEMPLATE_SFACE_112: NDArray[np.float64] = np.array(
+    [
+        [38.2946, 51.6963],
+        [73.5318, 51.5014],
+        [56.0252, 71.7366],
+        [41.5493, 92.3655],
+        [70.7299, 92.2041],
+    ],
+    dtype=np.float64,
+)
+ALIGN_TEMPLATE_SFACE_112.setflags(write=False)
 
 # Landmark sets spanning less than this (RMS distance to their centroid, pixels) are degenerate.
 _MIN_LANDMARK_SPREAD_PX = 1.0
@@ -82,11 +100,11 @@ def estimate_similarity(src: np.ndarray, dst: np.ndarray) -> NDArray[np.float64]
     return matrix
 
 
-def _warp_to_rgb(image: np.ndarray, matrix: NDArray[np.float64]) -> NDArray[np.uint8]:
+def _warp_to_rgb(image: np.ndarray, matrix: NDArray[np.float64], size: int) -> NDArray[np.uint8]:
     chip = cv2.warpAffine(
         image,
         matrix,
-        (CHIP_SIZE_PX, CHIP_SIZE_PX),
+        (size, size),
         flags=cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_CONSTANT,
         borderValue=0,
@@ -98,27 +116,29 @@ def _warp_to_rgb(image: np.ndarray, matrix: NDArray[np.float64]) -> NDArray[np.u
     return cv2.cvtColor(chip, cv2.COLOR_BGR2RGB)
 
 
-def align_face(image_bgr: np.ndarray, landmarks5: np.ndarray) -> NDArray[np.uint8]:
-    """Return the 150x150x3 uint8 RGB chip of the face whose 5 YuNet landmarks (pixels) are given.
+def align_face(image_bgr: np.ndarray, landmarks5: np.ndarray, template: NDArray[np.float64] = ALIGN_TEMPLATE_150,
+               chip_size_px: int = CHIP_SIZE_PX) -> NDArray[np.uint8]:
+    """Return the chip_size x chip_size x 3 uint8 RGB chip of the face whose 5 YuNet landmarks (pixels) are given.
 
     ``image_bgr``: uint8 HxWx3 BGR (HxW grey and HxWx4 BGRA are accepted too). Parts of the chip that
     fall outside the image are black. Raises ValueError on a bad image or bad landmarks (wrong shape,
     non-finite, degenerate).
     """
     image = check_bgr_image(image_bgr, allow_bgra=True)
-    matrix = estimate_similarity(_validate_landmarks(landmarks5), ALIGN_TEMPLATE_150)
-    return _warp_to_rgb(image, matrix)
+    matrix = estimate_similarity(_validate_landmarks(landmarks5), template)
+    return _warp_to_rgb(image, matrix, chip_size_px)
 
 
 def align_faces(
-    image_bgr: np.ndarray, landmarks_list: Sequence[np.ndarray] | np.ndarray
+    image_bgr: np.ndarray, landmarks_list: Sequence[np.ndarray] | np.ndarray,
+    template: NDArray[np.float64] = ALIGN_TEMPLATE_150, chip_size_px: int = CHIP_SIZE_PX,
 ) -> NDArray[np.uint8]:
-    """Align several faces of one image: returns [N, 150, 150, 3] uint8 RGB (N may be 0)."""
+    """Align several faces of one image: returns [N, chip, chip, 3] uint8 RGB (N may be 0)."""
     image = check_bgr_image(image_bgr, allow_bgra=True)
     if isinstance(landmarks_list, np.ndarray) and landmarks_list.ndim != 3 and landmarks_list.size > 0:
         raise ValueError(f"landmarks_list must be [N, 5, 2], got shape {landmarks_list.shape}")
-    chips = np.empty((len(landmarks_list), CHIP_SIZE_PX, CHIP_SIZE_PX, 3), dtype=np.uint8)
+    chips = np.empty((len(landmarks_list), chip_size_px, chip_size_px, 3), dtype=np.uint8)
     for index, landmarks in enumerate(landmarks_list):
-        matrix = estimate_similarity(_validate_landmarks(landmarks), ALIGN_TEMPLATE_150)
-        chips[index] = _warp_to_rgb(image, matrix)
+        matrix = estimate_similarity(_validate_landmarks(landmarks), template)
+        chips[index] = _warp_to_rgb(image, matrix, chip_size_px)
     return chips

@@ -21,9 +21,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.faces.alignment import ALIGN_TEMPLATE_150
+from face_reid_camera.common.embedding_spaces import EMBEDDER_CHOICES, embedder_space, space_dim
 from face_reid_camera.faces.detector import YuNetDetector
-from face_reid_camera.faces.embedder import FaceEmbedder
+from face_reid_camera.faces.embedder import CombinedEmbedder, FaceEmbedder
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -44,9 +44,9 @@ IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe", ".png", ".bmp", ".webp", ".
 ProgressCallback = Callable[[int, int], None]
 """Called as ``progress(done, total)`` after each photo."""
 
-# Eye distance (pixels) of the 150x150 chip template; faces whose eyes are more than this many times
-# farther apart are shrunk with INTER_AREA before the (bilinear) alignment warp.
-_CHIP_EYE_DISTANCE_PX = float(np.linalg.norm(ALIGN_TEMPLATE_150[1] - ALIGN_TEMPLATE_150[0]))
+_EMBEDDING_LENGTHS = frozenset(space_dim(embedder_space(choice)) for choice in EMBEDDER_CHOICES)
+# Faces whose eyes are more than this many times farther apart than in the embedder's chip template are
+# shrunk with INTER_AREA before the (bilinear) alignment warp.
 _MAX_WARP_SHRINK = 2.0
 
 
@@ -58,7 +58,8 @@ class PhotoError(ValueError):
 class PhotoEmbedding:
     """Embedding of the largest face of one photo; geometry in the photo's full-resolution pixels.
 
-    ``path``: the file (None for an in-memory image). ``embedding``: (128,) float32, read-only.
+    ``path``: the file (None for an in-memory image). ``embedding``: (dim,) float32, read-only (128 values;
+    256 for a combined embedder).
     ``box_xywh``: (4,) float32 face box. ``score``: detector confidence. ``eye_distance_px``: distance
     between the eye landmarks, a face-size / quality indicator.
     """
@@ -72,8 +73,9 @@ class PhotoEmbedding:
     def __post_init__(self) -> None:
         emb = np.array(self.embedding, dtype=np.float32).reshape(-1)
         box = np.array(self.box_xywh, dtype=np.float32).reshape(-1)
-        if emb.shape != (FaceEmbedder.embedding_dim,) or not np.all(np.isfinite(emb)):
-            raise ValueError(f"embedding must be {FaceEmbedder.embedding_dim} finite values, got {emb.shape}")
+        if emb.size not in _EMBEDDING_LENGTHS or not np.all(np.isfinite(emb)):
+            raise ValueError(f"embedding must be {' or '.join(map(str, sorted(_EMBEDDING_LENGTHS)))} finite values "
+                             f"(one embedder's or a combined one's), got shape {emb.shape}")
         if box.shape != (4,):
             raise ValueError(f"box_xywh must have 4 values, got shape {box.shape}")
         emb.flags.writeable = False
@@ -143,24 +145,25 @@ def list_identity_photos(root: str | Path) -> tuple[dict[str, list[Path]], list[
 
 
 class PhotoEmbedder:
-    """Detects the largest face of a photo (YuNet) and embeds it (dlib ResNet): one embedding per photo.
+    """Detects the largest face of a photo (YuNet) and embeds it (dlib ResNet by default): one embedding per photo.
 
-    ``detector`` / ``embedder``: shared instances (None: load the default models). ``max_side_px``: photos
+    ``detector`` / ``embedder``: shared instances (None: YuNet and dlib; a :class:`CombinedEmbedder` gives the
+    concatenated rows, each network aligned on its own chip). ``max_side_px``: photos
     whose longer side exceeds it are shrunk to it for detection only (>= 64).
     """
 
     def __init__(
         self,
         detector: YuNetDetector | None = None,
-        embedder: FaceEmbedder | None = None,
+        embedder: FaceEmbedder | CombinedEmbedder | None = None,
         max_side_px: int = 640,
     ) -> None:
         if isinstance(max_side_px, bool) or not isinstance(max_side_px, (int, np.integer)) or max_side_px < 64:
             raise ValueError(f"max_side_px must be an integer >= 64, got {max_side_px!r}")
         if detector is not None and not isinstance(detector, YuNetDetector):
             raise ValueError(f"detector must be a YuNetDetector, got {type(detector).__name__}")
-        if embedder is not None and not isinstance(embedder, FaceEmbedder):
-            raise ValueError(f"embedder must be a FaceEmbedder, got {type(embedder).__name__}")
+        if embedder is not None and not isinstance(embedder, (FaceEmbedder, CombinedEmbedder)):
+            raise ValueError(f"embedder must be a FaceEmbedder or CombinedEmbedder, got {type(embedder).__name__}")
         self.max_side_px = int(max_side_px)
         self.detector = detector if detector is not None else YuNetDetector()
         self.embedder = embedder if embedder is not None else FaceEmbedder()
@@ -197,8 +200,14 @@ class PhotoEmbedder:
         box[2:] *= scale_xy
         landmarks = best.landmarks * scale_xy
         eye_distance_px = float(np.linalg.norm(landmarks[1] - landmarks[0]))
-        crop, crop_landmarks = _alignment_source(image, box, landmarks, eye_distance_px)
-        embedding = self.embedder.embed_faces(crop, [crop_landmarks])[0]
+        parts = self.embedder.embedders if isinstance(self.embedder, CombinedEmbedder) else (self.embedder,)
+        rows = []
+        for part in parts:
+            template = part.spec.template
+            chip_eye_px = float(np.linalg.norm(template[1] - template[0]))
+            crop, crop_landmarks = _alignment_source(image, box, landmarks, eye_distance_px, chip_eye_px)
+            rows.append(part.embed_faces(crop, [crop_landmarks])[0])
+        embedding = rows[0] if len(rows) == 1 else np.concatenate(rows)
         return PhotoEmbedding(path, embedding, box, best.score, eye_distance_px)
 
     def embed_folder_tree(
@@ -245,11 +254,13 @@ class PhotoEmbedder:
 
 
 def _alignment_source(
-    image: NDArray[np.uint8], box: NDArray[np.float32], landmarks: NDArray[np.float32], eye_distance_px: float
+    image: NDArray[np.uint8], box: NDArray[np.float32], landmarks: NDArray[np.float32], eye_distance_px: float,
+    chip_eye_distance_px: float,
 ) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
-    """Image and landmarks to align on: the full image, or for a face far larger than the chip an
-    area-shrunk crop around it (same chip, without the aliasing of a large bilinear downscale)."""
-    shrink = eye_distance_px / (_MAX_WARP_SHRINK * _CHIP_EYE_DISTANCE_PX)
+    """Image and landmarks to align on: the full image, or for a face far larger than the chip (whose eyes
+    are ``chip_eye_distance_px`` apart) an area-shrunk crop around it (same chip, without the aliasing of a
+    large bilinear downscale)."""
+    shrink = eye_distance_px / (_MAX_WARP_SHRINK * chip_eye_distance_px)
     if shrink <= 1.0:
         return image, landmarks
     height, width = image.shape[:2]

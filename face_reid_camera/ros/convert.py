@@ -48,7 +48,9 @@ def person_to_msg(person_cls: type, person: PersonObservation) -> Any:
         m.face_quality = float(face.quality)
         m.face_yaw_deg = float(face.yaw_deg)
         m.face_eye_distance_px = float(face.eye_distance_px)
-        m.embedding = np.asarray(face.embedding, dtype=np.float32).tolist()
+        if face.embedding is not None:
+            m.embedding = np.asarray(face.embedding, dtype=np.float32).tolist()
+            m.embedding_space = face.embedding_space
     return m
 
 

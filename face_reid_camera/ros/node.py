@@ -46,6 +46,7 @@ class CameraNode(ManagedNode):
         self.pipeline: CameraPipeline | None = None
         self.health: NodeHealth | None = None
         self._intrinsics: CameraIntrinsics | None = None
+        self._color_intrinsics: CameraIntrinsics | None = None
         self._sync: StampSynchronizer[Any, Any] | None = None
         self._slot: tuple[float, Any, Any] | None = None
         self._cond = threading.Condition()
@@ -62,7 +63,7 @@ class CameraNode(ManagedNode):
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
         from face_reid_camera.faces.detector import YuNetDetector
-        from face_reid_camera.faces.embedder import FaceEmbedder
+        from face_reid_camera.faces.embedder import load_embedder
 
         values = self.parameter_values()
         config = camera_params.pipeline_config(values)
@@ -77,7 +78,8 @@ class CameraNode(ManagedNode):
                 roi_input_size_px=int(values["face_roi_input_px"]),
                 num_threads=threads,
             )
-            embedder = FaceEmbedder(values["embedder_model_path"] or None, num_threads=threads)
+            embedder = load_embedder(str(values["embedder"]), threads, {
+                "dlib": str(values["dlib_model_path"]), "sface": str(values["sface_model_path"])})
         self.values = values
         self.pipeline = CameraPipeline(config, pose, detector, embedder, bool(values["seed_ground_from_pose"]))
         self.health = NodeHealth(f"{self.get_name()}: camera {config.camera_id}", config.camera_id,
@@ -101,6 +103,9 @@ class CameraNode(ManagedNode):
             self.create_subscription(Image, str(values["depth_topic"]), self._on_depth, image_qos),
             self.create_subscription(CameraInfo, str(values["camera_info_topic"]), self._on_info, image_qos),
         ]
+        if values["color_camera_info_topic"]:
+            self._subs.append(self.create_subscription(
+                CameraInfo, str(values["color_camera_info_topic"]), self._on_color_info, image_qos))
         assert self.health is not None
         self.health.start(self.now_s())
         self._running = True
@@ -110,7 +115,7 @@ class CameraNode(ManagedNode):
         self.get_logger().info(
             f"camera '{self.pipeline.config.camera_id}': colour={values['color_topic']} depth={values['depth_topic']} "
             f"info={values['camera_info_topic']} -> {self.publisher.topic_name} "
-            f"(faces {'on' if self.pipeline.config.detect_faces else 'off'})"
+            f"(faces {'on, embedder ' + str(values['embedder']) if self.pipeline.config.detect_faces else 'off'})"
         )
 
     def deactivate(self) -> None:
@@ -133,6 +138,7 @@ class CameraNode(ManagedNode):
         self.pipeline = None
         self._sync = None
         self._intrinsics = None
+        self._color_intrinsics = None
 
     # ------------------------------------------------------------------ callbacks: decode, pair, hand over
     def _on_info(self, msg: Any) -> None:
@@ -144,6 +150,12 @@ class CameraNode(ManagedNode):
         self._intrinsics = intr
         if not self._camera_frame_id:
             self._camera_frame_id = msg.header.frame_id
+
+    def _on_color_info(self, msg: Any) -> None:
+        try:
+            self._color_intrinsics = intrinsics_from_camera_info(msg)
+        except ValueError as exc:
+            self._reject("no_camera_info", f"unusable colour CameraInfo: {exc}")
 
     def _on_color(self, msg: Any) -> None:
         img = self._decode(msg, to_bgr, "bad_color", "colour")
@@ -211,10 +223,21 @@ class CameraNode(ManagedNode):
                          f"depth is {depth.shape[1]}x{depth.shape[0]} but CameraInfo says {intr.width}x{intr.height}")
             return
         ch, cw = color.shape[:2]
-        if abs(cw / intr.width - ch / intr.height) > 0.02:
-            self._reject("size_mismatch", f"colour {cw}x{ch} and depth {intr.width}x{intr.height} differ in aspect")
+        color_intr = None
+        if self.values["color_camera_info_topic"]:
+            color_intr = self._color_intrinsics
+            if color_intr is None:
+                self._reject("no_camera_info", "no colour CameraInfo received yet: frame dropped")
+                return
+            if (cw, ch) != (color_intr.width, color_intr.height):
+                self._reject("size_mismatch", f"colour is {cw}x{ch} but its CameraInfo says "
+                             f"{color_intr.width}x{color_intr.height}")
+                return
+        elif abs(cw / intr.width - ch / intr.height) > 0.02:
+            self._reject("size_mismatch", f"colour {cw}x{ch} and depth {intr.width}x{intr.height} differ in aspect "
+                         "(set color_camera_info_topic when colour has its own CameraInfo)")
             return
-        result = pipeline.process(color, depth, intr)
+        result = pipeline.process(color, depth, intr, color_intr, stamp_s)
         self._floor_found = bool(result.ground_plane_found)
         msg = frame_to_msg(result, stamp_s, pipeline.config.camera_id, str(self.values["world_frame_id"]),
                            self._camera_frame_id, pipeline.camera_pose, self._new_drops())

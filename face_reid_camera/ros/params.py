@@ -42,7 +42,12 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
         "depth_topic", "depth_registered/image_raw",
         "Depth image registered to colour (sensor_msgs/Image: 16UC1 mm or 32FC1 m).",
     ),
-    ParamSpec("camera_info_topic", "color/camera_info", "CameraInfo of the registered depth/colour images."),
+    ParamSpec("camera_info_topic", "color/camera_info", "CameraInfo of the depth image (registered to colour)."),
+    ParamSpec(
+        "color_camera_info_topic", "",
+        "CameraInfo of the colour image when it has its own resolution/intrinsics (e.g. 1920x1080 colour with "
+        "512x424 depth, same optical frame); empty = colour has depth's aspect and scaled intrinsics.",
+    ),
     ParamSpec("output_topic", "face_reid/frames", "Where face_reid_msgs/CameraFrame messages are published."),
     ParamSpec(
         "image_qos_reliable", False,
@@ -60,7 +65,10 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "multiple of 32).", low=32, high=640),
     ParamSpec("num_threads", 1, "onnxruntime intra-op threads per model (count).", low=1, high=64),
     ParamSpec("detector_model_path", "", "YuNet ONNX file; empty = the installed default model."),
-    ParamSpec("embedder_model_path", "", "Embedder ONNX file; empty = the installed default model."),
+    ParamSpec("embedder", "dlib", "Face embedder network(s): dlib (ResNet v1), sface (OpenCV Zoo SFace) or both "
+              "(both run, one 256-value embedding).", choices=("dlib", "sface", "both"), read_only=True),
+    ParamSpec("dlib_model_path", "", "dlib embedder ONNX file; empty = the installed default model."),
+    ParamSpec("sface_model_path", "", "SFace embedder ONNX file; empty = the installed default model."),
     ParamSpec("no_input_warning_s", 5.0, "/diagnostics warns when no image pair arrived for this long (s).",
               low=0.0, high=3600.0, low_open=True),
 )

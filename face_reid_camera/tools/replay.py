@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         detector = embedder = None
         if config.detect_faces:
             from face_reid_camera.faces.detector import YuNetDetector
-            from face_reid_camera.faces.embedder import FaceEmbedder
+            from face_reid_camera.faces.embedder import load_embedder
 
             detector = YuNetDetector(
                 values["detector_model_path"] or None,  # type: ignore[arg-type]
@@ -148,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
                 nms_iou_threshold=float(values["face_nms_iou_threshold"]),  # type: ignore[arg-type]
                 roi_input_size_px=int(values["face_roi_input_px"]),  # type: ignore[arg-type]
             )
-            embedder = FaceEmbedder(values["embedder_model_path"] or None)  # type: ignore[arg-type]
+            embedder = load_embedder(str(values["embedder"]), 1, {
+                "dlib": str(values["dlib_model_path"]), "sface": str(values["sface_model_path"])})
         pipeline = CameraPipeline(config, pose, detector, embedder, seed_ground_from_pose=seeded)
     except (ValueError, FileNotFoundError, ModelLoadError, OSError) as exc:
         print(f"face-reid-replay: error: {exc}", file=sys.stderr)

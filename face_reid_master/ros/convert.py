@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from face_reid_camera.common.embedding_spaces import DLIB_SPACE as LEGACY_EMBEDDING_SPACE
 from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
 from face_reid_master.records import STATE_LOST, CameraFrameRecord, NamedTrackRecord, PersonRecord
 
@@ -20,6 +21,8 @@ def frame_from_msg(msg: Any) -> CameraFrameRecord:
             PersonRecord(
                 np.array([p.position_world.x, p.position_world.y, p.position_world.z]),
                 float(p.position_std_m), float(p.height_m), emb, float(p.face_score), float(p.face_quality),
+                # an empty space: a camera from before spaces were named, which ran the dlib embedder
+                str(p.embedding_space) or LEGACY_EMBEDDING_SPACE, float(p.face_eye_distance_px),
             )
         )
     return CameraFrameRecord(msg.camera_id, stamp_to_seconds(msg.header.stamp), tuple(people), msg.header.frame_id)
@@ -44,6 +47,8 @@ def frame_record_to_msg(frame: CameraFrameRecord, stamp_s: float) -> Any:
             m.face_score = float(person.face_score)
             m.face_quality = float(person.face_quality)
             m.embedding = np.asarray(person.embedding, dtype=np.float32).tolist()
+            m.embedding_space = person.embedding_space
+            m.face_eye_distance_px = float(person.face_eye_distance_px)
         msg.people.append(m)
     return msg
 

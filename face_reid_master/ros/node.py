@@ -20,6 +20,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
+from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_master.core import MasterCore
 from face_reid_master.ros import params as master_params
@@ -41,6 +42,7 @@ class MasterNode(ManagedNode):
         super().__init__(master_params.TABLE, **kwargs)
         self.values: dict[str, Any] = {}
         self.core: MasterCore | None = None
+        self._photos: Any = None  # PhotoEmbedder of the master's space, loaded on first use
         self.store: Any = None
         self.health: NodeHealth | None = None
         self._services: list[Any] = []
@@ -129,7 +131,8 @@ class MasterNode(ManagedNode):
 
         path = Path(str(self.values["db_path"])) if self.values["db_path"] else default_db_path()
         retention = float(self.values["retention_unnamed_s"]) or None
-        store = FaceStore(path, retention_unnamed_s=retention)
+        space = str(self.values["embedding_space"])
+        store = FaceStore(path, retention_unnamed_s=retention, embedding_dim=space_dim(space), embedding_space=space)
         if store.recovered_from is not None:
             self.get_logger().error(
                 f"face database {path} was corrupt: moved to {store.recovered_from}, started a fresh one"
@@ -139,10 +142,9 @@ class MasterNode(ManagedNode):
     def _load_gallery(self, path: str) -> dict[str, np.ndarray]:
         if not path:
             return {}
-        from face_reid_camera.faces.photos import PhotoEmbedder
         from face_reid_master.storage.gallery import load_gallery
 
-        result = load_gallery(Path(path), PhotoEmbedder())
+        result = load_gallery(Path(path), self._photo_embedder())
         skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
         if skipped:
             self.get_logger().warning(
@@ -150,6 +152,16 @@ class MasterNode(ManagedNode):
                 f"{len(result.skipped_no_face)} without a detectable face"
             )
         return dict(result.people)
+
+    def _photo_embedder(self) -> Any:
+        """Photos -> embeddings of the master's space (gallery folder, add-person service)."""
+        from face_reid_camera.faces.embedder import load_embedder
+        from face_reid_camera.faces.photos import PhotoEmbedder
+
+        if self._photos is None:
+            choice = embedder_for_space(str(self.values["embedding_space"]))
+            self._photos = PhotoEmbedder(embedder=load_embedder(choice))
+        return self._photos
 
     # ------------------------------------------------------------------ camera topics
     def _subscribe(self, topic: str) -> None:
@@ -187,6 +199,8 @@ class MasterNode(ManagedNode):
             return
         health.frame_processed((time.perf_counter() - t0) * 1e3, len(record.people),
                                sum(1 for p in record.people if p.embedding is not None))
+        for notice in outcome.notices:
+            self.get_logger().warning(notice)
         for ev in outcome.identity_events:
             self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")
         if self._min_publish_interval_s and now - self._last_publish_s < self._min_publish_interval_s:
@@ -252,14 +266,16 @@ class MasterNode(ManagedNode):
             if not name:
                 raise ValueError("name must not be empty")
             emb = np.asarray(request.embeddings, dtype=np.float32)
-            if emb.size % 128:
-                raise ValueError(f"embeddings must hold k x 128 values, got {emb.size}")
+            dim = space_dim(str(self.values["embedding_space"]))
+            if emb.size % dim:
+                raise ValueError(f"embeddings must hold k x {dim} values (space {self.values['embedding_space']}), "
+                                 f"got {emb.size}")
             if emb.size:
-                rows.extend(emb.reshape(-1, 128))
+                rows.extend(emb.reshape(-1, dim))
             if request.image_paths:
-                from face_reid_camera.faces.photos import PhotoEmbedder, PhotoError
+                from face_reid_camera.faces.photos import PhotoError
 
-                embedder = PhotoEmbedder()
+                embedder = self._photo_embedder()
                 for path in request.image_paths:
                     try:
                         found = embedder.embed_photo(Path(path))

@@ -58,6 +58,7 @@ _FILE_MODE = 0o600
 _DIR_MODE = 0o700
 _SIDECARS = ("-wal", "-shm")
 _DEFAULT_DIM = 128
+_LEGACY_SPACE = "dlib_resnet_v1"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _VECTOR_DTYPE = np.dtype("<f4")  # little-endian float32 on every platform
 
@@ -141,7 +142,10 @@ class FaceStore:
     ``retention_unnamed_s``: unnamed faces not seen for this long are deleted by :meth:`prune_unnamed`
     (None = keep forever).  ``embedding_dim``: length of the stored vectors; a store written with another
     dimension raises :class:`FaceStoreError` (a different embedder: the operator must decide); None adopts
-    the stored dimension (128 for a new store).
+    the stored dimension (128 for a new store).  ``embedding_space``: the embedder space of the vectors
+    (e.g. ``dlib_resnet_v1``); a store of another space raises :class:`FaceStoreError` (faces of two
+    networks must never be compared); None adopts the stored space. A store written before spaces were
+    recorded is taken to be ``dlib_resnet_v1`` (the only embedder then).
     ``synchronous``: "FULL" (default, power-loss safe) or "NORMAL" (process-crash safe).  ``create``:
     False raises :class:`FaceStoreError` when the file does not exist (used by the CLI).
     """
@@ -152,6 +156,7 @@ class FaceStore:
         *,
         retention_unnamed_s: float | None = None,
         embedding_dim: int | None = 128,
+        embedding_space: str | None = "dlib_resnet_v1",
         synchronous: str = "FULL",
         create: bool = True,
     ) -> None:
@@ -172,6 +177,9 @@ class FaceStore:
         self.path = Path(path).expanduser().absolute()
         self.retention_unnamed_s = retention_unnamed_s
         self.embedding_dim: int = 0 if embedding_dim is None else embedding_dim  # 0: take the store's
+        if embedding_space is not None and (not isinstance(embedding_space, str) or not embedding_space):
+            raise ValueError(f"embedding_space must be a non-empty str or None, got {embedding_space!r}")
+        self.embedding_space: str = embedding_space or ""  # "": take the store's
         self.synchronous = synchronous
         self.recovered_from: Path | None = None  # set when a corrupt file was moved aside at open
         self._lock_fd: int | None = None
@@ -296,6 +304,8 @@ class FaceStore:
                 self._enable_wal(conn)  # before the first write: the schema goes straight into the WAL
                 conn.executescript("BEGIN IMMEDIATE;" + _SCHEMA + "COMMIT;")
                 self._set_meta(conn, "embedding_dim", str(self.embedding_dim))
+                self.embedding_space = self.embedding_space or _LEGACY_SPACE
+                self._set_meta(conn, "embedding_space", self.embedding_space)
                 return
             if not _EXPECTED_TABLES <= tables:
                 raise _CorruptStore(f"not a face store (tables {sorted(tables)})")
@@ -311,6 +321,19 @@ class FaceStore:
                 raise FaceStoreError(
                     f"face store {self.path} holds {dim}-dimensional features but embedding_dim is "
                     f"{self.embedding_dim} (a different embedder?): use another file or delete this one"
+                )
+            space = meta.get("embedding_space")
+            if space is None:  # written before spaces were recorded: the dlib embedder was the only one
+                space = _LEGACY_SPACE
+                if not self.embedding_space or self.embedding_space == space:
+                    self._set_meta(conn, "embedding_space", space)
+            if not self.embedding_space:
+                self.embedding_space = space
+            elif space != self.embedding_space:
+                raise FaceStoreError(
+                    f"face store {self.path} holds faces of embedder space {space!r} but this master compares "
+                    f"{self.embedding_space!r}: faces of different networks cannot be compared; use another "
+                    "file (face_db_path) or delete this one"
                 )
         except sqlite3.DatabaseError as exc:
             raise _CorruptStore(f"unreadable database ({exc})") from exc

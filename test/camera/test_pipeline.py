@@ -94,6 +94,30 @@ def test_face_budget_goes_to_the_nearest_people(models, faces) -> None:
     assert with_face[0].position_world[0] < 2.8
 
 
+def test_embedding_budget_refreshes_every_face_in_turn(models, faces) -> None:
+    """A budget of one face per frame: all three faces are found every frame, each embedded every third."""
+    spots = [(2.3, -0.9), (2.7, 0.0), (2.4, 0.9)]
+    people = [SyntheticPerson(x, y, 1.75, math.atan2(-y, -x), faces[ident][0])
+              for (x, y), ident in zip(spots, IDS, strict=True)]
+    frame = render_scene(people, INTR, POSE, rng=np.random.default_rng(1))
+    pipeline = CameraPipeline(CameraPipelineConfig(camera_id="c", embed_budget_ms=1e-3), POSE, *models)
+    embedded_at: dict[int, list[int]] = {0: [], 1: [], 2: []}
+    truth = np.array([[p.x_m, p.y_m] for p in people])
+    for k in range(6):
+        result = pipeline.process(frame.rgb_bgr, _depth_m(frame.depth_mm), INTR, stamp_s=k * 0.1)
+        assert result.num_faces == 3 and result.num_embedded == 1
+        for obs in result.people:
+            assert obs.face is not None
+            i = int(np.argmin(np.linalg.norm(truth - obs.position_world[:2], axis=1)))
+            if obs.face.embedding is not None:
+                assert obs.face.embedding_space == "dlib_resnet_v1"
+                embedded_at[i].append(k)
+            else:
+                assert obs.face.embedding_space == ""
+    assert sorted(len(v) for v in embedded_at.values()) == [2, 2, 2]
+    assert all(b - a == 3 for v in embedded_at.values() for a, b in [v])
+
+
 def test_real_desk_frames_have_no_people(models) -> None:
     pipeline = CameraPipeline(CameraPipelineConfig(), CameraPose(), *models, seed_ground_from_pose=False)
     for depth_path in sorted((DATA / "rgbd" / "pcl_desk").glob("*_depth_mm.png")):

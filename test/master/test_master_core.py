@@ -183,3 +183,53 @@ def test_faces_survive_a_restart_and_can_be_forgotten(embeddings, tmp_path) -> N
         _walk(core, {"a": (np.array([3.0, 1.0]), embeddings[IDS[0]][5:])}, 106.0, 109.0)
         (again,) = {t.face_id for t in core.tracks()}
         assert again not in (0, face_a)
+
+
+def test_embeddings_of_another_space_are_not_compared_and_noticed_once_per_camera(embeddings) -> None:
+    """A dlib master: an SFace camera's faces are refused (positions tracked, one notice); a camera running
+    both embedders is used through its dlib half."""
+    core = MasterCore(_config())
+    a = embeddings[IDS[0]]
+    rng = np.random.default_rng(0)
+    notices: list[str] = []
+    for k in range(40):
+        t = k / 10.0
+        pos = np.array([0.5 * t, 0.0, 0.0])
+        if k % 2:
+            sface = rng.normal(size=128).astype(np.float32)
+            person = PersonRecord(pos, 0.05, 1.75, sface / np.linalg.norm(sface), 0.9, 0.8, "sface_2021dec")
+            cam = "cam_sface"
+        else:
+            joint = np.concatenate([a[k // 2 % 5], rng.normal(size=128).astype(np.float32)])
+            person = PersonRecord(pos, 0.05, 1.75, joint, 0.9, 0.8, "dlib_resnet_v1+sface_2021dec")
+            cam = "cam_both"
+        outcome = core.process_frame(CameraFrameRecord(cam, t, (person,)))
+        assert outcome.accepted
+        notices.extend(outcome.notices)
+    assert core.stats.embeddings_rejected_space == 20
+    assert core.stats.embeddings_used == 20
+    assert len(notices) == 1 and "cam_sface" in notices[0] and "'sface_2021dec'" in notices[0], notices
+    (track,) = core.tracks()  # one person, tracked from both cameras
+    assert track.face_id != 0 and track.face_observations == 20
+    learned = core.identity.face_features(track.face_id)
+    assert learned.shape[1] == 128  # the dlib half only
+    assert np.min(np.linalg.norm(learned[:, None, :] - a[None, :5, :], axis=2), axis=1).max() < 1e-5
+
+
+def test_a_joint_space_master_needs_both_networks(embeddings) -> None:
+    core = MasterCore(_config(embedding_space="dlib_resnet_v1+sface_2021dec"), likelihood=_joint_stub_likelihood())
+    a = embeddings[IDS[0]]
+    outcome = core.process_frame(CameraFrameRecord("cam_dlib", 0.0, (PersonRecord(np.zeros(3), 0.05, 1.7, a[0]),)))
+    assert core.stats.embeddings_rejected_space == 1 and "cam_dlib" in outcome.notices[0]
+    wrong_len = PersonRecord(np.zeros(3), 0.05, 1.7, a[0], embedding_space="dlib_resnet_v1+sface_2021dec")
+    core.process_frame(CameraFrameRecord("cam_both", 0.1, (wrong_len,)))
+    assert core.stats.embeddings_rejected_length == 1
+    unknown = PersonRecord(np.zeros(3), 0.05, 1.7, a[0], embedding_space="openface_v9")
+    outcome = core.process_frame(CameraFrameRecord("cam_x", 0.2, (unknown,)))
+    assert core.stats.embeddings_rejected_space == 2 and "unknown embedding space" in outcome.notices[0]
+
+
+def _joint_stub_likelihood():
+    from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
+
+    return LikelihoodModel(SkewNormal(0.0, 0.8, 0.2), SkewNormal(0.0, 1.6, 0.2))

@@ -205,7 +205,7 @@ def test_corrupt_model_file_raises_model_load_error(tmp_path: Path) -> None:
 
 
 def test_other_onnx_model_is_rejected() -> None:
-    with pytest.raises(ModelLoadError, match="not the face embedder"):
+    with pytest.raises(ModelLoadError, match="not the dlib face embedder"):
         FaceEmbedder(YUNET_PATH)
 
 

@@ -3,6 +3,7 @@ recovery, kill -9 durability, process lock and the ``face-reid-faces`` CLI."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -509,3 +510,23 @@ def test_an_invalid_stored_face_is_skipped_not_fatal(db: Path, caplog: pytest.Lo
         assert store.recovered_from is None
         assert [f.face_id for f in store.load_faces()] == [2]
     assert any("skipping invalid stored face 1" in r.getMessage() for r in caplog.records)
+
+
+def test_a_store_of_another_embedder_space_is_refused_not_mixed(db: Path) -> None:
+    with FaceStore(db, embedding_space="sface_2021dec") as store:
+        store.save_face(LearnedFace(1, _feats(1, 3)))
+    with pytest.raises(FaceStoreError, match="space 'sface_2021dec' but this master compares 'dlib_resnet_v1'"):
+        FaceStore(db)
+    with FaceStore(db, embedding_space=None) as store:  # adopt the stored space (CLI)
+        assert store.embedding_space == "sface_2021dec" and [f.face_id for f in store.load_faces()] == [1]
+
+
+def test_a_store_from_before_spaces_is_the_dlib_space(db: Path) -> None:
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(1, _feats(1, 3)))
+    with contextlib.closing(sqlite3.connect(db)) as conn, conn:
+        conn.execute("DELETE FROM meta WHERE key = 'embedding_space'")
+    with pytest.raises(FaceStoreError, match="space 'dlib_resnet_v1'"):
+        FaceStore(db, embedding_space="sface_2021dec")
+    with FaceStore(db) as store:
+        assert store.embedding_space == "dlib_resnet_v1" and len(store.load_faces()) == 1
