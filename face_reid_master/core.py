@@ -37,12 +37,23 @@ from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
 from face_reid_master.identity.records import IdentityEventKind, LearnedFace
+from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
 from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.records import FrameStatus, TrackState
 from face_reid_master.tracking.tracker import Tracker
 
 _SPACE_CHOICES = tuple(embedder_space(choice) for choice in EMBEDDER_CHOICES)
+
+
+def _derived(name: str, configured: float, derived: float | None) -> float:
+    """A configured distance, or (0) the value derived for the embedder space; ValueError if there is none."""
+    if configured > 0:
+        return configured
+    if derived is None:
+        raise ValueError(f"{name} is 0 (= derived for the embedder space) but the likelihood file derives none: "
+                         f"set {name} explicitly or refit with face-reid-fit-likelihood")
+    return derived
 
 
 @dataclass(frozen=True)
@@ -90,12 +101,14 @@ class MasterConfig:
         True, "An identified track's embedding joins its face only if within the decision distance (guards "
         "faces against tracker swaps; false = the paper).")
     # identity (threshold baseline)
-    threshold_distance: float = param(0.6, "Threshold method: same face below this L2 distance.",
-                                      low=0.0, high=4.0, low_open=True)
+    threshold_distance: float = param(
+        0.0, "Threshold method: same face below this L2 distance (0 = the value derived for embedding_space, "
+        "in its likelihood file).", low=0.0, high=4.0)
     threshold_votes: int = param(5, "Threshold method: observations per majority vote (count).", low=1, high=1000)
     # predefined people
-    name_threshold: float = param(0.45, "A face gets a predefined name below this L2 distance.",
-                                  low=0.0, high=4.0, low_open=True)
+    name_threshold: float = param(
+        0.0, "A face gets a predefined name below this L2 distance (0 = the value derived for embedding_space, "
+        "in its likelihood file).", low=0.0, high=4.0)
     min_face_features_for_name: int = param(5, "Embeddings a face needs before naming.", low=1, high=10000)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
@@ -167,15 +180,26 @@ class MasterCore:
     def __init__(
         self,
         config: MasterConfig | None = None,
-        likelihood: LikelihoodModel | None = None,
+        likelihood: LikelihoodModel | FaceLikelihood | None = None,
         store: Any | None = None,
         gallery: Mapping[str, NDArray[np.floating]] | None = None,
     ) -> None:
         self.config = config or MasterConfig()
         cfg = self.config
         self.tracker = Tracker(cfg.tracker)
+        model = likelihood or default_face_likelihood(cfg.embedding_space)
+        if isinstance(model, LikelihoodModel):
+            model = FaceLikelihood(model, cfg.embedding_space)
+        if model.space != cfg.embedding_space:
+            raise ValueError(f"the likelihood model is fitted for embedder space {model.space!r} but "
+                             f"embedding_space is {cfg.embedding_space!r}")
+        self.likelihood = model  # also gives the joint-space weights and the space's derived thresholds
+        self.threshold_distance = _derived("threshold_distance", cfg.threshold_distance, model.threshold_distance) \
+            if cfg.method == "threshold" else cfg.threshold_distance or model.threshold_distance
+        # naming needs a threshold only once there are predefined people (add_person checks it too)
+        self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
+            if gallery else cfg.name_threshold or model.name_threshold
         if cfg.method == "bayes":
-            model = likelihood or LikelihoodModel.default()
             if cfg.new_person_scale_c != model.new_person_scale_c:
                 model = model.with_new_person_scale(cfg.new_person_scale_c)
             self.identity: IdentityManagerBase = make_identity_manager(
@@ -186,12 +210,13 @@ class MasterCore:
             )
         else:
             self.identity = make_identity_manager(
-                "threshold", distance_threshold=cfg.threshold_distance, n_votes=cfg.threshold_votes,
+                "threshold", distance_threshold=self.threshold_distance, n_votes=cfg.threshold_votes,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=space_dim(cfg.embedding_space),
-                feature_gate_distance=cfg.threshold_distance if cfg.learn_only_consistent_features else None,
+                feature_gate_distance=self.threshold_distance if cfg.learn_only_consistent_features else None,
             )
         self.people = PredefinedPeople(
-            gallery or {}, name_threshold=cfg.name_threshold, min_face_features=cfg.min_face_features_for_name,
+            {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
+            name_threshold=self.name_threshold or 1.0, min_face_features=cfg.min_face_features_for_name,
             embedding_dim=space_dim(cfg.embedding_space),
         )
         self.store = store
@@ -249,10 +274,11 @@ class MasterCore:
 
         touched_tracks: set[int] = set()
         for track_id, det_index in result.associations:
-            emb = embeddings.get(det_index)
-            if emb is None:
+            face = embeddings.get(det_index)
+            if face is None:
                 continue
-            if self.identity.add_validated_observations(track_id, emb[None, :], stamp):  # validated above
+            emb, eye_px = face
+            if self.identity.add_validated_observations(track_id, emb[None, :], stamp, eye_px):  # validated above
                 self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
                 touched_tracks.add(track_id)
                 st.embeddings_used += 1
@@ -279,10 +305,12 @@ class MasterCore:
     def _detections(
         self, frame: CameraFrameRecord
     ) -> tuple[
-        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], dict[int, NDArray[np.float32]], list[int]
+        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+        dict[int, tuple[NDArray[np.float32], NDArray[np.float64]]], list[int]
     ]:
         """The frame's valid detections as tracker input (positions (N, 2), stds (N,), heights (N,)),
-        their usable embeddings by detection index, and detection -> person index.
+        their usable embeddings (with the face's eye distance, px; 0 = unknown) by detection index, and
+        detection -> person index.
 
         This is the one place a frame's people are validated (the tracker and the face table are handed
         checked values), in one vectorised pass: it runs for every person of every camera frame.
@@ -312,7 +340,7 @@ class MasterCore:
             (k, i) for k, i in enumerate(person_index)
             if people[i].embedding is not None and np.size(people[i].embedding) > 0
         ]
-        embeddings: dict[int, NDArray[np.float32]] = {}
+        embeddings: dict[int, tuple[NDArray[np.float32], NDArray[np.float64]]] = {}
         if not with_face:
             return *tracker_input, embeddings, person_index
         vectors = [(k, i, self._in_space(people[i], frame.camera_id)) for k, i in with_face]
@@ -329,7 +357,8 @@ class MasterCore:
         st.embeddings_rejected_nonfinite += int(np.count_nonzero(~finite))
         st.embeddings_skipped_quality += int(np.count_nonzero(finite & ~good_quality))
         for row in np.flatnonzero(finite & good_quality):
-            embeddings[good_len[row][0]] = stacked[row]
+            eye = float(people[good_len[row][1]].face_eye_distance_px)
+            embeddings[good_len[row][0]] = (stacked[row], np.array([eye if math.isfinite(eye) and eye > 0 else 0.0]))
         return *tracker_input, embeddings, person_index
 
     def _in_space(self, person: Any, camera_id: str) -> NDArray[np.float32] | None:
@@ -344,6 +373,8 @@ class MasterCore:
             if space != want and values.size != space_dim(space):
                 return np.zeros(0, dtype=np.float32)
             part = extract_space(values, space, want)
+            if part is not None:
+                part = self.likelihood.scale(part)
             why = f"its face embeddings are of space {space[:64]!r}, this master compares {want!r}"
         except ValueError as exc:
             part, why = None, f"its face embeddings are unusable ({exc})"
@@ -430,8 +461,9 @@ class MasterCore:
 
     # ------------------------------------------------------------------------------ people
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
-        """Add or replace a predefined person (gallery embeddings (k, 128)) at run time."""
-        self.people.set_person(name, embeddings)
+        """Add or replace a predefined person (gallery embeddings (k, dim) of the master's space) at run time."""
+        _derived("name_threshold", self.config.name_threshold, self.likelihood.name_threshold)
+        self.people.set_person(name, self.likelihood.scale(np.asarray(embeddings, dtype=np.float32)))
         for fid in self.identity.face_ids():
             self._refresh_name(fid, self.identity.face_features(fid))
 

@@ -12,8 +12,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-EMBEDDING_DIM = 128
-
 STATE_TENTATIVE = 0
 STATE_CONFIRMED = 1
 STATE_LOST = 2

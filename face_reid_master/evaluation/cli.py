@@ -26,7 +26,7 @@ from face_reid_master.evaluation.gallery import GalleryInfo, default_gallery_peo
 from face_reid_master.evaluation.metrics import evaluate_run, paired_reid_times
 from face_reid_master.evaluation.plots import save_plots
 from face_reid_master.evaluation.runner import DEFAULT_TICK_PERIOD_S, RunLog, progress_to, run_master
-from face_reid_master.identity.likelihood import LikelihoodModel, load_likelihood_model
+from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood, load_face_likelihood
 from face_reid_master.tools.fit_likelihood import excluded_from_fit
 
 _IDENTITY_FIELDS = {
@@ -58,8 +58,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="save PREFIX_timeline.png and PREFIX_map.png")
     p.add_argument("--out", type=Path, default=None, metavar="JSON", help="also write the JSON to this file")
     p.add_argument("--likelihood", type=Path, default=None, metavar="JSON",
-                   help="bayes: the fitted likelihoods to use (default: models/face_likelihood.json); "
+                   help="the fitted likelihoods to use (default: models/face_likelihood_<space>.json); "
                    "see face-reid-fit-likelihood")
+    p.add_argument("--space", default=None, metavar="SPACE",
+                   help="embedder space the master compares (default: the scenario's); a scenario simulated with "
+                        "both embedders serves dlib_resnet_v1, sface_2021dec and dlib_resnet_v1+sface_2021dec")
+    p.add_argument("--pooled-likelihood", action="store_true",
+                   help="judge every face by the pooled likelihood, ignoring the face-size buckets")
     p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
     p.add_argument("--live", action="store_true",
                    help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
@@ -73,7 +78,7 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _identities_in_likelihood_fit(names: Sequence[str], likelihood: LikelihoodModel) -> list[str] | None:
+def _identities_in_likelihood_fit(names: Sequence[str], likelihood: FaceLikelihood) -> list[str] | None:
     """Scenario identities ``likelihood`` may have been fitted on: those its fit did not exclude (metadata
     ``excluded``, written by face-reid-fit-likelihood); None if the model does not say."""
     excluded = likelihood.metadata.get("excluded")
@@ -84,7 +89,7 @@ def _identities_in_likelihood_fit(names: Sequence[str], likelihood: LikelihoodMo
     return sorted(n for n in names if not excluded_from_fit(n, patterns, ids))
 
 
-def _scenario_json(scenario: Any, likelihood: LikelihoodModel) -> dict[str, Any]:
+def _scenario_json(scenario: Any, likelihood: FaceLikelihood) -> dict[str, Any]:
     doc = scenario.document
     summary = scenario.summary
     names = [str(i["name"]) for i in scenario.identities]
@@ -103,16 +108,21 @@ def _scenario_json(scenario: Any, likelihood: LikelihoodModel) -> dict[str, Any]
         "gt_losses": summary.get("losses"),
         "gt_visible_segments": summary.get("visible_segments"),
         "faces_dir": doc.get("faces_dir"),
+        "embedding_space": doc.get("embedding_space", "dlib_resnet_v1"),
         "identities_in_likelihood_fit": _identities_in_likelihood_fit(names, likelihood),
     }
 
 
-def _parameters(config: MasterConfig, likelihood: LikelihoodModel | None, tick_period_s: float) -> dict[str, Any]:
+def _parameters(config: MasterConfig, likelihood: FaceLikelihood, tick_period_s: float) -> dict[str, Any]:
     out: dict[str, Any] = {k: getattr(config, k) for k in _IDENTITY_FIELDS[config.method]}
-    out["name_threshold"] = config.name_threshold
+    out["embedding_space"] = config.embedding_space
+    out["name_threshold"] = config.name_threshold or likelihood.name_threshold
+    if config.method == "threshold":
+        out["threshold_distance"] = config.threshold_distance or likelihood.threshold_distance
+    out["likelihood_size_buckets"] = list(likelihood.eye_px_edges) if likelihood.conditioned else "pooled"
     out["tick_period_s"] = tick_period_s
     out["tracker"] = dataclasses.asdict(config.tracker)
-    if likelihood is not None:
+    if config.method == "bayes":
         out["likelihood_data"] = likelihood.metadata.get("data", "")
         out["likelihood_command"] = likelihood.metadata.get("command", "")
     return out
@@ -132,12 +142,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not (math.isfinite(args.tick_period) and args.tick_period > 0):
         print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
         return 2
+    from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario, load_scenario_document
+
     try:
-        model = LikelihoodModel.default() if args.likelihood is None else load_likelihood_model(args.likelihood)
+        space = args.space or str(load_scenario_document(args.scenario).get("embedding_space", "dlib_resnet_v1"))
+    except ScenarioFormatError as exc:
+        print(f"face-reid-eval: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        model = default_face_likelihood(space) if args.likelihood is None else load_face_likelihood(args.likelihood)
+        if model.space != space:
+            raise ValueError(f"{args.likelihood} is fitted for space {model.space!r}, the master compares {space!r}")
     except (OSError, ValueError) as exc:
         print(f"face-reid-eval: error: --likelihood: {exc}", file=sys.stderr)
         return 2
-    from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario
+    if args.pooled_likelihood:
+        model = model.pooled_only()
+    missing = [name for name, needed in (("name_threshold", args.gallery_people != 0),
+                                         ("threshold_distance", args.method in ("threshold", "both")))
+               if needed and getattr(model, name) is None]
+    if missing:
+        print(f"face-reid-eval: error: --likelihood: {args.likelihood or 'the shipped fit'} derives no "
+              f"{' / '.join(missing)} (a version-1 file?): refit with face-reid-fit-likelihood", file=sys.stderr)
+        return 2
 
     t0 = time.perf_counter()
     try:
@@ -153,7 +180,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"face-reid-eval: error: --gallery-people: {exc}", file=sys.stderr)
         return 2
     t1 = time.perf_counter()
-    gallery = scenario_gallery(scenario.document, scenario.directory, gallery_ids, faces_dir=args.faces, log=log) \
+    gallery = scenario_gallery(scenario.document, scenario.directory, gallery_ids, faces_dir=args.faces, log=log,
+                               space=space) \
         if gallery_ids else GalleryInfo({}, {}, {}, [], skipped="--gallery-people 0")
     if gallery.skipped and gallery_ids and log:
         print(f"gallery skipped: {gallery.skipped}", file=log)
@@ -170,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             result[m] = res
         result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
     else:
-        config = MasterConfig(method=args.method)
+        config = MasterConfig(method=args.method, embedding_space=space)
         if args.live:
             return _main_live(args, scenario, gallery, config, model, days, t0, log)
         result = _run_offline(args, args.method, scenario, gallery, days, log, model)[0]
@@ -181,11 +209,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
                  days: list[tuple[int, float, float, list[int]]], log: Any,
-                 model: LikelihoodModel) -> tuple[dict[str, Any], RunLog]:
-    """The master core with ``method`` (and ``model`` if bayes) over the scenario; (the JSON-ready metrics,
-    the run's log)."""
-    config = MasterConfig(method=method)
-    likelihood = model if method == "bayes" else None
+                 model: FaceLikelihood) -> tuple[dict[str, Any], RunLog]:
+    """The master core with ``method`` (and ``model``: likelihoods, weights, thresholds) over the scenario;
+    (the JSON-ready metrics, the run's log)."""
+    config = MasterConfig(method=method, embedding_space=model.space)
+    likelihood = model
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
     run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
@@ -221,10 +249,10 @@ def _emit(result: dict[str, Any], out: Path | None) -> None:
 
 
 def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, config: MasterConfig,
-               model: LikelihoodModel, days: list[tuple[int, float, float, list[int]]], t0: float,
+               model: FaceLikelihood, days: list[tuple[int, float, float, list[int]]], t0: float,
                log: Any) -> int:
     """``--live``: the scenario through the master node over DDS; the metrics of what it published."""
-    likelihood = model if args.method == "bayes" else None
+    likelihood = model
     import os
     import random
     import signal
@@ -253,7 +281,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     t1 = time.perf_counter()
     try:
         live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
-                        log=log, likelihood_path=args.likelihood)
+                        log=log, likelihood_path=args.likelihood, embedding_space=model.space)
     except LiveError as exc:
         print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
         return 1

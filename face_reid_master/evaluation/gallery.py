@@ -61,20 +61,24 @@ def scenario_gallery(
     faces_dir: str | Path | None = None,
     embedder: Any | None = None,
     log: Any | None = None,
+    space: str = "dlib_resnet_v1",
 ) -> GalleryInfo:
     """Predefined people for ``gt_ids``: each identity's photos in its faces folder that the scenario did
     NOT use on any day, embedded with the real models (``PhotoEmbedder``). If none is usable, one photo
     the scenario used is taken (and listed in ``from_scenario_photo``). A missing faces folder gives a
-    GalleryInfo with ``skipped`` set (the evaluation then has no names)."""
+    GalleryInfo with ``skipped`` set (the evaluation then has no names). ``space``: the embedder space of
+    the master (the photos are embedded by the network(s) it compares; ``embedder`` overrides)."""
     if not gt_ids:
         return GalleryInfo({}, {}, {}, [], skipped="no gallery people requested")
     base = _resolve_faces_dir(document, Path(scenario_dir), faces_dir)
     if base is None:
         return GalleryInfo({}, {}, {}, [], skipped=f"faces folder {document.get('faces_dir')!r} not found "
                                                    "(pass --faces)")
+    from face_reid_camera.common.embedding_spaces import embedder_for_space
+    from face_reid_camera.faces.embedder import load_embedder
     from face_reid_camera.faces.photos import IMAGE_SUFFIXES, PhotoEmbedder, PhotoError
 
-    emb = embedder if embedder is not None else PhotoEmbedder()
+    emb = embedder if embedder is not None else PhotoEmbedder(embedder=load_embedder(embedder_for_space(space)))
     photo_path = {int(p["index"]): str(p["path"]) for p in document.get("photos", [])}
     idents = {int(i["gt_id"]): i for i in document.get("identities", [])}
     info = GalleryInfo({}, {}, {}, [])

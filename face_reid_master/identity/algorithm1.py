@@ -68,6 +68,11 @@ class TrackEntry:
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
 
 
+def _eye_rows(chunks: list[tuple[F32Array, FloatArray | None]]) -> FloatArray:
+    """Eye distance (px) of every row of a track's queued chunks (0 = unknown)."""
+    return np.concatenate([c[1] if c[1] is not None else np.zeros(c[0].shape[0]) for c in chunks])
+
+
 class IdentityManagerBase:
     """Algorithm 1 of the paper, shared by the Bayesian method and the threshold baseline.
 
@@ -119,17 +124,19 @@ class IdentityManagerBase:
         self._tracks: dict[int, TrackEntry] = {}
         self._available: list[int] = []  # face_list in column order (Bayes: table columns 1..M)
         self._available_slots = np.zeros(0, dtype=np.intp)
-        self._pending_obs: dict[int, list[F32Array]] = {}
+        self._pending_obs: dict[int, list[tuple[F32Array, FloatArray | None]]] = {}  # (embeddings, eye px)
         self._pending_deleted: dict[int, float] = {}
         self._dead: OrderedDict[int, float] = OrderedDict()
         self._next_face_id = 1
         self.stats = IdentityStats()
 
     # ------------------------------------------------------------------------------ public inputs
-    def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float) -> bool:
+    def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float,
+                         eye_px: npt.ArrayLike | None = None) -> bool:
         """Queue face embeddings (K, embedding_dim) observed on a track; used at the next :meth:`step`.
 
-        Returns False (and counts it) when the track was already deleted (a late message).
+        ``eye_px``: the face size (eye distance, px) of each row, for size-conditioned likelihoods (None or
+        0: unknown). Returns False (and counts it) when the track was already deleted (a late message).
         Raises ValueError on a wrong shape/dtype, NaN or Inf.
         """
         tid = check_int("track_id", track_id, -(2**63))
@@ -147,15 +154,22 @@ class IdentityManagerBase:
             raise ValueError(f"embeddings of track {tid} contain NaN or Inf")
         if emb.shape[0] == 0:
             return True
-        return self.add_validated_observations(tid, np.ascontiguousarray(emb, dtype=np.float32), stamp)
+        eye = None
+        if eye_px is not None:
+            eye = np.asarray(eye_px, dtype=np.float64).reshape(-1)
+            if eye.shape != (emb.shape[0],):
+                raise ValueError(f"eye_px must have one value per embedding ({emb.shape[0]}), got {eye.shape}")
+        return self.add_validated_observations(tid, np.ascontiguousarray(emb, dtype=np.float32), stamp, eye)
 
-    def add_validated_observations(self, tid: int, emb: F32Array, stamp: float) -> bool:
+    def add_validated_observations(self, tid: int, emb: F32Array, stamp: float,
+                                   eye_px: FloatArray | None = None) -> bool:
         """:meth:`add_observations` for input already validated (MasterCore checks each frame once):
-        ``emb`` a finite C-contiguous float32 (K >= 1, embedding_dim) array, ``stamp`` finite seconds."""
+        ``emb`` a finite C-contiguous float32 (K >= 1, embedding_dim) array, ``stamp`` finite seconds,
+        ``eye_px`` None or (K,) float64."""
         if tid in self._dead or tid in self._pending_deleted:
             self.stats.observations_ignored_dead_track += emb.shape[0]
             return False
-        self._pending_obs.setdefault(tid, []).append(emb)
+        self._pending_obs.setdefault(tid, []).append((emb, eye_px))
         self.stats.observations_received += emb.shape[0]
         track = self._tracks.get(tid)
         if track is not None:
@@ -188,11 +202,12 @@ class IdentityManagerBase:
         self._pending_obs = {}
         unassigned_ids: list[int] = []
         unassigned_obs: list[F32Array] = []
+        unassigned_eye: list[FloatArray] = []
         bank = self._bank
         single_slots: list[int] = []  # one new feature into a full feature set: batched below
         single_obs: list[F32Array] = []
         for tid, chunks in pending.items():
-            obs = chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+            obs = chunks[0][0] if len(chunks) == 1 else np.concatenate([c[0] for c in chunks])
             track = self._tracks[tid]
             track.n_observations += obs.shape[0]
             if track.face_id is not None:
@@ -210,6 +225,7 @@ class IdentityManagerBase:
                     track.slot = bank.new_slot(obs)
                 unassigned_ids.append(tid)
                 unassigned_obs.append(obs)
+                unassigned_eye.append(_eye_rows(chunks))
             if slot is not None:
                 if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
                     single_slots.append(slot)
@@ -219,7 +235,7 @@ class IdentityManagerBase:
         if single_slots:
             bank.add_one_each(np.array(single_slots, dtype=np.intp), np.concatenate(single_obs))
         if unassigned_ids:
-            self._ingest_unassigned(unassigned_ids, unassigned_obs)
+            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for tid in list(self._pending_deleted):
@@ -431,7 +447,8 @@ class IdentityManagerBase:
         return IdentityEvent(IdentityEventKind.RELEASED, tid, track.face_id, stamp, track.confidence)
 
     # hooks for the classification method
-    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array]) -> None:
+    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
+                           eye_px: list[FloatArray]) -> None:
         """Accumulate the evidence of this step's observations of unassigned tracks (one array per track)."""
         raise NotImplementedError
 

@@ -33,6 +33,7 @@ from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
+from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
 
 __all__ = ["BayesIdentityManager"]
 
@@ -54,7 +55,7 @@ class BayesIdentityManager(IdentityManagerBase):
 
     def __init__(
         self,
-        likelihood: LikelihoodModel | None = None,
+        likelihood: LikelihoodModel | FaceLikelihood | None = None,
         *,
         prior_probability: float = 0.1,
         posterior_threshold: float = 0.95,
@@ -68,9 +69,11 @@ class BayesIdentityManager(IdentityManagerBase):
     ) -> None:
         super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
         if likelihood is None:
-            likelihood = LikelihoodModel.default()
-        if not isinstance(likelihood, LikelihoodModel):
-            raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
+            likelihood = default_face_likelihood()
+        if isinstance(likelihood, LikelihoodModel):
+            likelihood = FaceLikelihood(likelihood)
+        if not isinstance(likelihood, FaceLikelihood):
+            raise ValueError(f"likelihood must be a FaceLikelihood or LikelihoodModel, got {type(likelihood).__name__}")
         self.likelihood = likelihood
         self.prior_probability = check_real(
             "prior_probability", prior_probability, 0.0, 1.0, low_open=True, high_open=True
@@ -171,7 +174,8 @@ class BayesIdentityManager(IdentityManagerBase):
         self._remove_rows([track_id])
 
     # ------------------------------------------------------------------------------ inference
-    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array]) -> None:
+    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
+                           eye_px: list[FloatArray]) -> None:
         for tid in track_ids:
             if tid not in self._row_of:
                 self._add_row(tid)
@@ -184,15 +188,11 @@ class BayesIdentityManager(IdentityManagerBase):
         if m:
             d = self._available_distances(obs)
             n_feats = self._bank.count[self._available_slots].astype(np.float64)[None, :]  # K of eq. 4
-            finite = np.isfinite(d)
-            if finite.all():
-                lr = self.likelihood.log_ratio_trusted(d, n_feats)
-            else:  # faces outside the search shortlist: the weakest evidence (distance d_hi or more)
-                far = self.likelihood.log_ratio_trusted(np.full(m, np.inf), n_feats[0])
-                lr = np.repeat(far[None, :], d.shape[0], axis=0)
-                lr[finite] = self.likelihood.log_ratio_trusted(
-                    d[finite], np.broadcast_to(n_feats, d.shape)[finite]
-                )
+            model = self.likelihood
+            buckets = model.bucket_of(eye_px[0] if len(eye_px) == 1 else np.concatenate(eye_px)) \
+                if model.conditioned else None
+            # faces outside the search shortlist (inf) get the weakest evidence: clipped to distance d_hi
+            lr = model.log_ratio_rows(d, n_feats, buckets)
             if self.max_abs_log_likelihood_ratio is not None:
                 np.clip(lr, -self.max_abs_log_likelihood_ratio, self.max_abs_log_likelihood_ratio, out=lr)
             if len(sizes) == obs.shape[0]:

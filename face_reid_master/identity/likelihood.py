@@ -24,7 +24,6 @@ from scipy import special as _special
 from face_reid_camera.common.checks import check_real
 
 __all__ = [
-    "LIKELIHOOD_FILE",
     "LikelihoodModel",
     "SkewNormal",
     "fit_likelihood_model",
@@ -35,7 +34,6 @@ __all__ = [
 ]
 
 FORMAT_TAG = "face_reid_likelihood/1"
-LIKELIHOOD_FILE = "face_likelihood.json"  # the shipped fit, in the models folder (common.resources.model_path)
 
 _LOG_2 = math.log(2.0)
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -235,19 +233,6 @@ class LikelihoodModel:
     def with_k_exponents(self, positive: float, negative: float) -> LikelihoodModel:
         """Copy with other min-of-K exponents (0, 0 = the paper's pair likelihoods)."""
         return dataclasses.replace(self, k_exponent_positive=positive, k_exponent_negative=negative)
-
-    @classmethod
-    def default(cls, path: str | Path | None = None) -> LikelihoodModel:
-        """The shipped model (``models/face_likelihood.json`` in the installed models folder), or ``path``.
-
-        FileNotFoundError when the file is missing: the fitted numbers live in that file only.
-        """
-        from face_reid_camera.common.resources import model_path
-
-        p = model_path(LIKELIHOOD_FILE) if path is None else Path(path)
-        if not p.is_file():
-            raise FileNotFoundError(f"likelihood model {p}: No such file (refit with face-reid-fit-likelihood)")
-        return load_likelihood_model(p)
 
 
 def fit_skewnormal(distances: npt.ArrayLike) -> SkewNormal:

@@ -37,7 +37,8 @@ class ThresholdIdentityManager(IdentityManagerBase):
         )
         self.n_votes = check_int("n_votes", n_votes, 1)
 
-    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array]) -> None:
+    def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
+                           eye_px: list[npt.NDArray[np.float64]]) -> None:
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
         d = self._available_distances(obs)
         if d.shape[1]:

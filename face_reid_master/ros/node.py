@@ -56,12 +56,13 @@ class MasterNode(ManagedNode):
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
-        from face_reid_master.identity.likelihood import LikelihoodModel
+        from face_reid_master.identity.size_likelihood import default_face_likelihood, load_face_likelihood
 
         values = self.parameter_values()
         config = master_params.master_config(values)
         regex = re.compile(str(values["camera_topic_regex"])) if values["camera_topic_regex"] else None
-        likelihood = LikelihoodModel.default(values["likelihood_path"] or None)  # missing / bad file: clear error
+        likelihood = (load_face_likelihood(values["likelihood_path"]) if values["likelihood_path"]  # clear errors
+                      else default_face_likelihood(str(values["embedding_space"])))
         self.values = values
         self.store = self._open_store() if values["persist_faces"] else None
         gallery = self._load_gallery(str(values["gallery_path"]))

@@ -16,10 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.pipeline import FaceQualityConfig, face_quality
-from face_reid_master.records import EMBEDDING_DIM
 from face_reid_master.sim.frame_table import DetectionColumns
 from face_reid_master.sim.motion import sample_trajectories
-from face_reid_master.sim.photos import IdentityPhotos, glance_photos, range_bucket, valid_variants
+from face_reid_master.sim.photos import IdentityPhotos, glance_photos, range_bucket, valid_variants, variant_eye_px
 from face_reid_master.sim.streams import S_CAMERA, S_FACES, S_FP, stream_rng
 from face_reid_master.sim.visibility import camera_visibility
 from face_reid_master.sim.world import World
@@ -40,10 +39,13 @@ def feature_camera_day(
 ) -> DetectionColumns:
     """Camera messages of one camera over one day, made directly from the world model."""
     camera = world.cameras[cam_index]
+    dim = int(identities[0].photos[0].embeddings.shape[1])
+    # colour at its own resolution (same horizontal field of view as depth): faces have more pixels
+    fx_color = _KINECT_FX_PX * (cfg.color_resolution[0] / camera.intrinsics.width if cfg.color_resolution else 1.0)
     rng_det = stream_rng(cfg.seed, S_CAMERA, day.day, cam_index)
     rng_face = stream_rng(cfg.seed, S_FACES, day.day, cam_index)
     rng_fp = stream_rng(cfg.seed, S_FP, day.day, cam_index)
-    cols = DetectionColumns()
+    cols = DetectionColumns(dim=dim)
     n_f, n_p = stamps.size, len(day.gt_ids)
     if n_f == 0:
         return cols
@@ -71,10 +73,12 @@ def feature_camera_day(
     fi = np.flatnonzero(has_face)
     photos_flat = [ph for ident in identities for ph in ident.photos]
     valid_cache: dict[int, list[list[int]]] = {}
-    buckets = range_bucket(rng_m[f_idx[fi], p_idx[fi]])
+    # photo variants by the range at which a 640x480 Kinect shows a face of this many pixels
+    buckets = range_bucket(rng_m[f_idx[fi], p_idx[fi]] * (_KINECT_FX_PX / fx_color))
     picks_u = rng_face.random(fi.size)
-    embeddings = np.empty((fi.size, EMBEDDING_DIM), dtype=np.float32)
+    embeddings = np.empty((fi.size, dim), dtype=np.float32)
     variants = np.empty(fi.size, dtype=np.int16)
+    variant_px = np.empty(fi.size, dtype=np.float32)  # the size of the face the embedding shows
     face_photo = photo_of[f_idx[fi], p_idx[fi]]
     for k in range(fi.size):
         ph = int(face_photo[k])
@@ -84,18 +88,19 @@ def feature_camera_day(
         choices = valid[int(buckets[k])]
         v = choices[min(int(picks_u[k] * len(choices)), len(choices) - 1)]
         variants[k] = v
+        variant_px[k] = variant_eye_px(photos_flat[ph], v)
         embeddings[k] = photos_flat[ph].embeddings[v]
     if fi.size and cfg.embedding_noise_std > 0:
         embeddings += (cfg.embedding_noise_std * rng_face.normal(size=embeddings.shape)).astype(np.float32)
     face_angle = angle[f_idx[fi], p_idx[fi]]
     face_range = rng_m[f_idx[fi], p_idx[fi]]
     score = np.clip(0.93 - 0.002 * face_angle - 0.02 * face_range + 0.03 * rng_face.normal(size=fi.size), 0.6, 0.99)
-    eye_px = _KINECT_FX_PX * _EYE_DISTANCE_M / np.maximum(face_range, 0.1) * np.cos(np.radians(face_angle))
+    eye_px = fx_color * _EYE_DISTANCE_M / np.maximum(face_range, 0.1) * np.cos(np.radians(face_angle))
     qcfg = FaceQualityConfig()
     quality = np.array([face_quality(float(s), float(e), float(a), qcfg) for s, e, a in
                         zip(score, eye_px, face_angle, strict=True)], dtype=np.float32)
     cols.append(f_idx, gt, pos, std, height, has_face, embeddings, score, quality, face_photo,
-            glance_of[f_idx[fi], p_idx[fi]], variants)
+                glance_of[f_idx[fi], p_idx[fi]], variants, variant_px)
     # false positives: clutter somewhere in the camera's view, never with a face
     n_fp = rng_fp.poisson(cfg.false_positives_per_frame, size=n_f)
     fp_frames = np.repeat(np.arange(n_f), n_fp)
@@ -112,6 +117,6 @@ def feature_camera_day(
         fp_pos[:, :2] = fp_xy[keep]
         fp_std = (cfg.position_noise_base_m + cfg.position_noise_per_m * dist[keep]).astype(np.float32)
         cols.append(fp_frames[keep], np.full(m, -1, np.int32), fp_pos, fp_std,
-                rng_fp.uniform(1.0, 2.0, size=m), np.zeros(m, bool), np.zeros((0, EMBEDDING_DIM), np.float32),
+                rng_fp.uniform(1.0, 2.0, size=m), np.zeros(m, bool), np.zeros((0, dim), np.float32),
                 np.zeros(0), np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.int16))
     return cols

@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.records import EMBEDDING_DIM
 from face_reid_master.sim.streams import S_SHUFFLE, stream_rng
 
 __all__ = ["DetectionColumns", "FrameTable", "assemble_frames"]
@@ -34,23 +33,30 @@ class DetectionColumns:
     face_photo: list[NDArray[np.int32]] = field(default_factory=list)
     face_glance: list[NDArray[np.int32]] = field(default_factory=list)
     face_variant: list[NDArray[np.int16]] = field(default_factory=list)
+    face_eye_px: list[NDArray[np.float32]] = field(default_factory=list)
+    dim: int = 128  # embedding length (256 for a camera running both embedders)
 
     def append(self, frame: NDArray[Any], gt: NDArray[Any], pos: NDArray[Any], std: NDArray[Any],
                height: NDArray[Any], has_face: NDArray[Any], emb: NDArray[Any], score: NDArray[Any],
-               quality: NDArray[Any], photo: NDArray[Any], glance: NDArray[Any], variant: NDArray[Any]) -> None:
-        """Add a batch of detections (the face columns hold rows for the detections with a face only)."""
+               quality: NDArray[Any], photo: NDArray[Any], glance: NDArray[Any], variant: NDArray[Any],
+               eye_px: NDArray[Any] | None = None) -> None:
+        """Add a batch of detections (the face columns hold rows for the detections with a face only;
+        ``eye_px`` None: face size unknown, 0)."""
         self.frame.append(np.asarray(frame, dtype=np.int64))
         self.gt.append(np.asarray(gt, dtype=np.int32))
         self.position.append(np.asarray(pos, dtype=np.float64).reshape(-1, 3))
         self.std.append(np.asarray(std, dtype=np.float32))
         self.height.append(np.asarray(height, dtype=np.float32))
         self.has_face.append(np.asarray(has_face, dtype=bool))
-        self.embedding.append(np.asarray(emb, dtype=np.float32).reshape(-1, EMBEDDING_DIM))
+        self.embedding.append(np.asarray(emb, dtype=np.float32).reshape(-1, self.dim))
         self.face_score.append(np.asarray(score, dtype=np.float32))
         self.face_quality.append(np.asarray(quality, dtype=np.float32))
         self.face_photo.append(np.asarray(photo, dtype=np.int32))
         self.face_glance.append(np.asarray(glance, dtype=np.int32))
         self.face_variant.append(np.asarray(variant, dtype=np.int16))
+        n_faces = self.face_variant[-1].size
+        self.face_eye_px.append(np.zeros(n_faces, np.float32) if eye_px is None else
+                                np.asarray(eye_px, dtype=np.float32).reshape(n_faces))
 
 
 @dataclass
@@ -69,7 +75,8 @@ def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionCo
     frame_cam, frame_stamp, frame_key = [], [], []
     det_parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("frame", "gt", "position", "std", "height", "face")}
     face_parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("embedding", "score", "quality", "photo", "glance",
-                                                                  "variant")}
+                                                                  "variant", "eye_px")}
+    dim = next((cols.dim for _, _, cols in per_camera), 128)
     n_frames = 0
     n_faces = 0
     for cam_index, stamps, cols in per_camera:
@@ -93,6 +100,7 @@ def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionCo
             face_parts["photo"].append(cols.face_photo[i])
             face_parts["glance"].append(cols.face_glance[i])
             face_parts["variant"].append(cols.face_variant[i])
+            face_parts["eye_px"].append(cols.face_eye_px[i])
         n_frames += stamps.size
     cam = np.concatenate(frame_cam) if frame_cam else np.zeros(0, np.int16)
     stamp = np.concatenate(frame_stamp) if frame_stamp else np.zeros(0)
@@ -122,12 +130,13 @@ def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionCo
     det_face[has] = np.arange(face_order.size, dtype=np.int32)
     det["face"] = det_face
     face = {
-        "embedding": cat(face_parts["embedding"], np.float32, EMBEDDING_DIM)[face_order],
+        "embedding": cat(face_parts["embedding"], np.float32, dim)[face_order],
         "score": cat(face_parts["score"], np.float32)[face_order],
         "quality": cat(face_parts["quality"], np.float32)[face_order],
         "photo": cat(face_parts["photo"], np.int32)[face_order],
         "glance": cat(face_parts["glance"], np.int32)[face_order],
         "variant": cat(face_parts["variant"], np.int16)[face_order],
+        "eye_px": cat(face_parts["eye_px"], np.float32)[face_order],
     }
     counts = np.bincount(det_frame, minlength=order.size)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

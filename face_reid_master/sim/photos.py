@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.records import EMBEDDING_DIM
+from face_reid_camera.common.embedding_spaces import embedder_space, space_dim
 from face_reid_master.sim.scenario_files import write_npz
 from face_reid_master.sim.visibility import glance_ids
 
@@ -34,6 +34,7 @@ __all__ = [
     "glance_photos",
     "range_bucket",
     "valid_variants",
+    "variant_eye_px",
 ]
 
 # Photo variants (index: change). Re-detected and re-embedded with the real models.
@@ -48,7 +49,7 @@ _VARIANT_SPECS: tuple[dict[str, float], ...] = (
     {"eye_px": 9.0, "alpha": 0.8, "beta": -5.0, "rotate_deg": 5.0},  # 7: far, dim, rolled
 )
 NUM_VARIANTS = len(_VARIANT_SPECS)
-_VARIANT_VERSION = "v1"  # bump when _VARIANT_SPECS change: invalidates cached variants
+_VARIANT_VERSION = "v2"  # bump when _VARIANT_SPECS or the cached fields change: invalidates cached variants
 # Variants a frame may use, by face range (m): near, mid, far.
 _RANGE_EDGES_M = (2.0, 3.3)
 _RANGE_VARIANTS: tuple[tuple[int, ...], ...] = ((0, 1, 2, 3, 4), (1, 2, 3, 4, 5), (5, 6, 7))
@@ -60,13 +61,15 @@ class InsufficientFacesError(ValueError):
 
 @dataclass(frozen=True)
 class PhotoVariants:
-    """One usable photo: path relative to the faces folder, face box/score, and (NUM_VARIANTS, 128)
-    embeddings of its variants (NaN rows: no face found in that variant; row 0 is always valid)."""
+    """One usable photo: path relative to the faces folder, face box/score, eye distance (px) of the photo's
+    face, and (NUM_VARIANTS, dim) embeddings of its variants (NaN rows: no face found in that variant; row 0
+    is always valid)."""
 
     rel_path: str
     box_xywh: NDArray[np.float32]
     score: float
     embeddings: NDArray[np.float32]
+    eye_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -103,14 +106,16 @@ def _augment(image: NDArray[np.uint8], spec: dict[str, float], eye_px: float, ce
 class PhotoBank:
     """Identity folders of a faces directory, embedded on demand (real models) with an optional npz cache.
 
+    ``embedder``: dlib | sface | both (the camera's choice; both = the two rows side by side).
     The cache maps ``path|mtime_ns|size|variant-version`` to the photo's status (usable / unreadable / no
-    face), face box, score and variant embeddings; photos whose file changed are re-embedded.
+    face), face box, score, eye distance and variant embeddings; photos whose file changed are re-embedded.
+    A cache of another embedder space is ignored (and overwritten on save).
     """
 
     _OK, _UNREADABLE, _NO_FACE = 0, 1, 2
 
     def __init__(self, faces_dir: str | Path, cache_path: str | Path | None = None,
-                 min_photos_per_identity: int = 2, log: TextIO | None = None) -> None:
+                 min_photos_per_identity: int = 2, log: TextIO | None = None, embedder: str = "dlib") -> None:
         from face_reid_camera.faces.photos import list_identity_photos
 
         self.faces_dir = Path(faces_dir)
@@ -124,12 +129,15 @@ class PhotoBank:
                 f"faces folder {self.faces_dir} has no photos: expected one sub-folder per identity with image files"
             )
         self.min_photos = int(min_photos_per_identity)
+        self.embedder_choice = embedder
+        self.space = embedder_space(embedder)
+        self.dim = space_dim(self.space)
         self.cache_path = Path(cache_path) if cache_path is not None else None
         self.log = log
         self.skipped_unreadable: list[str] = []
         self.skipped_no_face: list[str] = []
         self.too_few_photos: list[str] = []
-        self._cache: dict[str, tuple[int, NDArray[np.float32], float, NDArray[np.float32]]] = {}
+        self._cache: dict[str, tuple[int, NDArray[np.float32], float, NDArray[np.float32], float]] = {}
         self._cache_dirty = False
         self._embedder: Any = None
         self.embedded_now = 0
@@ -138,11 +146,12 @@ class PhotoBank:
 
     @property
     def photo_embedder(self) -> Any:
-        """The real :class:`PhotoEmbedder` (YuNet + dlib ResNet), loaded on first use."""
+        """The real :class:`PhotoEmbedder` (YuNet + the chosen embedder), loaded on first use."""
         if self._embedder is None:
+            from face_reid_camera.faces.embedder import load_embedder
             from face_reid_camera.faces.photos import PhotoEmbedder
 
-            self._embedder = PhotoEmbedder()
+            self._embedder = PhotoEmbedder(embedder=load_embedder(self.embedder_choice))
         return self._embedder
 
     # --- cache
@@ -150,14 +159,18 @@ class PhotoBank:
         assert self.cache_path is not None
         try:
             with np.load(self.cache_path, allow_pickle=False) as data:
+                space = str(data["space"]) if "space" in data.files else "dlib_resnet_v1"
+                if space != self.space:
+                    raise ValueError(f"it holds embeddings of space {space!r}, not {self.space!r}")
                 keys = [str(k) for k in data["keys"]]
                 status, boxes, scores, embs = data["status"], data["boxes"], data["scores"], data["embeddings"]
-                if embs.shape[1:] != (NUM_VARIANTS, EMBEDDING_DIM) or len({len(keys), len(status), len(boxes),
-                                                                          len(scores), len(embs)}) != 1:
+                eyes = data["eye_px"]
+                if embs.shape[1:] != (NUM_VARIANTS, self.dim) or len({len(keys), len(status), len(boxes),
+                                                                      len(scores), len(embs), len(eyes)}) != 1:
                     raise ValueError("inconsistent arrays")
                 for i, key in enumerate(keys):
                     self._cache[key] = (int(status[i]), boxes[i].astype(np.float32), float(scores[i]),
-                                        embs[i].astype(np.float32))
+                                        embs[i].astype(np.float32), float(eyes[i]))
         except (OSError, KeyError, ValueError, zipfile.BadZipFile) as exc:
             self._say(f"ignoring unusable embedding cache {self.cache_path}: {exc}")
             self._cache = {}
@@ -173,7 +186,9 @@ class PhotoBank:
             "boxes": np.array([self._cache[k][1] for k in keys], dtype=np.float32).reshape(-1, 4),
             "scores": np.array([self._cache[k][2] for k in keys], dtype=np.float32),
             "embeddings": np.array([self._cache[k][3] for k in keys], dtype=np.float32).reshape(
-                -1, NUM_VARIANTS, EMBEDDING_DIM),
+                -1, NUM_VARIANTS, self.dim),
+            "eye_px": np.array([self._cache[k][4] for k in keys], dtype=np.float32),
+            "space": np.array(self.space),
         }
         self.cache_path.parent.mkdir(parents=True, exist_ok=True)
         write_npz(self.cache_path, arrays)
@@ -190,19 +205,19 @@ class PhotoBank:
             self.log.flush()
 
     # --- embedding
-    def _embed(self, path: Path) -> tuple[int, NDArray[np.float32], float, NDArray[np.float32]]:
+    def _embed(self, path: Path) -> tuple[int, NDArray[np.float32], float, NDArray[np.float32], float]:
         from face_reid_camera.faces.photos import PhotoError, read_photo
 
         nan_box = np.full(4, np.nan, dtype=np.float32)
-        nan_embs = np.full((NUM_VARIANTS, EMBEDDING_DIM), np.nan, dtype=np.float32)
+        nan_embs = np.full((NUM_VARIANTS, self.dim), np.nan, dtype=np.float32)
         try:
             image = read_photo(path)
         except PhotoError:
-            return self._UNREADABLE, nan_box, 0.0, nan_embs
+            return self._UNREADABLE, nan_box, 0.0, nan_embs, 0.0
         embedder = self.photo_embedder
         base = embedder.embed_photo(image)
         if base is None:
-            return self._NO_FACE, nan_box, 0.0, nan_embs
+            return self._NO_FACE, nan_box, 0.0, nan_embs, 0.0
         embs = nan_embs.copy()
         embs[0] = base.embedding
         box = np.asarray(base.box_xywh, dtype=np.float32)
@@ -211,7 +226,7 @@ class PhotoBank:
             variant = embedder.embed_photo(_augment(image, spec, base.eye_distance_px, centre))
             if variant is not None:
                 embs[v] = variant.embedding
-        return self._OK, box, float(base.score), embs
+        return self._OK, box, float(base.score), embs, float(base.eye_distance_px)
 
     def load_identity(self, name: str) -> IdentityPhotos | None:
         """Embed (or fetch from the cache) one identity folder; None if it has too few usable photos."""
@@ -229,14 +244,14 @@ class PhotoBank:
                 self._cache[key] = entry
                 self._cache_dirty = True
                 self.embedded_now += 1
-            status, box, score, embs = entry
+            status, box, score, embs, eye_px = entry
             rel = path.relative_to(self.faces_dir).as_posix()
             if status == self._UNREADABLE:
                 self.skipped_unreadable.append(rel)
             elif status == self._NO_FACE:
                 self.skipped_no_face.append(rel)
             else:
-                photos.append(PhotoVariants(rel, box, score, embs))
+                photos.append(PhotoVariants(rel, box, score, embs, eye_px))
         if len(photos) < self.min_photos:
             self.too_few_photos.append(name)
             return None
@@ -265,6 +280,12 @@ class PhotoBank:
                 f"without a face"
             )
         return chosen
+
+
+def variant_eye_px(photo: PhotoVariants, variant: int | NDArray[np.integer]) -> NDArray[np.float64]:
+    """Eye distance (px) of the face a variant shows: the photo's, or the smaller size it was reduced to."""
+    sizes = np.array([spec.get("eye_px", np.inf) for spec in _VARIANT_SPECS])
+    return np.minimum(sizes[np.asarray(variant)], photo.eye_px if photo.eye_px > 0 else np.inf)
 
 
 def range_bucket(range_m: NDArray[np.float64]) -> NDArray[np.int64]:

@@ -10,7 +10,6 @@ from typing import TYPE_CHECKING, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.records import EMBEDDING_DIM
 from face_reid_master.sim.frame_table import DetectionColumns
 from face_reid_master.sim.motion import sample_trajectories
 from face_reid_master.sim.photos import IdentityPhotos, PhotoBank, glance_photos
@@ -57,7 +56,7 @@ def pixel_camera_frames(
         rng_face = stream_rng(cfg.seed, S_FACES, day.day, cam_index)
         pipeline = CameraPipeline(CameraPipelineConfig(camera_id=camera.camera_id), camera.pose,
                                   embedder.detector, embedder.embedder)
-        cols = DetectionColumns()
+        cols = DetectionColumns(dim=bank.dim)
         out.append(cols)
         if stamps.size == 0:
             continue
@@ -98,7 +97,8 @@ def pixel_camera_frames(
                         gt_ids[r] = day.gt_ids[index[c]]
             has_face = np.array([d.face is not None for d in dets], dtype=bool)
             fi = np.flatnonzero(has_face)
-            emb = np.array([dets[i].face.embedding for i in fi], dtype=np.float32).reshape(-1, EMBEDDING_DIM)  # type: ignore[union-attr]
+            emb = np.array([dets[i].face.embedding for i in fi], dtype=np.float32).reshape(-1, bank.dim)  # type: ignore[union-attr]
+            eye = np.array([dets[i].face.eye_distance_px for i in fi], dtype=np.float32)  # type: ignore[union-attr]
             score = np.array([dets[i].face.detection.score for i in fi], dtype=np.float32)  # type: ignore[union-attr]
             quality = np.array([dets[i].face.quality for i in fi], dtype=np.float32)  # type: ignore[union-attr]
             photo = np.array([photo_of[f, matched_p[i]] if matched_p[i] >= 0 else -1 for i in fi], dtype=np.int32)
@@ -106,7 +106,7 @@ def pixel_camera_frames(
             cols.append(np.full(len(dets), f), gt_ids,
                     np.array([d.position_world for d in dets]).reshape(-1, 3),
                     np.array([d.position_std_m for d in dets]), np.array([d.height_m for d in dets]),
-                    has_face, emb, score, quality, photo, glance, np.full(fi.size, -1, np.int16))
+                    has_face, emb, score, quality, photo, glance, np.full(fi.size, -1, np.int16), eye)
             frames_done[0] += 1
             if log is not None and (frames_done[0] % step == 0 or frames_done[0] == frames_total):
                 log.write(f"  rendered + processed {frames_done[0]}/{frames_total} frames\n")

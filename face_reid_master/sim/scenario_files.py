@@ -11,8 +11,10 @@
   (F+1,) int64: detections of frame i are rows offsets[i]:offsets[i+1] of ``det_position`` (D, 3)
   float64 world m, ``det_std_m`` (D,) float32, ``det_height_m`` (D,) float32, ``det_gt_id`` (D,) int32
   (-1 = false positive), ``det_face`` (D,) int32 row into the face arrays or -1; ``face_embedding``
-  (E, 128) float32, ``face_score``, ``face_quality`` (E,) float32, ``face_photo`` (E,) int32 photo
-  index (-1 unknown), ``face_glance`` (E,) int32, ``face_variant`` (E,) int16 (-1 at pixel level).
+  (E, dim) float32 in the space ``embedding_space`` of scenario.json (dlib_resnet_v1 when absent: 128
+  values; 256 for both embedders), ``face_score``, ``face_quality`` (E,) float32, ``face_photo`` (E,) int32
+  photo index (-1 unknown), ``face_glance`` (E,) int32, ``face_variant`` (E,) int16 (-1 at pixel level),
+  ``face_eye_px`` (E,) float32 size of the face the embedding shows (optional: 0 = unknown).
 - ``ground_truth.npz``: ``t_s`` (T,) at ``ground_truth_rate_hz`` for each day, ``day`` (T,) int8,
   ``gt_id`` (P,) int32, ``xy`` (P, T, 2) float32 (NaN when the person is absent that day),
   ``facing_rad`` (P, T) float32, ``in_room`` (P, T), ``in_view`` (P, T, M), ``face_visible`` (P, T, M) bool.
@@ -33,7 +35,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-from face_reid_master.records import EMBEDDING_DIM, CameraFrameRecord, PersonRecord
+from face_reid_camera.common.embedding_spaces import DLIB_SPACE, space_dim
+from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.sim.visibility import coverage_fraction
 from face_reid_master.sim.world import SimCamera, World
 
@@ -117,6 +120,7 @@ def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities:
         "version": FORMAT_VERSION,
         "generator": "face-reid-sim",
         "level": cfg.level,
+        "embedding_space": bank.space,
         "seed": int(cfg.seed),
         "faces_dir": str(bank.faces_dir),
         "parameters": cfg.to_json(),
@@ -164,7 +168,7 @@ def write_scenario(result: SimResult, out_dir: str | Path) -> Path:
         "det_gt_id": table.det["gt_id"], "det_face": table.det["face"],
         "face_embedding": table.face["embedding"], "face_score": table.face["score"],
         "face_quality": table.face["quality"], "face_photo": table.face["photo"], "face_glance": table.face["glance"],
-        "face_variant": table.face["variant"],
+        "face_variant": table.face["variant"], "face_eye_px": table.face["eye_px"],
     }
     write_npz(out / "frames.npz", arrays)
     write_npz(out / "ground_truth.npz", result.ground_truth)
@@ -231,7 +235,7 @@ _FRAME_KEYS = ("frame_camera", "frame_stamp_s", "frame_offsets", "det_position",
 _GT_KEYS = ("t_s", "day", "gt_id", "xy", "facing_rad", "in_room", "in_view", "face_visible")
 
 
-def _read_npz(path: Path, keys: Sequence[str]) -> dict[str, NDArray[Any]]:
+def _read_npz(path: Path, keys: Sequence[str], optional: Sequence[str] = ()) -> dict[str, NDArray[Any]]:
     if not path.is_file():
         raise ScenarioFormatError(f"scenario file {path} is missing")
     try:
@@ -239,7 +243,7 @@ def _read_npz(path: Path, keys: Sequence[str]) -> dict[str, NDArray[Any]]:
             missing = [k for k in keys if k not in data.files]
             if missing:
                 raise ScenarioFormatError(f"{path} lacks arrays {missing}")
-            return {k: data[k] for k in keys}
+            return {k: data[k] for k in (*keys, *(k for k in optional if k in data.files))}
     except (OSError, ValueError, zipfile.BadZipFile) as exc:
         if isinstance(exc, ScenarioFormatError):
             raise
@@ -281,7 +285,12 @@ def load_scenario(directory: str | Path) -> Scenario:
         n_ids = len(doc["identities"])
     except (KeyError, TypeError, ValueError) as exc:
         raise ScenarioFormatError(f"{doc_path} has malformed cameras/identities: {exc}") from exc
-    a = _read_npz(base / "frames.npz", _FRAME_KEYS)
+    a = _read_npz(base / "frames.npz", _FRAME_KEYS, ("face_eye_px",))
+    space = str(doc.get("embedding_space", DLIB_SPACE))
+    try:
+        dim = space_dim(space)
+    except ValueError as exc:
+        raise ScenarioFormatError(f"{doc_path}: {exc}") from None
     n_f, n_d, n_e = a["frame_stamp_s"].size, a["det_gt_id"].size, a["face_score"].size
     offsets = a["frame_offsets"]
     problems = []
@@ -296,7 +305,8 @@ def load_scenario(directory: str | Path) -> Scenario:
     if a["det_position"].shape != (n_d, 3) or any(a[k].shape != (n_d,) for k in ("det_std_m", "det_height_m",
                                                                                    "det_face")):
         problems.append("detection arrays disagree in shape")
-    if a["face_embedding"].shape != (n_e, EMBEDDING_DIM) or any(
+    eye_px = a.get("face_eye_px", np.zeros(n_e, dtype=np.float32))
+    if a["face_embedding"].shape != (n_e, dim) or eye_px.shape != (n_e,) or any(
             a[k].shape != (n_e,) for k in ("face_quality", "face_photo", "face_glance", "face_variant")):
         problems.append("face arrays disagree in shape")
     if n_d and (a["det_face"].max() >= n_e or a["det_face"].min() < -1 or a["det_gt_id"].max() >= n_ids
@@ -317,6 +327,7 @@ def load_scenario(directory: str | Path) -> Scenario:
                                           a["det_face"].tolist(), a["det_gt_id"])
     emb, f_score, f_quality, f_photo = a["face_embedding"], a["face_score"].tolist(), a["face_quality"].tolist(), \
         a["face_photo"]
+    f_eye = eye_px.tolist()
     for i in range(n_f):
         lo, hi = int(offsets[i]), int(offsets[i + 1])
         people = []
@@ -324,7 +335,8 @@ def load_scenario(directory: str | Path) -> Scenario:
         for j in range(lo, hi):
             k = det_face[j]
             if k >= 0:
-                people.append(PersonRecord(pos[j], std[j], height[j], emb[k], f_score[k], f_quality[k]))
+                people.append(PersonRecord(pos[j], std[j], height[j], emb[k], f_score[k], f_quality[k], space,
+                                           f_eye[k]))
                 photos[j - lo] = f_photo[k]
             else:
                 people.append(PersonRecord(pos[j], std[j], height[j]))

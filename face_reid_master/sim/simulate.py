@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import is_finite_number
+from face_reid_camera.common.embedding_spaces import EMBEDDER_CHOICES, embedder_space
 from face_reid_master.sim.feature_level import feature_camera_day
 from face_reid_master.sim.frame_table import DetectionColumns, assemble_frames
 from face_reid_master.sim.ground_truth import sample_ground_truth
@@ -67,6 +68,8 @@ class SimConfig:
     min_photos_per_identity: int = 2
     loss_gap_s: float = 1.5
     ground_truth_rate_hz: float = 10.0
+    embedder: str = "dlib"  # the cameras' embedder: dlib | sface | both (one scenario serves all three spaces)
+    color_resolution: tuple[int, int] | None = None  # colour image W, H (px); None: the depth camera's
     motion: MotionConfig = field(default_factory=MotionConfig)
     visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
 
@@ -105,6 +108,13 @@ class SimConfig:
             raise ValueError(f"position_noise_base_m must be > 0, got {self.position_noise_base_m!r}")
         if not (is_finite_number(self.ground_truth_rate_hz) and 0 < self.ground_truth_rate_hz <= 100):
             raise ValueError(f"ground_truth_rate_hz must be in (0, 100] Hz, got {self.ground_truth_rate_hz!r}")
+        if self.embedder not in EMBEDDER_CHOICES:
+            raise ValueError(f"embedder must be one of {sorted(EMBEDDER_CHOICES)}, got {self.embedder!r}")
+        if self.color_resolution is not None:
+            w, h = self.color_resolution
+            if not all(isinstance(v, (int, np.integer)) and 64 <= v <= 8192 for v in (w, h)):
+                raise ValueError(f"color_resolution must be two integers in [64, 8192] (W, H px), got "
+                                 f"{self.color_resolution!r}")
         if not isinstance(self.motion, MotionConfig) or not isinstance(self.visibility, VisibilityConfig):
             raise ValueError("motion / visibility must be MotionConfig / VisibilityConfig instances")
 
@@ -152,7 +162,10 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
             log.flush()
 
     t0 = time.perf_counter()
-    bank = bank if bank is not None else PhotoBank(faces_dir, cache_path, cfg.min_photos_per_identity, log)
+    bank = bank if bank is not None else PhotoBank(faces_dir, cache_path, cfg.min_photos_per_identity, log,
+                                                   embedder=cfg.embedder)
+    if bank.space != embedder_space(cfg.embedder):
+        raise ValueError(f"the photo bank embeds with {bank.embedder_choice!r}, the config asks for {cfg.embedder!r}")
     n_day1, n_new = cfg.num_people, cfg.num_new_people
     say(f"choosing {n_day1 + n_new} identities in {bank.faces_dir} ({len(bank.identity_files)} folders)")
     identities = bank.choose(n_day1 + n_new, stream_rng(cfg.seed, S_IDENTITIES))

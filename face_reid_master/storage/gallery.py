@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from face_reid_camera.common.embedding_spaces import EMBEDDER_CHOICES, embedder_space, space_dim
 from face_reid_master.identity.predefined_people import PredefinedPeople
 
 if TYPE_CHECKING:
@@ -23,7 +24,8 @@ if TYPE_CHECKING:
 
 __all__ = ["EMBEDDING_DIM", "GalleryResult", "load_gallery", "save_gallery_npz", "validate_person_name"]
 
-EMBEDDING_DIM = 128
+EMBEDDING_DIM = 128  # one network's embedding; a joint space (both embedders) has 256
+_LENGTHS = frozenset(space_dim(embedder_space(choice)) for choice in EMBEDDER_CHOICES)
 
 
 def validate_person_name(name: object) -> str:
@@ -39,8 +41,9 @@ def validate_person_name(name: object) -> str:
 
 def _validate_embeddings(name: str, value: npt.ArrayLike) -> npt.NDArray[np.float32]:
     arr = np.asarray(value)
-    if arr.ndim != 2 or arr.shape[0] < 1 or arr.shape[1] != EMBEDDING_DIM:
-        raise ValueError(f"embeddings of {name!r} must have shape (k >= 1, {EMBEDDING_DIM}), got {arr.shape}")
+    if arr.ndim != 2 or arr.shape[0] < 1 or arr.shape[1] not in _LENGTHS:
+        raise ValueError(f"embeddings of {name!r} must have shape (k >= 1, {' or '.join(map(str, sorted(_LENGTHS)))}),"
+                         f" got {arr.shape}")
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)) or arr.dtype == np.bool_:
         raise ValueError(f"embeddings of {name!r} must be real numbers, got dtype {arr.dtype}")
     if not np.all(np.isfinite(arr)):

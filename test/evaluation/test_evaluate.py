@@ -24,6 +24,7 @@ from face_reid_master.evaluation.gallery import default_gallery_people, scenario
 from face_reid_master.evaluation.metrics import evaluate_run, mot_metrics, paired_reid_times, track_outcomes
 from face_reid_master.evaluation.runner import RunLog, TrackLog, run_master
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
+from face_reid_master.identity.size_likelihood import FaceLikelihood, save_face_likelihood
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.tracking.config import TrackerConfig
 
@@ -332,7 +333,10 @@ def test_cli_likelihood_option_uses_that_model(scenario_dir: Path, tmp_path: Pat
     face for every decided track (no re-identification), and the JSON says which model ran."""
     path = tmp_path / "strict.json"
     strict = LikelihoodModel(SkewNormal(0.0, 0.05, 0.01), SkewNormal(0.0, 0.9, 0.3), metadata={"data": "strict"})
-    save_likelihood_model(strict, path)
+    save_likelihood_model(strict, path)  # a version-1 file: pooled, no derived thresholds
+    assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet"]) == 2  # naming needs one
+    assert "name_threshold" in capsys.readouterr().err
+    save_face_likelihood(FaceLikelihood(strict, name_threshold=0.45, metadata={"data": "strict"}), path)
     assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed["parameters"]["likelihood_data"] == "strict"

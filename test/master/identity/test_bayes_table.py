@@ -24,6 +24,7 @@ from face_reid_master.identity.bayes_table import BayesIdentityManager
 from face_reid_master.identity.feature_bank import min_distances_to_faces
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
 from face_reid_master.identity.records import LearnedFace
+from face_reid_master.identity.size_likelihood import default_face_likelihood
 
 # ------------------------------------------------------------------------------------------------
 # Hand-computed Bayesian update + Sinkhorn (2 tracks x 2 faces + slack)
@@ -147,7 +148,7 @@ def test_new_person_scale_c_biases_towards_new_faces() -> None:
         m = manager_with_faces(
             3,
             np.random.default_rng(12),
-            likelihood=LikelihoodModel.default().with_new_person_scale(c),
+            likelihood=default_face_likelihood().pooled.with_new_person_scale(c),
             min_observations=100,
         )
         m.add_observations(10, obs, 0.0)
@@ -222,7 +223,7 @@ def test_bad_constructor_arguments_raise(kw: dict) -> None:
 
 
 def test_default_gate_is_the_likelihood_crossing() -> None:
-    model = LikelihoodModel.default()
+    model = default_face_likelihood().pooled
     d = model.decision_distance
     lr = model.log_likelihood_ratio([d - 0.01, d + 0.01])
     assert lr[0] > 0 > lr[1]

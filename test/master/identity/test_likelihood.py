@@ -13,7 +13,6 @@ from scipy import stats
 
 from face_reid_camera.common.resources import model_path
 from face_reid_master.identity.likelihood import (
-    LIKELIHOOD_FILE,
     LikelihoodModel,
     SkewNormal,
     fit_likelihood_model,
@@ -21,6 +20,11 @@ from face_reid_master.identity.likelihood import (
     fit_skewnormal,
     load_likelihood_model,
     save_likelihood_model,
+)
+from face_reid_master.identity.size_likelihood import (
+    default_face_likelihood,
+    default_likelihood_file,
+    load_face_likelihood,
 )
 
 YUNET_PATH = DATA_DIR.parents[1] / "models" / "face_detection_yunet_2023mar.onnx"
@@ -134,15 +138,15 @@ def test_load_rejects_malformed_files(tmp_path: Path, content: str) -> None:
 
 # ------------------------------------------------------------------------------------------ the model
 def test_default_model_is_the_shipped_file_and_discriminates_at_dlib_distances() -> None:
-    shipped = model_path(LIKELIHOOD_FILE)
+    shipped = model_path(default_likelihood_file("dlib_resnet_v1"))
     assert shipped.is_file()
-    m = LikelihoodModel.default()
-    assert m == load_likelihood_model(shipped)
+    m = default_face_likelihood().pooled
+    assert m == load_face_likelihood(shipped).pooled
     assert m.metadata["n_positive_pairs"] > 500
     lr = m.log_likelihood_ratio([0.3, 0.45, 0.75, 0.9])
     assert lr[0] > lr[1] > 0 > lr[2] > lr[3]  # dlib: same person ~0.45, different ~0.8+
     with pytest.raises(FileNotFoundError, match="No such file"):  # no built-in copy of the fitted numbers
-        LikelihoodModel.default(Path("/nonexistent/face_likelihood.json"))
+        load_face_likelihood(Path("/nonexistent/face_likelihood.json"))
 
 
 def test_log_ratio_is_clipped_where_fitted_tails_turn_back_up() -> None:
@@ -178,7 +182,7 @@ def test_model_rejects_bad_constants(bad: dict[str, float]) -> None:
 
 
 def test_log_ratio_rejects_nan_and_bad_counts() -> None:
-    m = LikelihoodModel.default()
+    m = default_face_likelihood().pooled
     with pytest.raises(ValueError):
         m.log_likelihood_ratio([math.nan])
     with pytest.raises(ValueError):
@@ -203,8 +207,9 @@ def test_min_of_k_likelihood_matches_order_statistic_density() -> None:
 
 def test_min_of_k_makes_many_features_demand_a_closer_match() -> None:
     # the shipped model uses the paper's pair form (exponents 0: the stored features of a face are correlated)
-    assert LikelihoodModel.default().k_exponent_positive == LikelihoodModel.default().k_exponent_negative == 0.0
-    m = LikelihoodModel.default().with_k_exponents(0.54, 0.34)  # exponents fitted on independent photos
+    shipped = default_face_likelihood().pooled
+    assert shipped.k_exponent_positive == shipped.k_exponent_negative == 0.0
+    m = default_face_likelihood().pooled.with_k_exponents(0.54, 0.34)  # exponents fitted on independent photos
     # the same distance is weaker evidence against a face that has many features to take the minimum over
     assert float(m.log_likelihood_ratio(0.55, 50)) < float(m.log_likelihood_ratio(0.55, 1))
 
@@ -259,7 +264,7 @@ def test_default_model_classifies_real_fixture_pairs(
     d = np.sqrt(np.maximum(((e[:, None, :] - e[None, :, :]) ** 2).sum(-1), 0.0))
     iu = np.triu_indices(len(e), 1)
     same = ids[iu[0]] == ids[iu[1]]
-    lr = LikelihoodModel.default().log_likelihood_ratio(d[iu])
+    lr = default_face_likelihood().pooled.log_likelihood_ratio(d[iu])
     assert same.sum() > 500
     assert np.mean(lr[same] > 0) > 0.95
     assert np.mean(lr[~same] < 0) > 0.95

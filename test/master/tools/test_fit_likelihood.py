@@ -19,7 +19,8 @@ from conftest import DATA_DIR, REPO_ROOT
 
 from face_reid_camera.common.resources import model_path
 from face_reid_camera.faces.photos import PhotoEmbedder
-from face_reid_master.identity.likelihood import LIKELIHOOD_FILE, LikelihoodModel, fit_likelihood_model
+from face_reid_master.identity.likelihood import fit_likelihood_model
+from face_reid_master.identity.size_likelihood import default_likelihood_file, load_face_likelihood
 from face_reid_master.tools.fit_likelihood import (
     build_pair_distances,
     camera_view_draws,
@@ -85,7 +86,7 @@ N_SUBSET_POSITIVE = sum(comb(_count(i), 2) for i in SUBSET)
 def test_fit_command_writes_a_loadable_discriminative_model(cli_run: tuple[int, Path, Path, str]) -> None:
     rc, out, _, stdout = cli_run
     assert rc == 0
-    model = LikelihoodModel.default(out)
+    model = load_face_likelihood(out).pooled
     assert _mode(model.positive) < 0.55 < 0.65 < _mode(model.negative)
     assert model.log_likelihood_ratio(0.4) > 0 > model.log_likelihood_ratio(0.8)
     assert 0.0 < model.k_exponent_positive <= 1.0 and 0.0 < model.k_exponent_negative <= 1.0
@@ -184,7 +185,7 @@ def test_camera_views_widen_same_person_distances(subset_dir: Path, tmp_path: Pa
         assert main([str(subset_dir), "--out", str(clean), "--exclude", "facerec_*"]) == 0
         assert main([str(subset_dir), "--out", str(cam), "--exclude", "facerec_*", "--camera-views", "2",
                      "--cache", str(cache)]) == 0
-    m_clean, m_cam = LikelihoodModel.default(clean), LikelihoodModel.default(cam)
+    m_clean, m_cam = load_face_likelihood(clean).pooled, load_face_likelihood(cam).pooled
     assert m_cam.metadata["n_identities"] == m_clean.metadata["n_identities"] == 5
     assert m_cam.metadata["excluded"] == {"patterns": ["facerec_*"], "scenario_identities": []}
     for m in (m_clean, m_cam):  # the face-less photo is in the excluded facerec_obama folder: not reported
@@ -234,7 +235,7 @@ SHARED_FACES = Path(os.environ.get("FACE_REID_SHARED_FACES", REPO_ROOT.parent / 
 def test_command_regenerates_the_shipped_model(tmp_path: Path) -> None:
     """The command recorded in models/face_likelihood.json, on the shared development faces, reproduces it
     (the held-out scenario identities passed as --exclude names, as recorded in its metadata)."""
-    shipped = json.loads(model_path(LIKELIHOOD_FILE).read_text())
+    shipped = json.loads(model_path(default_likelihood_file("dlib_resnet_v1")).read_text())
     meta = shipped["metadata"]
     out = tmp_path / "face_likelihood.json"
     excludes = [a for p in [*meta["excluded"]["patterns"], *meta["excluded"]["scenario_identities"]]
