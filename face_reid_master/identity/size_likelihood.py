@@ -160,6 +160,8 @@ def save_face_likelihood(model: FaceLikelihood, path: str | Path) -> None:
         "pooled": _model_dict(pooled),
         "by_size": [_model_dict(m) for m in model.by_size],
         "new_person_scale_c": pooled.new_person_scale_c,
+        "k_exponent_positive": pooled.k_exponent_positive,
+        "k_exponent_negative": pooled.k_exponent_negative,
         "name_threshold": model.name_threshold,
         "threshold_distance": model.threshold_distance,
         "metadata": dict(model.metadata),
@@ -189,7 +191,8 @@ def load_face_likelihood(path: str | Path) -> FaceLikelihood:
     try:
         c = float(doc.get("new_person_scale_c", 1.0))
         pooled = _model_from(doc["pooled"], c)
-        pooled = LikelihoodModel(pooled.positive, pooled.negative, c, metadata=doc.get("metadata", {}))
+        pooled = LikelihoodModel(pooled.positive, pooled.negative, c, float(doc.get("k_exponent_positive", 0.0)),
+                                 float(doc.get("k_exponent_negative", 0.0)), metadata=doc.get("metadata", {}))
         return FaceLikelihood(
             pooled, str(doc["space"]), tuple(doc.get("eye_px_edges", ())),
             tuple(_model_from(m, c) for m in doc.get("by_size", ())), tuple(doc.get("component_weights", ())),

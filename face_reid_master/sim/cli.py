@@ -43,6 +43,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="people on day 2 who were not there on day 1 (default people // 3)")
     p.add_argument("--room", type=str, default=None, metavar="WxD",
                    help="room size in metres, e.g. 10x8 (default: scaled with the number of cameras)")
+    p.add_argument("--embedder", choices=("dlib", "sface", "both"), default="dlib",
+                   help="the cameras' face embedder (default dlib); both: 256-value embeddings, so one scenario "
+                        "can be evaluated in the dlib, SFace and joint spaces (face-reid-eval --space)")
+    p.add_argument("--color-resolution", type=str, default=None, metavar="WxH",
+                   help="colour image size in pixels, e.g. 1920x1080 (default: the depth camera's 640x480); "
+                        "faces get proportionally more pixels (feature level: the photo variants and the eye "
+                        "distance follow)")
     p.add_argument("--cache", type=Path, default=None,
                    help="npz file caching the photo embeddings (keyed by path, mtime and size)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -58,6 +65,15 @@ def _room(text: str | None) -> tuple[float, float] | None:
     return float(parts[0]), float(parts[1])
 
 
+def _resolution(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.isdigit() for p in parts):
+        raise ValueError(f"--color-resolution must look like 1920x1080 (pixels), got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the simulator; returns the exit status."""
     parser = _parser()
@@ -68,7 +84,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = SimConfig(
             num_people=args.people, num_cameras=args.cameras, duration_s=duration, seed=args.seed, level=args.level,
             rate_hz=args.rate_hz, second_day=args.second_day, new_people=args.new_people,
-            room_size_m=_room(args.room),
+            room_size_m=_room(args.room), embedder=args.embedder, color_resolution=_resolution(args.color_resolution),
         )
     except ValueError as exc:
         parser.print_usage(sys.stderr)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.camera_model import CameraIntrinsics
 from face_reid_master.sim.frame_table import DetectionColumns
 from face_reid_master.sim.motion import sample_trajectories
 from face_reid_master.sim.photos import IdentityPhotos, PhotoBank, glance_photos
@@ -20,7 +21,17 @@ from face_reid_master.sim.world import World
 if TYPE_CHECKING:
     from face_reid_master.sim.simulate import Day, SimConfig
 
-__all__ = ["pixel_camera_frames"]
+__all__ = ["color_intrinsics", "pixel_camera_frames"]
+
+
+def color_intrinsics(depth: CameraIntrinsics, resolution: tuple[int, int] | None) -> CameraIntrinsics | None:
+    """A colour camera of ``resolution`` (W, H) with the depth camera's horizontal field of view and optical
+    frame (square pixels, centred principal point); None: colour registered at the depth resolution."""
+    if resolution is None:
+        return None
+    w, h = resolution
+    fx = depth.fx * w / depth.width
+    return CameraIntrinsics(fx, fx, (w - 1) / 2.0, (h - 1) / 2.0, w, h)
 
 
 def pixel_camera_frames(
@@ -53,6 +64,7 @@ def pixel_camera_frames(
     step = max(1, frames_total // 10)
     for cam_index, stamps in enumerate(per_cam_stamps):
         camera = world.cameras[cam_index]
+        color_intr = color_intrinsics(camera.intrinsics, cfg.color_resolution)
         rng_face = stream_rng(cfg.seed, S_FACES, day.day, cam_index)
         pipeline = CameraPipeline(CameraPipelineConfig(camera_id=camera.camera_id), camera.pose,
                                   embedder.detector, embedder.embedder)
@@ -76,13 +88,17 @@ def pixel_camera_frames(
                                               float(facing[f, p]), face_image_bgr=face, body_color_bgr=body,
                                               legs_color_bgr=legs, hair_color_bgr=hair))
                 index.append(p)
+            render = dict(max_face_angle_deg=cfg.visibility.max_face_angle_deg, floor_size_m=floor,
+                          max_range_m=cfg.visibility.max_range_m)  # the depth range of the world model
             frame = render_scene(people, camera.intrinsics, camera.pose,
-                                 rng=stream_rng(cfg.seed, S_RENDER, day.day, cam_index, f),
-                                 max_face_angle_deg=cfg.visibility.max_face_angle_deg, floor_size_m=floor,
-                                 max_range_m=cfg.visibility.max_range_m)  # the depth range of the world model
+                                 rng=stream_rng(cfg.seed, S_RENDER, day.day, cam_index, f), **render)
             depth = frame.depth_mm.astype(np.float32) / np.float32(1000.0)
             depth[frame.depth_mm == 0] = np.nan
-            result = pipeline.process(frame.rgb_bgr, depth, camera.intrinsics)
+            color = frame.rgb_bgr
+            if color_intr is not None:  # colour at its own resolution: rendered again at that size
+                color = render_scene(people, color_intr, camera.pose,
+                                     rng=stream_rng(cfg.seed, S_RENDER, day.day, cam_index, f), **render).rgb_bgr
+            result = pipeline.process(color, depth, camera.intrinsics, color_intr)
             dets = result.people
             gt_ids = np.full(len(dets), -1, dtype=np.int32)
             matched_p = np.full(len(dets), -1, dtype=np.int64)

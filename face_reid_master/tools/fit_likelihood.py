@@ -19,6 +19,7 @@ import argparse
 import dataclasses
 import fnmatch
 import hashlib
+import math
 import os
 import sys
 import time
@@ -34,8 +35,8 @@ from face_reid_master.identity.likelihood import (
     LikelihoodModel,
     fit_likelihood_model,
     fit_min_of_k_exponent,
-    save_likelihood_model,
 )
+from face_reid_master.identity.size_likelihood import FaceLikelihood, save_face_likelihood
 
 __all__ = [
     "MIN_OF_K_VALUES",
@@ -52,6 +53,7 @@ __all__ = [
 
 MIN_OF_K_VALUES: tuple[int, ...] = (1, 2, 3, 5, 7)
 MIN_OF_K_QUERIES_PER_K = 3000
+NAME_FAR = 1e-3  # naming threshold: this share of the negative pairs is closer
 _MAX_LISTED_SKIPPED = 100  # skipped file names written into the JSON metadata
 
 
@@ -196,13 +198,15 @@ def sample_min_of_k_distances(
 
 
 def camera_view_draws(
-    views: Mapping[str, npt.ArrayLike], draws: int, rng: np.random.Generator
+    views: Mapping[str, npt.ArrayLike], draws: int, rng: np.random.Generator,
+    chosen: list[dict[str, npt.NDArray[np.intp]]] | None = None,
 ) -> list[dict[str, npt.NDArray[np.float64]]]:
     """``draws`` data sets of one random usable view per photo: ``views[name]`` is (photos, views, dim) with
     NaN rows for views without a detectable face (each photo needs at least one usable view).
 
     One view per photo per draw keeps same-photo pairs out of the positives: two frames of one photo are
-    not two occasions of a person, and would make N_p far too tight.
+    not two occasions of a person, and would make N_p far too tight. ``chosen`` (a list) receives, per draw,
+    the view index taken for every photo.
     """
     if isinstance(draws, bool) or not isinstance(draws, int) or draws < 1:
         raise ValueError(f"draws must be an int >= 1, got {draws!r}")
@@ -218,10 +222,69 @@ def camera_view_draws(
     out = []
     for _ in range(draws):
         draw = {}
+        pick: dict[str, npt.NDArray[np.intp]] = {}
         for name in sorted(arrays):
             keys = np.where(usable[name], rng.random(usable[name].shape), -1.0)  # unusable views never win
-            draw[name] = arrays[name][np.arange(len(keys)), np.argmax(keys, axis=1)]
+            pick[name] = np.argmax(keys, axis=1)
+            draw[name] = arrays[name][np.arange(len(keys)), pick[name]]
         out.append(draw)
+        if chosen is not None:
+            chosen.append(pick)
+    return out
+
+
+def _draw_fit(ax: Any, model: LikelihoodModel, pos: npt.NDArray[np.float64], neg: npt.NDArray[np.float64],
+              title: str, hi: float) -> None:
+    """Histograms of the pair distances, the fitted skew-normals and the N_p = N_n crossing on ``ax``."""
+    crossing = model.decision_distance
+    bins = np.linspace(0.0, hi, 71)
+    grid = np.linspace(0.0, hi, 600)
+    ax.hist(pos, bins=bins, density=True, alpha=0.45, color="tab:blue", label=f"positive pairs (n={pos.size})")
+    ax.hist(neg, bins=bins, density=True, alpha=0.45, color="tab:red", label=f"negative pairs (n={neg.size})")
+    p, n = model.positive, model.negative
+    ax.plot(grid, p.pdf(grid), color="tab:blue", lw=2,
+            label=f"$N_p$ skew-normal ($\\alpha$={p.alpha:.2f}, $\\xi$={p.xi:.3f}, $\\omega$={p.omega:.3f})")
+    ax.plot(grid, n.pdf(grid), color="tab:red", lw=2,
+            label=f"$N_n$ skew-normal ($\\alpha$={n.alpha:.2f}, $\\xi$={n.xi:.3f}, $\\omega$={n.omega:.3f})")
+    ax.axvline(crossing, color="k", ls="--", lw=1.2, label=f"$N_p = N_n$ at d = {crossing:.3f}")
+    ax.set_xlabel("L2 distance between face embeddings")
+    ax.set_ylabel("density")
+    ax.set_xlim(0.0, hi)
+    ax.set_title(title or "Face-pair distance likelihoods", fontsize=9)
+    ax.legend(loc="upper right", fontsize=7)
+
+
+def size_bucket_distances(
+    draw: Mapping[str, npt.ArrayLike], eye_px: Mapping[str, npt.ArrayLike], edges: Sequence[float],
+    max_negative_pairs: int, rng: np.random.Generator, same_source_negatives: bool = False,
+) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:
+    """(positive, negative) pair distances per eye-distance bucket of the *query*: every pair counts once for
+    the bucket of each of its two faces (the face a camera just saw is compared with whatever a face has
+    stored). ``eye_px[name]``: the size of each photo's face in this draw; at most ``max_negative_pairs``
+    negatives are sampled (only same-source ones if ``same_source_negatives``)."""
+    names, x, labels = _stack(draw)
+    size = np.concatenate([np.asarray(eye_px[n], dtype=np.float64).reshape(-1) for n in names])
+    if size.shape != (len(x),):
+        raise ValueError("eye_px needs one size per photo of every identity")
+    bucket = np.searchsorted(np.asarray(edges, dtype=np.float64), size, side="right")
+    dist = _distance_matrix(x)
+    iu, ju = np.triu_indices(len(x), k=1)
+    same = labels[iu] == labels[ju]
+    negative_ok = ~same
+    if same_source_negatives:
+        sources = np.array([identity_source(n) for n in names])
+        negative_ok &= sources[labels[iu]] == sources[labels[ju]]
+    neg_idx = np.flatnonzero(negative_ok)
+    if neg_idx.size > max_negative_pairs:
+        neg_idx = np.sort(rng.choice(neg_idx, size=max_negative_pairs, replace=False))
+    pos_idx = np.flatnonzero(same)
+    out = []
+    for b in range(len(edges) + 1):
+        parts = []
+        for idx in (pos_idx, neg_idx):
+            d = dist[iu[idx], ju[idx]]
+            parts.append(np.concatenate([d[bucket[iu[idx]] == b], d[bucket[ju[idx]] == b]]))
+        out.append((parts[0], parts[1]))
     return out
 
 
@@ -231,8 +294,10 @@ def plot_fit(
     negative: npt.ArrayLike,
     path: str | Path,
     title: str = "",
+    by_size: Sequence[tuple[str, LikelihoodModel, npt.ArrayLike, npt.ArrayLike]] = (),
 ) -> None:
-    """Fig. 6 of the paper: histograms of pair distances, fitted skew-normals and the N_p = N_n crossing.
+    """Fig. 6 of the paper: histograms of pair distances, fitted skew-normals and the N_p = N_n crossing;
+    with ``by_size`` (label, model, positive, negative) one more panel per face-size bucket.
 
     matplotlib (Agg backend) is imported here only.
     """
@@ -241,27 +306,14 @@ def plot_fit(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    pos = np.asarray(positive, dtype=np.float64)
-    neg = np.asarray(negative, dtype=np.float64)
-    crossing = model.decision_distance
-    hi = max(1.4, float(np.max(neg)) + 0.05, float(np.max(pos)) + 0.05)
-    bins = np.linspace(0.0, hi, 71)
-    grid = np.linspace(0.0, hi, 600)
-    fig, ax = plt.subplots(figsize=(8, 5), dpi=100)
+    panels = [(title, model, np.asarray(positive, dtype=np.float64), np.asarray(negative, dtype=np.float64))]
+    panels += [(label, m, np.asarray(p, dtype=np.float64), np.asarray(n, dtype=np.float64))
+               for label, m, p, n in by_size]
+    hi = max(1.4, *(float(max(np.max(p), np.max(n))) + 0.05 for _, _, p, n in panels))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 5.0 * len(panels)), dpi=100, squeeze=False)
     try:
-        ax.hist(pos, bins=bins, density=True, alpha=0.45, color="tab:blue", label=f"positive pairs (n={pos.size})")
-        ax.hist(neg, bins=bins, density=True, alpha=0.45, color="tab:red", label=f"negative pairs (n={neg.size})")
-        p, n = model.positive, model.negative
-        ax.plot(grid, p.pdf(grid), color="tab:blue", lw=2,
-                label=f"$N_p$ skew-normal ($\\alpha$={p.alpha:.2f}, $\\xi$={p.xi:.3f}, $\\omega$={p.omega:.3f})")
-        ax.plot(grid, n.pdf(grid), color="tab:red", lw=2,
-                label=f"$N_n$ skew-normal ($\\alpha$={n.alpha:.2f}, $\\xi$={n.xi:.3f}, $\\omega$={n.omega:.3f})")
-        ax.axvline(crossing, color="k", ls="--", lw=1.2, label=f"$N_p = N_n$ at d = {crossing:.3f}")
-        ax.set_xlabel("L2 distance between face embeddings")
-        ax.set_ylabel("density")
-        ax.set_xlim(0.0, hi)
-        ax.set_title(title or "Face-pair distance likelihoods")
-        ax.legend(loc="upper right", fontsize=8)
+        for ax, (label, m, pos, neg) in zip(axes[:, 0], panels, strict=True):
+            _draw_fit(ax, m, pos, neg, label, hi)
         fig.tight_layout()
         fig.savefig(str(path))
     finally:
@@ -301,8 +353,16 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         "sub-folder per identity, and write them as JSON.",
     )
     parser.add_argument("faces_dir", type=Path, metavar="FACES_DIR", help="folder with one sub-folder per identity")
-    parser.add_argument("--out", type=Path, default=Path("models/face_likelihood.json"),
-                        help="output JSON (default: models/face_likelihood.json)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output JSON (default: models/face_likelihood_<space>.json)")
+    parser.add_argument("--embedder", choices=("dlib", "sface", "both"), default="dlib",
+                        help="the network(s) the photos are embedded with (default dlib)")
+    parser.add_argument("--space", default=None,
+                        help="the space fitted (default: the embedder's; with --embedder both also dlib_resnet_v1 "
+                        "or sface_2021dec, i.e. one half of the joint embeddings)")
+    parser.add_argument("--size-buckets", type=str, default="", metavar="PX,PX",
+                        help="with --camera-views: also fit N_p / N_n per eye-distance bucket of the query face, "
+                        "edges in pixels, e.g. 12,20 (default: the pooled fit only)")
     parser.add_argument("--plot", type=Path, default=None, metavar="PATH.png",
                         help="also save a plot of the distance histograms and fitted densities")
     parser.add_argument("--max-negative-pairs", type=int, default=20000, metavar="N",
@@ -335,6 +395,27 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         parser.error("--camera-views must be >= 0")
     if args.cache is not None and not args.camera_views:
         parser.error("--cache needs --camera-views")
+    from face_reid_camera.common.embedding_spaces import embedder_space, extract_space
+
+    have = embedder_space(args.embedder)
+    args.space = args.space or have
+    try:
+        if extract_space(np.zeros(1), have, args.space) is None and args.space != have:
+            parser.error(f"--space {args.space} is not part of the {args.embedder} embedder's space {have}")
+    except ValueError as exc:
+        parser.error(f"--space: {exc}")
+    try:
+        args.size_edges = tuple(float(v) for v in args.size_buckets.split(",") if v.strip())
+    except ValueError:
+        parser.error(f"--size-buckets must be pixel edges like 12,20, got {args.size_buckets!r}")
+    if args.size_edges and not args.camera_views:
+        parser.error("--size-buckets needs --camera-views (the sizes come from the camera views)")
+    if any(b <= a for a, b in zip((0.0, *args.size_edges), args.size_edges, strict=False)):
+        parser.error(f"--size-buckets edges must be positive and increasing, got {args.size_buckets!r}")
+    if args.out is None:
+        from face_reid_master.identity.size_likelihood import default_likelihood_file
+
+        args.out = Path("models") / default_likelihood_file(args.space)
     return args
 
 
@@ -366,6 +447,7 @@ class _Embedded:
     skipped_no_face: list[str]
     n_ignored_non_image: int
     embedder_desc: str
+    eye_px: dict[str, npt.NDArray[np.float64]] = dataclasses.field(default_factory=dict)  # (photos, views) px
 
     @property
     def n_photos(self) -> int:
@@ -381,26 +463,33 @@ def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
         from face_reid_master.sim.photos import InsufficientFacesError, PhotoBank
 
         try:
-            bank = PhotoBank(faces_dir, args.cache, min_photos_per_identity=1)
+            bank = PhotoBank(faces_dir, args.cache, min_photos_per_identity=1, embedder=args.embedder)
         except InsufficientFacesError as exc:
             raise ValueError(str(exc)) from None
+        from face_reid_master.sim.photos import NUM_VARIANTS, variant_eye_px
+
         names = [n for n in sorted(bank.identity_files) if keep(n)]
         views = {}
+        eye_px = {}
         progress = progress_bar(len(names), "embedding identities (camera views)")
         for k, name in enumerate(names):
             ident = bank.load_identity(name)
             if ident is not None:
-                views[name] = np.stack([p.embeddings for p in ident.photos]).astype(np.float64)
+                views[name] = _in_space(np.stack([p.embeddings for p in ident.photos]).astype(np.float64),
+                                        bank.space, args.space)
+                eye_px[name] = np.stack([variant_eye_px(p, np.arange(NUM_VARIANTS)) for p in ident.photos])
             progress(k + 1, len(names))
         bank.save_cache()
-        model_path = bank.photo_embedder.embedder.model_path
         return _Embedded(views, list(bank.skipped_unreadable),
                          list(bank.skipped_no_face), bank.ignored_non_image,
-                         _embedder_text(model_path, bank.photo_embedder.max_side_px)
-                         + "; camera views: face_reid_master.sim.simulate PhotoBank variants")
-    embedder = PhotoEmbedder()
+                         _embedder_text(bank.photo_embedder, args.space)
+                         + "; camera views: face_reid_master.sim.photos PhotoBank variants", eye_px)
+    from face_reid_camera.faces.embedder import load_embedder
+
+    embedder = PhotoEmbedder(embedder=load_embedder(args.embedder))
     folder = embedder.embed_folder_tree(faces_dir, progress_bar(0, "embedding photos"))
-    views = {name: np.stack([e.embedding for e in embs])[:, None, :].astype(np.float64)
+    views = {name: _in_space(np.stack([e.embedding for e in embs])[:, None, :].astype(np.float64),
+                             embedder.embedder.space, args.space)
              for name, embs in folder.identities.items() if keep(name)}
 
     def kept(paths: list[Path]) -> list[Path]:  # skipped files of excluded identities are not reported
@@ -408,15 +497,52 @@ def _embed(args: argparse.Namespace, keep: Any) -> _Embedded:
 
     return _Embedded(views, _relative_names(kept(folder.skipped_unreadable), faces_dir),
                      _relative_names(kept(folder.skipped_no_face), faces_dir), len(folder.ignored_non_image),
-                     _embedder_text(embedder.embedder.model_path, embedder.max_side_px))
+                     _embedder_text(embedder, args.space))
 
 
-def _embedder_text(model_path: Path, max_side_px: int) -> str:
+def _components(space: str) -> tuple[Any, ...]:
+    from face_reid_camera.common.embedding_spaces import parse_space
+
+    return parse_space(space)
+
+
+def _component_weights(draw: Mapping[str, npt.NDArray[np.float64]], space: str, max_negative_pairs: int,
+                       rng: np.random.Generator, same_source: bool) -> tuple[float, ...]:
+    """Joint spaces: 1 / median negative-pair distance of each component, so both networks count alike
+    (empty for a single network)."""
+    parts = _components(space)
+    if len(parts) < 2:
+        return ()
+    out, start = [], 0
+    for part in parts:
+        sub = {n: v[:, start: start + part.dim] for n, v in draw.items()}
+        start += part.dim
+        neg = build_pair_distances(sub, max_negative_pairs, rng, same_source).negative
+        out.append(round(1.0 / float(np.median(neg)), 4))
+    return tuple(out)
+
+
+def _in_space(views: npt.NDArray[np.float64], have: str, want: str) -> npt.NDArray[np.float64]:
+    """The ``want`` part of embeddings of space ``have`` (last axis)."""
+    from face_reid_camera.common.embedding_spaces import extract_space
+
+    part = extract_space(views, have, want)
+    if part is None:  # checked by the argument parser
+        raise ValueError(f"space {want!r} is not part of {have!r}")
+    return np.ascontiguousarray(part)
+
+
+def _embedder_text(photo_embedder: Any, space: str) -> str:
+    from face_reid_camera.common.embedding_spaces import SPACES, parse_space
+
+    parts = photo_embedder.embedder.embedders if hasattr(photo_embedder.embedder, "embedders") \
+        else (photo_embedder.embedder,)
+    nets = "; ".join(f"{SPACES[e.space].description} run as models/{e.model_path.name} (sha256 "
+                     f"{_sha256(e.model_path)}), aligned to its {e.spec.chip_size_px}x{e.spec.chip_size_px} chip "
+                     "template" for e in parts if e.space in {c.space_id for c in parse_space(space)})
     return (
-        "dlib_face_recognition_resnet_model_v1 (128-d, not L2-normalised) run as "
-        f"models/{model_path.name} (sha256 {_sha256(model_path)}); alignment: YuNet 2023mar "
-        f"(face_reid_camera.faces.detector, detection on photos shrunk to <= {max_side_px} px) 5 landmarks of the "
-        "largest face -> similarity transform to the 150x150 dlib chip template "
+        f"space {space}: {nets}; face detection: YuNet 2023mar (face_reid_camera.faces.detector, on photos shrunk "
+        f"to <= {photo_embedder.max_side_px} px), 5 landmarks of the largest face -> similarity transform "
         "(face_reid_camera.faces.photos.PhotoEmbedder)"
     )
 
@@ -431,6 +557,14 @@ def _command(args: argparse.Namespace) -> str:
     parts += [f"--exclude-scenario {d.as_posix()}" for d in args.exclude_scenario]
     if args.fit_min_of_k:
         parts.append("--fit-min-of-k")
+    if args.embedder != "dlib":
+        parts.append(f"--embedder {args.embedder}")
+    from face_reid_camera.common.embedding_spaces import embedder_space
+
+    if args.space != embedder_space(args.embedder):
+        parts.append(f"--space {args.space}")
+    if args.size_edges:
+        parts.append(f"--size-buckets {','.join(f'{e:g}' for e in args.size_edges)}")
     return "face-reid-fit-likelihood " + " ".join(parts)
 
 
@@ -463,11 +597,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     for p in emb.skipped_no_face:
         print(f"  no face: {p}", file=sys.stderr)
 
-    pair_rng, k_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(args.seed).spawn(2))
+    pair_rng, k_rng, size_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(args.seed).spawn(3))
     same_source = bool(args.same_source_negatives)
     try:
-        draws = (camera_view_draws(emb.views, args.camera_views, pair_rng) if args.camera_views
+        chosen: list[dict[str, npt.NDArray[np.intp]]] = []
+        draws = (camera_view_draws(emb.views, args.camera_views, pair_rng, chosen) if args.camera_views
                  else [{n: v[:, 0] for n, v in emb.views.items()}])
+        weights = _component_weights(draws[0], args.space, args.max_negative_pairs, size_rng, same_source)
+        if weights:
+            scale = np.concatenate([np.full(c.dim, w) for c, w in zip(_components(args.space), weights, strict=True)])
+            draws = [{n: v * scale for n, v in d.items()} for d in draws]
         pair_sets = [build_pair_distances(d, args.max_negative_pairs, pair_rng, same_source) for d in draws]
         positive = np.concatenate([p.positive for p in pair_sets])
         negative = np.concatenate([p.negative for p in pair_sets])
@@ -487,7 +626,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         metadata: dict[str, Any] = {
             "embedder": emb.embedder_desc,
-            "distance": "L2 between raw 128-d descriptors",
+            "distance": (f"L2 between the {args.space} embeddings" + (
+                f", each component scaled by its weight {list(weights)} (1 / its median negative-pair distance)"
+                if weights else "")),
             "data": _describe_data(faces_dir, emb.views) + view_desc,
             "n_identities": len(emb.views),
             "n_images": emb.n_photos,
@@ -541,11 +682,42 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as exc:
         return _fail(f"fitted model is unusable: {exc}")
 
+    by_size: list[tuple[str, LikelihoodModel, npt.NDArray[np.float64], npt.NDArray[np.float64]]] = []
+    edges: tuple[float, ...] = args.size_edges
+    try:
+        if edges:
+            per_draw = [size_bucket_distances(d, {n: emb.eye_px[n][np.arange(len(c[n])), c[n]] for n in d}, edges,
+                                              args.max_negative_pairs, size_rng, same_source)
+                        for d, c in zip(draws, chosen, strict=True)]
+            bounds = (0.0, *edges, math.inf)
+            for b in range(len(edges) + 1):
+                pos_b = np.concatenate([x[b][0] for x in per_draw])
+                neg_b = np.concatenate([x[b][1] for x in per_draw])
+                if pos_b.size < 10 or neg_b.size < 10:
+                    raise ValueError(f"eye-distance bucket [{bounds[b]:g}, {bounds[b + 1]:g}) px has only "
+                                     f"{pos_b.size} positive / {neg_b.size} negative pairs: choose other edges")
+                fit_b = fit_likelihood_model(pos_b, neg_b)
+                by_size.append((f"query face eye distance [{bounds[b]:g}, {bounds[b + 1]:g}) px", fit_b, pos_b, neg_b))
+    except ValueError as exc:
+        return _fail(f"cannot fit the size buckets: {exc}")
+    # derived on the same data: the threshold method's distance (N_p = N_n) and naming at pair FAR 1e-3
+    name_threshold = round(float(np.quantile(negative, NAME_FAR)), 4)
+    threshold_distance = round(model.decision_distance, 4)
+    metadata = {**model.metadata, "size_buckets": (
+        f"N_p / N_n per eye-distance bucket of the query face, edges {list(edges)} px: every pair of a draw counts "
+        "for the bucket of each of its two faces; negatives sampled per draw like the pooled fit (numpy "
+        f"SeedSequence({args.seed}) stream 2)") if edges else "none (pooled fit only)",
+        "thresholds": f"threshold_distance = pooled N_p = N_n distance; name_threshold = the {NAME_FAR:g} quantile "
+                      "of the pooled negative pair distances (pair false-accept rate 1e-3)"}
+    face_model = FaceLikelihood(
+        dataclasses.replace(model, metadata=metadata), args.space, edges, tuple(m for _, m, _, _ in by_size),
+        weights, name_threshold, threshold_distance, metadata)
+
     out: Path = args.out
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")  # written whole, then renamed over the old file
     try:
-        save_likelihood_model(model, tmp)
+        save_face_likelihood(face_model, tmp)
         os.replace(tmp, out)
     finally:
         if os.path.exists(tmp):
@@ -558,6 +730,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"N_p: alpha={p.alpha:.4f} xi={p.xi:.4f} omega={p.omega:.4f}; "
           f"N_n: alpha={n.alpha:.4f} xi={n.xi:.4f} omega={n.omega:.4f}")
     print(f"min-of-K exponents: positive {e_pos}, negative {e_neg}")
+    for label, m, pos_b, neg_b in by_size:
+        print(f"  {label}: {pos_b.size} positive / {neg_b.size} negative pairs, N_p = N_n at d = "
+              f"{m.decision_distance:.4f}, positive median {np.median(pos_b):.4f}")
+    print(f"derived: threshold_distance {threshold_distance}, name_threshold {name_threshold}"
+          + (f", component weights {list(weights)}" if weights else ""))
     pos_ok = float(np.mean(positive < crossing))
     neg_ok = float(np.mean(negative >= crossing))
     print(f"N_p = N_n at d = {crossing:.4f}: {pos_ok:.3f} of positive pairs below, {neg_ok:.3f} of negative "
@@ -568,7 +745,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         title = (f"{faces_dir.resolve().name}: {emb.n_photos} photos, {len(emb.views)} identities"
                  f"{', camera views' if args.camera_views else ''} (balanced pair accuracy "
                  f"{0.5 * (pos_ok + neg_ok):.3f})")
-        plot_fit(model, positive, negative, args.plot, title=title)
+        plot_fit(model, positive, negative, args.plot, title=title, by_size=by_size)
         print(f"wrote {args.plot}")
     return 0
 

@@ -249,3 +249,19 @@ def test_command_regenerates_the_shipped_model(tmp_path: Path) -> None:
     for key in ("n_positive_pairs", "n_negative_pairs", "n_images", "n_identities", "n_skipped_no_face"):
         assert fresh["metadata"][key] == meta[key]
     assert fresh["k_exponent_positive"] == shipped["k_exponent_positive"] == 0.0
+
+
+def test_size_buckets_take_each_pair_for_the_bucket_of_each_of_its_faces() -> None:
+    from face_reid_master.tools.fit_likelihood import size_bucket_distances
+
+    # two identities, two photos each: small faces (8 px) have noisier embeddings
+    draw = {"a": np.array([[0.0, 0.0], [0.1, 0.0]]), "b": np.array([[1.0, 0.0], [1.0, 0.5]])}
+    eye = {"a": np.array([8.0, 30.0]), "b": np.array([30.0, 8.0])}
+    (small_pos, small_neg), (large_pos, large_neg) = size_bucket_distances(
+        draw, eye, (12.0,), 100, np.random.default_rng(0))
+    # positives: a0-a1 (0.1; one small, one large face), b0-b1 (0.5; one large, one small)
+    np.testing.assert_allclose(np.sort(small_pos), [0.1, 0.5])
+    np.testing.assert_allclose(np.sort(large_pos), [0.1, 0.5])
+    # negatives: 4 pairs; a0 (small) with b0, b1; b1 (small) with a0, a1
+    assert small_neg.size == 4 and large_neg.size == 4
+    assert np.isclose(small_neg, np.hypot(1.0, 0.5)).sum() == 2  # a0-b1 counted for both of its small faces
