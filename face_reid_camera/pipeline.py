@@ -51,7 +51,7 @@ class CameraPipelineConfig:
     max_faces_per_frame: int = param(16, "Faces embedded per frame, nearest first (count).", low=0, high=1000)
     min_face_quality: float = param(0.0, "Faces below this quality (0..1) are not embedded.", low=0.0, high=1.0)
     embed_budget_ms: float = param(
-        0.0, "Embedding time per frame (ms; 0 = embed every face found). Over budget, faces not embedded "
+        40.0, "Embedding time per frame (ms; 0 = embed every face found). Over budget, faces not embedded "
         "for longest go first, best quality first; the others are reported without an embedding.",
         low=0.0, high=10000.0)
     position_std_base_m: float = param(0.05, "Position uncertainty at 0 m range (m).", low=0.0, high=5.0,

@@ -3,7 +3,8 @@
 A per-frame budget (milliseconds) bounds the embedder's time. Heads are followed from frame to frame by
 nearest position (camera frame, metres), so every visible person's face is refreshed in turn: faces never
 embedded come first (best quality first), then the ones embedded longest ago. The cost per face is a
-running mean of measured times; at least one face is embedded per frame so the schedule always moves.
+running mean of measured times (until the first measurement every face is embedded); at least one face is
+embedded per frame so the schedule always moves.
 """
 
 from __future__ import annotations
@@ -52,8 +53,6 @@ class EmbeddingScheduler:
         order = sorted(range(n), key=lambda i: (-staleness[i], -float(quality[i]), i))
         cost = self.cost_ms_per_face
         fit = n if cost is None or cost <= 0.0 else max(1, int(self.budget_ms // cost))
-        if cost is None:  # first frame: measure one face before trusting a count
-            fit = 1
         return order[:fit]
 
     def embedded(self, stamp_s: float, chosen: list[int], elapsed_ms: float) -> None:

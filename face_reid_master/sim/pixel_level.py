@@ -66,7 +66,8 @@ def pixel_camera_frames(
         camera = world.cameras[cam_index]
         color_intr = color_intrinsics(camera.intrinsics, cfg.color_resolution)
         rng_face = stream_rng(cfg.seed, S_FACES, day.day, cam_index)
-        pipeline = CameraPipeline(CameraPipelineConfig(camera_id=camera.camera_id), camera.pose,
+        # no embedding budget: it follows the wall clock, and a simulation must be reproducible
+        pipeline = CameraPipeline(CameraPipelineConfig(camera_id=camera.camera_id, embed_budget_ms=0.0), camera.pose,
                                   embedder.detector, embedder.embedder)
         cols = DetectionColumns(dim=bank.dim)
         out.append(cols)
