@@ -3,7 +3,9 @@
 Usage: python test/ros_procs/publish_camera_frames.py --camera-id C --topic T --plan PLAN.json
 PLAN.json: {"rate_hz": 10, "embeddings": "E.npz", "segments": [{"t0": 0, "t1": 4, "people": [
   {"x": 0, "y": 0, "vx": 0.5, "vy": 0, "identity": "a", "photos": [0, 1, 2]}]}]}
-Times are seconds after the first subscriber matched; E.npz holds identity -> (n, 128) embeddings.
+Times are seconds after the first subscriber matched; E.npz holds identity -> (n, 128) embeddings;
+"embedding_space" (optional) names their space in every message (default "": a camera from before
+spaces were named, taken as dlib_resnet_v1).
 Stamps are the publisher's clock (the master checks them against its own).
 With --barrier-dir D --barrier-count N, N publishers start their plans together: each marks itself
 ready in D once its subscriber matched and all start at the same wall-clock time (so plans of
@@ -82,6 +84,7 @@ def main() -> int:
                     emb = embeddings[p["identity"]][photos[k % len(photos)]]
                     obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
                     obs.embedding = emb.astype(np.float32).tolist()
+                    obs.embedding_space = plan.get("embedding_space", "")  # "": a camera from before spaces
                 msg.people.append(obs)
         pub.publish(msg)
         k += 1

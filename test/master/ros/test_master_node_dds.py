@@ -30,27 +30,36 @@ FACES = FACES_DIR
 IDS = {"tony": "lfw_Tony_Blair", "colin": "lfw_Colin_Powell"}
 
 
-@pytest.fixture(scope="module")
-def embeddings(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def _embed_fixture_faces(kind: str, path: Path) -> Path:
     from face_reid_camera.faces.detector import YuNetDetector
     from face_reid_camera.faces.embedder import FaceEmbedder
 
-    detector, embedder = YuNetDetector(), FaceEmbedder()
+    detector, embedder = YuNetDetector(), FaceEmbedder(kind=kind)
     out = {}
     for key, ident in IDS.items():
         rows = []
-        for path in sorted((FACES / ident).glob("*.jpg")):
-            photo = cv2.imread(str(path))
+        for photo_path in sorted((FACES / ident).glob("*.jpg")):
+            photo = cv2.imread(str(photo_path))
             best = max(detector.detect(photo), key=lambda d: float(d.box_xywh[2] * d.box_xywh[3]))
             rows.append(embedder.embed_faces(photo, [best.landmarks])[0])
         out[key] = np.stack(rows)
-    path = tmp_path_factory.mktemp("emb") / "embeddings.npz"
     np.savez(path, **out)
     return path
 
 
-def _plan(path: Path, embeddings: Path, segments: list[dict]) -> Path:
-    path.write_text(json.dumps({"rate_hz": 10, "embeddings": str(embeddings), "segments": segments}))
+@pytest.fixture(scope="module")
+def embeddings(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _embed_fixture_faces("dlib", tmp_path_factory.mktemp("emb") / "embeddings.npz")
+
+
+@pytest.fixture(scope="module")
+def sface_embeddings(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _embed_fixture_faces("sface", tmp_path_factory.mktemp("emb") / "sface.npz")
+
+
+def _plan(path: Path, embeddings: Path, segments: list[dict], space: str = "") -> Path:
+    path.write_text(json.dumps({"rate_hz": 10, "embeddings": str(embeddings), "segments": segments,
+                                "embedding_space": space}))
     return path
 
 
@@ -125,3 +134,64 @@ def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Pa
     assert {f.name for f in faces} >= {"Tony", "Colin"}
     assert tony_faces <= {f.face_id for f in faces}
     assert (db.stat().st_mode & 0o777) == 0o600
+
+
+def test_cameras_of_two_embedders_never_mix_their_faces(ros_domain_id: int, tmp_path: Path, embeddings: Path,
+                                                        sface_embeddings: Path) -> None:
+    """A dlib master gets Tony from a dlib camera and Colin from an SFace camera: Tony's face is learned,
+    Colin is tracked without a face (his SFace embeddings are never compared with dlib ones), and the
+    master says so once, naming the camera and both spaces."""
+    tony = {"x": 0.0, "y": 0.0, "vx": 0.3, "identity": "tony", "photos": [0, 1, 2, 3, 4]}
+    colin = {"x": 0.0, "y": 3.0, "vx": 0.3, "identity": "colin", "photos": [0, 1, 2, 3, 4]}
+    plan_d = _plan(tmp_path / "d.json", embeddings, [{"t0": 0.0, "t1": 5.0, "people": [tony]}], "dlib_resnet_v1")
+    plan_s = _plan(tmp_path / "s.json", sface_embeddings, [{"t0": 0.0, "t1": 5.0, "people": [colin]}],
+                   "sface_2021dec")
+    db = tmp_path / "faces.db"
+    master = procs.start(
+        ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}",
+         "-p", "topic_discovery_period_s:=0.5"],
+        ros_domain_id, tmp_path / "master.log",
+    )
+    collector = procs.start(
+        [str(procs.PROCS / "collect_tracks.py"), "--duration-s", "120", "--barrier-dir", str(tmp_path / "barrier")],
+        ros_domain_id, tmp_path / "collector.log",
+    )
+    cams = [
+        procs.start([str(procs.PROCS / "publish_camera_frames.py"), "--camera-id", cid, "--topic",
+                     f"/{cid}/face_reid/frames", "--plan", str(plan), "--wait-s", "60",
+                     "--barrier-dir", str(tmp_path / "barrier"), "--barrier-count", "3"],
+                    ros_domain_id, tmp_path / f"{cid}.log")
+        for cid, plan in (("cam_dlib", plan_d), ("cam_sface", plan_s))
+    ]
+    try:
+        for cam in cams:
+            cam.wait(timeout=90)
+        assert all(cam.returncode == 0 for cam in cams), [cam.stdout.read() for cam in cams if cam.stdout]
+        time.sleep(2.0)  # the last frames reach the master and its last /tracks_named reaches the collector
+        collector.send_signal(signal.SIGTERM)
+        out, _ = collector.communicate(timeout=30)
+        assert master.poll() is None, (tmp_path / "master.log").read_text()
+        master.send_signal(signal.SIGINT)
+        master.wait(timeout=20)
+    finally:
+        for p in (*cams, collector, master):
+            procs.stop(p)
+    log = (tmp_path / "master.log").read_text()
+    logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
+    notices = [line for line in log.splitlines() if "'cam_sface'" in line and "not used for identity" in line]
+    assert len(notices) == 1, logs
+    assert "'sface_2021dec'" in notices[0] and "'dlib_resnet_v1'" in notices[0]
+    assert "cam_dlib" not in "".join(line for line in log.splitlines() if "not used for identity" in line)
+    messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    tracks = [t for m in messages for t in m["tracks"]]
+    tony_tracks = [t for t in tracks if abs(t["y"]) < 1.0]
+    colin_tracks = [t for t in tracks if abs(t["y"] - 3.0) < 1.0]
+    assert tony_tracks and colin_tracks, logs
+    assert {t["face_id"] for t in tony_tracks} - {0}, "Tony's dlib face was never learned"
+    assert all(t["face_id"] == 0 and t["face_observations"] == 0 for t in colin_tracks), colin_tracks[-1]
+    from face_reid_master.storage.face_store import FaceStore
+
+    with FaceStore(db) as store:
+        faces = store.load_faces()
+        assert store.embedding_space == "dlib_resnet_v1"
+    assert len(faces) == 1 and faces[0].features.shape[1] == 128
