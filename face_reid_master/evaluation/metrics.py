@@ -274,6 +274,7 @@ def evaluate_run(
         "reid_tracks": len(pure_reid),
         "reid_success": sum(o.outcome == "success" for o in pure_reid),
         "reid_failure": sum(o.outcome == "failure" for o in pure_reid),
+        "reid_failure_wrong_person": sum(o.failure_kind == "wrong_person" for o in pure_reid),
         "reid_none": sum(o.outcome == "none" for o in pure_reid),
         "first_appearance_failure": sum(o.outcome == "failure" for o in pure if not o.reid_case),
         "mean_reid_time_s": _mean([o.decided_s - o.birth_s for o in pure_reid
