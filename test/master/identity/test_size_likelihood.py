@@ -78,3 +78,24 @@ def test_file_round_trip_and_version_1_files(tmp_path: Path) -> None:
 def test_bad_models_are_refused_with_the_field_named(kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         FaceLikelihood(SHARP, **kwargs)
+
+
+@pytest.mark.parametrize("space", ["dlib_resnet_v1", "sface_2021dec", "dlib_resnet_v1+sface_2021dec"])
+def test_every_space_ships_a_fit_with_its_derived_distances(space: str) -> None:
+    from face_reid_master.core import MasterConfig, MasterCore
+    from face_reid_master.identity.size_likelihood import default_face_likelihood
+
+    m = default_face_likelihood(space)
+    assert m.space == space and m.name_threshold is not None and m.threshold_distance is not None
+    assert m.name_threshold < m.threshold_distance  # naming is stricter than "same face"
+    if "+" in space:
+        assert len(m.component_weights) == 2
+    if space != "dlib_resnet_v1":  # fitted per face size: small faces' same-person distances spread further
+        assert m.conditioned
+        small, large = m.by_size[0], m.by_size[-1]
+        assert small.decision_distance > large.decision_distance
+        close = 0.6 * m.decision_distance  # a typical same-person distance: weaker evidence from a small face
+        lr = m.log_ratio_rows(np.full((2, 1), close), np.ones((1, 1)), m.bucket_of([8.0, 40.0]))
+        assert 0 < lr[0, 0] < lr[1, 0]
+    core = MasterCore(MasterConfig(embedding_space=space))  # the defaults load it
+    assert core.name_threshold == m.name_threshold
