@@ -39,7 +39,7 @@ def main() -> int:
             "tracks": [
                 {"track_id": t.track_id, "face_id": t.face_id, "name": t.name, "state": t.state,
                  "confidence": t.identity_confidence, "x": t.position.x, "y": t.position.y,
-                 "cameras": list(t.cameras), "face_observations": t.face_observations}
+                 "cameras": list(t.cameras)}
                 for t in msg.tracks
             ],
         }

@@ -188,7 +188,7 @@ def test_cameras_of_two_embedders_never_mix_their_faces(ros_domain_id: int, tmp_
     colin_tracks = [t for t in tracks if abs(t["y"] - 3.0) < 1.0]
     assert tony_tracks and colin_tracks, logs
     assert {t["face_id"] for t in tony_tracks} - {0}, "Tony's dlib face was never learned"
-    assert all(t["face_id"] == 0 and t["face_observations"] == 0 for t in colin_tracks), colin_tracks[-1]
+    assert all(t["face_id"] == 0 for t in colin_tracks), colin_tracks[-1]  # never identified
     from face_reid_master.storage.face_store import FaceStore
 
     with FaceStore(db) as store:
