@@ -193,6 +193,7 @@ class MasterCore:
         if model.space != cfg.embedding_space:
             raise ValueError(f"the likelihood model is fitted for embedder space {model.space!r} but "
                              f"embedding_space is {cfg.embedding_space!r}")
+        self._dim = dim = space_dim(cfg.embedding_space)
         self.likelihood = model  # also gives the joint-space weights and the space's derived thresholds
         self.threshold_distance = _derived("threshold_distance", cfg.threshold_distance, model.threshold_distance) \
             if cfg.method == "threshold" else cfg.threshold_distance or model.threshold_distance
@@ -205,23 +206,22 @@ class MasterCore:
             self.identity: IdentityManagerBase = make_identity_manager(
                 "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
                 prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
-                max_features_per_face=cfg.max_features_per_face, embedding_dim=space_dim(cfg.embedding_space),
+                max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             )
         else:
             self.identity = make_identity_manager(
                 "threshold", distance_threshold=self.threshold_distance, n_votes=cfg.threshold_votes,
-                max_features_per_face=cfg.max_features_per_face, embedding_dim=space_dim(cfg.embedding_space),
+                max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=self.threshold_distance if cfg.learn_only_consistent_features else None,
             )
         self.people = PredefinedPeople(
             {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
             name_threshold=self.name_threshold or 1.0, min_face_features=cfg.min_face_features_for_name,
-            embedding_dim=space_dim(cfg.embedding_space),
+            embedding_dim=dim,
         )
         self.store = store
         self.stats = MasterStats()
-        self._dim = space_dim(cfg.embedding_space)
         self._space_noticed: dict[str, str] = {}  # camera id -> the unusable space it was last logged for
         self._notices: list[str] = []
         self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed

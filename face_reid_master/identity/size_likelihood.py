@@ -69,6 +69,8 @@ class FaceLikelihood:
     name_threshold: float | None = None
     threshold_distance: float | None = None
     metadata: Mapping[str, Any] = field(default_factory=dict, compare=False, hash=False)
+    _edges: npt.NDArray[np.float64] = field(init=False, repr=False, compare=False, hash=False)
+    _scale: npt.NDArray[np.float32] | None = field(init=False, repr=False, compare=False, hash=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.pooled, LikelihoodModel):
@@ -125,7 +127,7 @@ class FaceLikelihood:
         e = np.asarray(eye_px, dtype=np.float64)
         if not self.by_size:
             return np.full(e.shape, -1, dtype=np.intp)
-        out = np.searchsorted(self._edges, e, side="right").astype(np.intp)  # type: ignore[attr-defined]
+        out = np.searchsorted(self._edges, e, side="right").astype(np.intp)
         out[~(np.isfinite(e) & (e > 0))] = -1
         return out
 
@@ -144,9 +146,9 @@ class FaceLikelihood:
 
     def scale(self, embeddings: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         """Embeddings of this space with the component weights applied (what the feature bank stores)."""
-        if self._scale is None:  # type: ignore[attr-defined]
+        if self._scale is None:
             return embeddings
-        return (embeddings * self._scale).astype(np.float32)  # type: ignore[attr-defined]
+        return (embeddings * self._scale).astype(np.float32)
 
 
 def save_face_likelihood(model: FaceLikelihood, path: str | Path) -> None:

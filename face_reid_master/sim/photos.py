@@ -49,6 +49,7 @@ _VARIANT_SPECS: tuple[dict[str, float], ...] = (
     {"eye_px": 9.0, "alpha": 0.8, "beta": -5.0, "rotate_deg": 5.0},  # 7: far, dim, rolled
 )
 NUM_VARIANTS = len(_VARIANT_SPECS)
+_VARIANT_EYE_PX = np.array([spec.get("eye_px", np.inf) for spec in _VARIANT_SPECS])  # inf: the photo's own size
 _VARIANT_VERSION = "v2"  # bump when _VARIANT_SPECS or the cached fields change: invalidates cached variants
 # Variants a frame may use, by face range (m): near, mid, far.
 _RANGE_EDGES_M = (2.0, 3.3)
@@ -284,8 +285,7 @@ class PhotoBank:
 
 def variant_eye_px(photo: PhotoVariants, variant: int | NDArray[np.integer]) -> NDArray[np.float64]:
     """Eye distance (px) of the face a variant shows: the photo's, or the smaller size it was reduced to."""
-    sizes = np.array([spec.get("eye_px", np.inf) for spec in _VARIANT_SPECS])
-    return np.minimum(sizes[np.asarray(variant)], photo.eye_px if photo.eye_px > 0 else np.inf)
+    return np.minimum(_VARIANT_EYE_PX[np.asarray(variant)], photo.eye_px if photo.eye_px > 0 else np.inf)
 
 
 def range_bucket(range_m: NDArray[np.float64]) -> NDArray[np.int64]:

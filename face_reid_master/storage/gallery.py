@@ -1,7 +1,7 @@
 """Predefined-people gallery (Koide et al. 2017, Sec. III-F): names and face embeddings from disk.
 
 A gallery is either a folder with one sub-folder per person (``NAME/*.jpg|png``, name = folder name,
-one embedding per photo: its largest face) or a precomputed ``.npz`` (name -> (k, 128) float32 array)
+one embedding per photo: its largest face) or a precomputed ``.npz`` (name -> (k, dim) float32)
 written by :func:`save_gallery_npz`, which starts instantly and needs no photos on the robot.
 """
 
@@ -22,9 +22,8 @@ from face_reid_master.identity.predefined_people import PredefinedPeople
 if TYPE_CHECKING:
     from face_reid_camera.faces.photos import PhotoEmbedder
 
-__all__ = ["EMBEDDING_DIM", "GalleryResult", "load_gallery", "save_gallery_npz", "validate_person_name"]
+__all__ = ["GalleryResult", "load_gallery", "save_gallery_npz", "validate_person_name"]
 
-EMBEDDING_DIM = 128  # one network's embedding; a joint space (both embedders) has 256
 _LENGTHS = frozenset(space_dim(embedder_space(choice)) for choice in EMBEDDER_CHOICES)
 
 
@@ -57,7 +56,7 @@ def _validate_embeddings(name: str, value: npt.ArrayLike) -> npt.NDArray[np.floa
 class GalleryResult:
     """Named people's embeddings and the gallery photos that could not be used.
 
-    ``people``: name -> (k, 128) float32 (read-only), names sorted. ``skipped_unreadable`` /
+    ``people``: name -> (k, dim) float32 (read-only), names sorted. ``skipped_unreadable`` /
     ``skipped_no_face``: photos not decodable / without a detectable face (always empty for an .npz).
     """
 
@@ -77,7 +76,7 @@ class GalleryResult:
 
 
 def save_gallery_npz(people: Mapping[str, npt.ArrayLike], path: str | Path) -> None:
-    """Write name -> (k, 128) embeddings as an uncompressed ``.npz`` (one array per name)."""
+    """Write name -> (k, dim) embeddings as an uncompressed ``.npz`` (one array per name)."""
     result = GalleryResult(dict(people))  # validates names and arrays
     p = Path(path)
     if p.suffix.lower() != ".npz":

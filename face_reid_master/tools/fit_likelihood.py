@@ -51,6 +51,7 @@ __all__ = [
     "sample_min_of_k_distances",
 ]
 
+IntArray = npt.NDArray[np.intp]
 MIN_OF_K_VALUES: tuple[int, ...] = (1, 2, 3, 5, 7)
 MIN_OF_K_QUERIES_PER_K = 3000
 NAME_FAR = 1e-3  # naming threshold: this share of the negative pairs is closer
@@ -112,7 +113,21 @@ def build_pair_distances(
         raise ValueError(f"max_negative_pairs must be an int >= 1, got {max_negative_pairs!r}")
     names, x, labels = _stack(identities)
     dist = _distance_matrix(x)
-    iu, ju = np.triu_indices(len(x), k=1)
+    iu, ju, pos_idx, neg_idx, n_available = _sampled_pairs(names, labels, max_negative_pairs, rng,
+                                                           same_source_negatives)
+    return PairDistances(
+        positive=dist[iu[pos_idx], ju[pos_idx]],
+        negative=dist[iu[neg_idx], ju[neg_idx]],
+        n_negative_available=n_available,
+    )
+
+
+def _sampled_pairs(names: Sequence[str], labels: npt.NDArray[np.intp], max_negative_pairs: int,
+                   rng: np.random.Generator, same_source_negatives: bool,
+                   ) -> tuple[IntArray, IntArray, IntArray, IntArray, int]:
+    """Pairs (i < j) of the stacked photos: (iu, ju, positive pair indices, sampled negative pair indices,
+    negatives available); negatives uniformly without replacement, at most ``max_negative_pairs``."""
+    iu, ju = np.triu_indices(len(labels), k=1)
     same = labels[iu] == labels[ju]
     negative_ok = ~same
     if same_source_negatives:
@@ -122,11 +137,7 @@ def build_pair_distances(
     n_available = int(neg_idx.size)
     if n_available > max_negative_pairs:
         neg_idx = np.sort(rng.choice(neg_idx, size=max_negative_pairs, replace=False))
-    return PairDistances(
-        positive=dist[iu[same], ju[same]],
-        negative=dist[iu[neg_idx], ju[neg_idx]],
-        n_negative_available=n_available,
-    )
+    return iu, ju, np.flatnonzero(same), neg_idx, n_available
 
 
 @dataclass(frozen=True)
@@ -268,16 +279,7 @@ def size_bucket_distances(
         raise ValueError("eye_px needs one size per photo of every identity")
     bucket = np.searchsorted(np.asarray(edges, dtype=np.float64), size, side="right")
     dist = _distance_matrix(x)
-    iu, ju = np.triu_indices(len(x), k=1)
-    same = labels[iu] == labels[ju]
-    negative_ok = ~same
-    if same_source_negatives:
-        sources = np.array([identity_source(n) for n in names])
-        negative_ok &= sources[labels[iu]] == sources[labels[ju]]
-    neg_idx = np.flatnonzero(negative_ok)
-    if neg_idx.size > max_negative_pairs:
-        neg_idx = np.sort(rng.choice(neg_idx, size=max_negative_pairs, replace=False))
-    pos_idx = np.flatnonzero(same)
+    iu, ju, pos_idx, neg_idx, _ = _sampled_pairs(names, labels, max_negative_pairs, rng, same_source_negatives)
     out = []
     for b in range(len(edges) + 1):
         parts = []
@@ -395,15 +397,16 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         parser.error("--camera-views must be >= 0")
     if args.cache is not None and not args.camera_views:
         parser.error("--cache needs --camera-views")
-    from face_reid_camera.common.embedding_spaces import embedder_space, extract_space
+    from face_reid_camera.common.embedding_spaces import embedder_space, parse_space
 
     have = embedder_space(args.embedder)
     args.space = args.space or have
     try:
-        if extract_space(np.zeros(1), have, args.space) is None and args.space != have:
-            parser.error(f"--space {args.space} is not part of the {args.embedder} embedder's space {have}")
+        wanted = {c.space_id for c in parse_space(args.space)}
     except ValueError as exc:
         parser.error(f"--space: {exc}")
+    if not wanted <= {c.space_id for c in parse_space(have)}:
+        parser.error(f"--space {args.space} is not part of the {args.embedder} embedder's space {have}")
     try:
         args.size_edges = tuple(float(v) for v in args.size_buckets.split(",") if v.strip())
     except ValueError:

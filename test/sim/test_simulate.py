@@ -5,6 +5,7 @@ pipeline, determinism, the directory format and bad faces folders."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -280,3 +281,36 @@ def test_config_validation() -> None:
     assert SimConfig(level="pixel").frame_rate_hz == 5.0 and SimConfig().frame_rate_hz == 15.0
     assert SimConfig(num_people=6, second_day=True).num_new_people == 2
     assert SimConfig(num_people=6).num_new_people == 0
+
+
+def test_both_embedders_and_a_larger_colour_image(faces: Path, tmp_path: Path) -> None:
+    """--embedder both stores dlib | SFace side by side (each half the photo variant's own embedding, plus
+    the simulator's noise) with the eye distance of the face each embedding shows; a colour image of twice
+    the resolution lets more faces use full-resolution photo variants."""
+    from face_reid_master.sim.photos import variant_eye_px
+
+    cache = tmp_path / "both.npz"
+    base = SimConfig(num_people=3, num_cameras=2, duration_s=20.0, seed=3, embedder="both")
+    sizes = {}
+    for label, cfg in (("vga", base), ("2x", dataclasses.replace(base, color_resolution=(1280, 960)))):
+        out = tmp_path / label
+        write_scenario(simulate(faces, cfg, cache_path=cache), out)
+        s = load_scenario(out)
+        assert s.document["embedding_space"] == "dlib_resnet_v1+sface_2021dec"
+        people = [p for f in s.frames for p in f.people if p.embedding is not None]
+        assert people and all(p.embedding.shape == (256,) and p.embedding_space == s.document["embedding_space"]
+                              for p in people)
+        sface_norms = np.array([np.linalg.norm(p.embedding[128:]) for p in people])
+        assert np.all(np.abs(sface_norms - 1.0) < 0.2)  # unit-length SFace rows, plus noise
+        sizes[label] = np.array([p.face_eye_distance_px for p in people])
+        assert np.all(sizes[label] > 0)
+    bank = PhotoBank(faces, cache, embedder="both")
+    ident = bank.load_identity(IDENTITIES[0])
+    assert ident is not None and ident.photos[0].embeddings.shape == (NUM_VARIANTS, 256)
+    allowed = {float(v) for ph in ident.photos for v in variant_eye_px(ph, np.arange(NUM_VARIANTS))}
+    assert {9.0, 10.0, 14.0} <= allowed
+    assert np.mean(sizes["2x"] >= 20) > np.mean(sizes["vga"] >= 20)  # more native-size faces
+    with pytest.raises(ValueError, match="embedder must be one of"):
+        SimConfig(embedder="openface")
+    with pytest.raises(ValueError, match="color_resolution"):
+        SimConfig(color_resolution=(10, 10))

@@ -14,6 +14,7 @@ import os
 import signal
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -63,6 +64,42 @@ def _plan(path: Path, embeddings: Path, segments: list[dict], space: str = "") -
     return path
 
 
+def _run_network(tmp_path: Path, domain_id: int, master_params: list[str],
+                 cameras: list[tuple[str, Path]]) -> tuple[str, Any]:
+    """A master node, a /tracks_named collector and one frame publisher per (camera id, plan), started together
+    at a barrier; returns the collector's output once every plan was played, and the still-running master
+    (the caller stops it). Everything is stopped if anything fails."""
+    args = ["-m", "face_reid_master.ros.node", "--ros-args"]
+    for param in ("topic_discovery_period_s:=0.5", *master_params):
+        args += ["-p", param]
+    master = procs.start(args, domain_id, tmp_path / "master.log")
+    barrier = str(tmp_path / "barrier")
+    collector = procs.start([str(procs.PROCS / "collect_tracks.py"), "--duration-s", "120", "--barrier-dir", barrier],
+                            domain_id, tmp_path / "collector.log")
+    cams = [
+        procs.start([str(procs.PROCS / "publish_camera_frames.py"), "--camera-id", cid, "--topic",
+                     f"/{cid}/face_reid/frames", "--plan", str(plan), "--wait-s", "60",
+                     "--barrier-dir", barrier, "--barrier-count", str(len(cameras) + 1)],
+                    domain_id, tmp_path / f"{cid}.log")
+        for cid, plan in cameras
+    ]
+    try:
+        for cam in cams:
+            cam.wait(timeout=90)
+        assert all(cam.returncode == 0 for cam in cams), [cam.stdout.read() for cam in cams if cam.stdout]
+        time.sleep(2.0)  # the last frames reach the master and its last /tracks_named reaches the collector
+        collector.send_signal(signal.SIGTERM)
+        out, _ = collector.communicate(timeout=30)
+        assert master.poll() is None, (tmp_path / "master.log").read_text()
+    except BaseException:
+        procs.stop(master)
+        raise
+    finally:
+        for p in (*cams, collector):
+            procs.stop(p)
+    return out, master
+
+
 def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Path, embeddings: Path) -> None:
     emb = dict(np.load(embeddings))
     gallery = tmp_path / "gallery.npz"
@@ -78,36 +115,14 @@ def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Pa
         {"t0": 8.5, "t1": 12.5, "people": [{"x": 1.0, "y": -1.5, "vx": 0.4, "identity": "tony", "photos": [5, 6, 7]}]},
     ])
     db = tmp_path / "faces.db"
-    master = procs.start(
-        ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}", "-p", f"gallery_path:={gallery}",
-         "-p", "tracker.lost_after_s:=0.5", "-p", "tracker.delete_after_s:=1.0",
-         "-p", "topic_discovery_period_s:=0.5", "-p", "min_face_features_for_name:=3"],
-        ros_domain_id, tmp_path / "master.log",
-    )
-    collector = procs.start(
-        [str(procs.PROCS / "collect_tracks.py"), "--duration-s", "120", "--barrier-dir", str(tmp_path / "barrier")],
-        ros_domain_id, tmp_path / "collector.log",
-    )
-    cams = [
-        procs.start([str(procs.PROCS / "publish_camera_frames.py"), "--camera-id", cid, "--topic",
-                     f"/{cid}/face_reid/frames", "--plan", str(plan), "--wait-s", "60",
-                     "--barrier-dir", str(tmp_path / "barrier"), "--barrier-count", "3"],
-                    ros_domain_id, tmp_path / f"{cid}.log")
-        for cid, plan in (("cam_a", plan_a), ("cam_b", plan_b))
-    ]
+    out, master = _run_network(tmp_path, ros_domain_id, [
+        f"db_path:={db}", f"gallery_path:={gallery}", "tracker.lost_after_s:=0.5", "tracker.delete_after_s:=1.0",
+        "min_face_features_for_name:=3"], [("cam_a", plan_a), ("cam_b", plan_b)])
     try:
-        for cam in cams:
-            cam.wait(timeout=90)
-        assert all(cam.returncode == 0 for cam in cams), [cam.stdout.read() for cam in cams if cam.stdout]
-        time.sleep(2.0)  # the last frames reach the master and its last /tracks_named reaches the collector
-        collector.send_signal(signal.SIGTERM)
-        out, _ = collector.communicate(timeout=30)
-        assert master.poll() is None, (tmp_path / "master.log").read_text()
         os.killpg(master.pid, signal.SIGKILL)  # no clean shutdown: nothing learned may be lost
         master.wait(timeout=10)
     finally:
-        for p in (*cams, collector, master):
-            procs.stop(p)
+        procs.stop(master)
     logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
     messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     assert messages, logs
@@ -147,35 +162,13 @@ def test_cameras_of_two_embedders_never_mix_their_faces(ros_domain_id: int, tmp_
     plan_s = _plan(tmp_path / "s.json", sface_embeddings, [{"t0": 0.0, "t1": 5.0, "people": [colin]}],
                    "sface_2021dec")
     db = tmp_path / "faces.db"
-    master = procs.start(
-        ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}",
-         "-p", "topic_discovery_period_s:=0.5"],
-        ros_domain_id, tmp_path / "master.log",
-    )
-    collector = procs.start(
-        [str(procs.PROCS / "collect_tracks.py"), "--duration-s", "120", "--barrier-dir", str(tmp_path / "barrier")],
-        ros_domain_id, tmp_path / "collector.log",
-    )
-    cams = [
-        procs.start([str(procs.PROCS / "publish_camera_frames.py"), "--camera-id", cid, "--topic",
-                     f"/{cid}/face_reid/frames", "--plan", str(plan), "--wait-s", "60",
-                     "--barrier-dir", str(tmp_path / "barrier"), "--barrier-count", "3"],
-                    ros_domain_id, tmp_path / f"{cid}.log")
-        for cid, plan in (("cam_dlib", plan_d), ("cam_sface", plan_s))
-    ]
+    out, master = _run_network(tmp_path, ros_domain_id, [f"db_path:={db}"],
+                               [("cam_dlib", plan_d), ("cam_sface", plan_s)])
     try:
-        for cam in cams:
-            cam.wait(timeout=90)
-        assert all(cam.returncode == 0 for cam in cams), [cam.stdout.read() for cam in cams if cam.stdout]
-        time.sleep(2.0)  # the last frames reach the master and its last /tracks_named reaches the collector
-        collector.send_signal(signal.SIGTERM)
-        out, _ = collector.communicate(timeout=30)
-        assert master.poll() is None, (tmp_path / "master.log").read_text()
         master.send_signal(signal.SIGINT)
         master.wait(timeout=20)
     finally:
-        for p in (*cams, collector, master):
-            procs.stop(p)
+        procs.stop(master)
     log = (tmp_path / "master.log").read_text()
     logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
     notices = [line for line in log.splitlines() if "'cam_sface'" in line and "not used for identity" in line]
