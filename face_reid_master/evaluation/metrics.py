@@ -64,9 +64,10 @@ def evaluated_tracks(log: RunLog) -> list[TrackLog]:
 
 
 def face_persons(log: RunLog) -> dict[int, int]:
-    """Face id -> the true person it was learned from: the majority person of the face detections of the
-    track that created it (NEW_FACE), which all went into that face; -1 if unknown."""
-    return {fid: (log.tracks[tid].face_person if tid in log.tracks else -1) for fid, (_, tid) in log.faces.items()}
+    """Face id -> the true person it was learned from: the majority person of the face detections the
+    track that created it (NEW_FACE) had at that moment (its buffer became the face); -1 if unknown."""
+    return {fid: (log.tracks[tid].face_person_until(stamp) if tid in log.tracks else -1)
+            for fid, (stamp, tid) in log.faces.items()}
 
 
 def track_outcomes(log: RunLog) -> list[TrackOutcome]:

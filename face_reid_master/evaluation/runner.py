@@ -82,7 +82,13 @@ class TrackLog:
     def face_person(self) -> int:
         """Majority true person of the track's face detections (false positives ignored), i.e. whose face
         it fed into the identity layer; the track's :attr:`true_person` when it had no face detection."""
-        counts = Counter(g for _, g in self.face_gt if g >= 0)
+        return self.face_person_until(math.inf)
+
+    def face_person_until(self, stamp_s: float) -> int:
+        """:attr:`face_person` of the face detections up to ``stamp_s`` (all of them if there were none)."""
+        counts = Counter(g for s, g in self.face_gt if g >= 0 and s <= stamp_s + 1e-9)
+        if not counts:
+            counts = Counter(g for _, g in self.face_gt if g >= 0)
         if not counts:
             return self.true_person
         return min(counts, key=lambda g: (-counts[g], g))

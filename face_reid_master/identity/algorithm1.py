@@ -27,7 +27,7 @@ from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats, LearnedFace
 
-__all__ = ["IdentityManagerBase", "TrackEntry", "Vote"]
+__all__ = ["IdentityManagerBase", "Origin", "TrackEntry", "Vote"]
 
 FloatArray = npt.NDArray[np.float64]
 F32Array = npt.NDArray[np.float32]
@@ -68,7 +68,20 @@ class TrackEntry:
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
 
 
-def _eye_rows(chunks: list[tuple[F32Array, FloatArray | None]]) -> FloatArray:
+@dataclass(frozen=True, slots=True)
+class Origin:
+    """Where a run of a track's observations of one step came from: the camera (``source``), the stamp (s)
+    and how many consecutive rows of the track's observations it covers."""
+
+    source: str
+    stamp_s: float
+    rows: int
+
+
+_Chunk = tuple[F32Array, "FloatArray | None", float, str]  # (embeddings, eye px, stamp, source)
+
+
+def _eye_rows(chunks: list[_Chunk]) -> FloatArray:
     """Eye distance (px) of every row of a track's queued chunks (0 = unknown)."""
     return np.concatenate([c[1] if c[1] is not None else np.zeros(c[0].shape[0]) for c in chunks])
 
@@ -124,7 +137,7 @@ class IdentityManagerBase:
         self._tracks: dict[int, TrackEntry] = {}
         self._available: list[int] = []  # face_list in column order (Bayes: table columns 1..M)
         self._available_slots = np.zeros(0, dtype=np.intp)
-        self._pending_obs: dict[int, list[tuple[F32Array, FloatArray | None]]] = {}  # (embeddings, eye px)
+        self._pending_obs: dict[int, list[_Chunk]] = {}
         self._pending_deleted: dict[int, float] = {}
         self._dead: OrderedDict[int, float] = OrderedDict()
         self._next_face_id = 1
@@ -132,12 +145,13 @@ class IdentityManagerBase:
 
     # ------------------------------------------------------------------------------ public inputs
     def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float,
-                         eye_px: npt.ArrayLike | None = None) -> bool:
+                         eye_px: npt.ArrayLike | None = None, source: str = "") -> bool:
         """Queue face embeddings (K, embedding_dim) observed on a track; used at the next :meth:`step`.
 
         ``eye_px``: the face size (eye distance, px) of each row, for size-conditioned likelihoods (None or
-        0: unknown). Returns False (and counts it) when the track was already deleted (a late message).
-        Raises ValueError on a wrong shape/dtype, NaN or Inf.
+        0: unknown). ``source``: the camera that saw them (its consecutive observations of a track form a
+        glance, see :mod:`~face_reid_master.identity.glance_evidence`). Returns False (and counts it) when
+        the track was already deleted (a late message). Raises ValueError on a wrong shape/dtype, NaN or Inf.
         """
         tid = check_int("track_id", track_id, -(2**63))
         stamp = check_stamp(stamp_s)
@@ -159,17 +173,20 @@ class IdentityManagerBase:
             eye = np.asarray(eye_px, dtype=np.float64).reshape(-1)
             if eye.shape != (emb.shape[0],):
                 raise ValueError(f"eye_px must have one value per embedding ({emb.shape[0]}), got {eye.shape}")
-        return self.add_validated_observations(tid, np.ascontiguousarray(emb, dtype=np.float32), stamp, eye)
+        if not isinstance(source, str):
+            raise ValueError(f"source must be a str, got {type(source).__name__}")
+        return self.add_validated_observations(tid, np.ascontiguousarray(emb, dtype=np.float32), stamp, eye,
+                                               source)
 
     def add_validated_observations(self, tid: int, emb: F32Array, stamp: float,
-                                   eye_px: FloatArray | None = None) -> bool:
+                                   eye_px: FloatArray | None = None, source: str = "") -> bool:
         """:meth:`add_observations` for input already validated (MasterCore checks each frame once):
         ``emb`` a finite C-contiguous float32 (K >= 1, embedding_dim) array, ``stamp`` finite seconds,
-        ``eye_px`` None or (K,) float64."""
+        ``eye_px`` None or (K,) float64, ``source`` a str."""
         if tid in self._dead or tid in self._pending_deleted:
             self.stats.observations_ignored_dead_track += emb.shape[0]
             return False
-        self._pending_obs.setdefault(tid, []).append((emb, eye_px))
+        self._pending_obs.setdefault(tid, []).append((emb, eye_px, stamp, source))
         self.stats.observations_received += emb.shape[0]
         track = self._tracks.get(tid)
         if track is not None:
@@ -203,6 +220,7 @@ class IdentityManagerBase:
         unassigned_ids: list[int] = []
         unassigned_obs: list[F32Array] = []
         unassigned_eye: list[FloatArray] = []
+        unassigned_origins: list[list[Origin]] = []
         bank = self._bank
         single_slots: list[int] = []  # one new feature into a full feature set: batched below
         single_obs: list[F32Array] = []
@@ -226,6 +244,7 @@ class IdentityManagerBase:
                 unassigned_ids.append(tid)
                 unassigned_obs.append(obs)
                 unassigned_eye.append(_eye_rows(chunks))
+                unassigned_origins.append([Origin(c[3], c[2], c[0].shape[0]) for c in chunks])
             if slot is not None:
                 if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
                     single_slots.append(slot)
@@ -235,7 +254,7 @@ class IdentityManagerBase:
         if single_slots:
             bank.add_one_each(np.array(single_slots, dtype=np.intp), np.concatenate(single_obs))
         if unassigned_ids:
-            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye)
+            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye, unassigned_origins)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for tid in list(self._pending_deleted):
@@ -448,8 +467,9 @@ class IdentityManagerBase:
 
     # hooks for the classification method
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
-                           eye_px: list[FloatArray]) -> None:
-        """Accumulate the evidence of this step's observations of unassigned tracks (one array per track)."""
+                           eye_px: list[FloatArray], origins: list[list[Origin]]) -> None:
+        """Accumulate the evidence of this step's observations of unassigned tracks (one array per track;
+        ``origins``: per track, the camera and stamp of each run of its rows, in order)."""
         raise NotImplementedError
 
     def _decide(self) -> list[tuple[int, int, float]]:

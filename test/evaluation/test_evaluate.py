@@ -21,7 +21,13 @@ from face_reid_camera.faces.photos import PhotoEmbedder
 from face_reid_master.core import MasterConfig
 from face_reid_master.evaluation.cli import main
 from face_reid_master.evaluation.gallery import default_gallery_people, scenario_gallery
-from face_reid_master.evaluation.metrics import evaluate_run, mot_metrics, paired_reid_times, track_outcomes
+from face_reid_master.evaluation.metrics import (
+    evaluate_run,
+    face_persons,
+    mot_metrics,
+    paired_reid_times,
+    track_outcomes,
+)
 from face_reid_master.evaluation.runner import RunLog, TrackLog, run_master
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
 from face_reid_master.identity.size_likelihood import FaceLikelihood, save_face_likelihood
@@ -111,6 +117,18 @@ def test_face_of_an_impure_track_belongs_to_the_person_whose_faces_it_saw() -> N
     outcomes = {o.track_id: o for o in track_outcomes(log)}
     assert outcomes[2].reid_case and outcomes[2].outcome == "success"
     assert evaluate_run(log, with_mot=False)["faces"]["faces_learned_from_another_person_than_their_track"] == 1
+
+
+def test_a_face_belongs_to_the_person_it_was_created_from_not_to_whom_its_track_swapped() -> None:
+    # track 1 made face 1 from person 1's faces at 1.0 s, then the tracker swapped it onto person 0 (whose
+    # faces the consistency gate keeps out of face 1): person 1's next track getting face 1 is a success
+    t1 = _track(1, 0, 0.0, 9.0, assigned=(1.0, 1, "new"), n_det=30)
+    t1.gt_counts = {0: 25, 1: 5}
+    t1.face_gt = [(0.5, 1)] * 3 + [(5.0, 0)] * 20
+    log = _empty_log([t1, _track(2, 1, 10.0, 15.0, assigned=(12.0, 1, "known"))], {1: (1.0, 1)})
+    outcomes = {o.track_id: o for o in track_outcomes(log)}
+    assert face_persons(log) == {1: 1}
+    assert outcomes[2].outcome == "success" and outcomes[1].failure_kind == "wrong_person"
 
 
 def test_new_id_while_the_face_is_held_by_a_duplicate_track_is_flagged() -> None:
