@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from face_reid_camera.common.checks import check_real
 from face_reid_camera.common.embedding_spaces import (
     DLIB_SPACE,
+    SFACE_SPACE,
     EMBEDDER_CHOICES,
     embedder_space,
     extract_space,
@@ -74,7 +75,7 @@ class MasterConfig:
     method: str = param("bayes", "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline).",
                         choices=("bayes", "threshold"))
     embedding_space: str = param(
-        DLIB_SPACE, "Embedder space compared for identity: dlib_resnet_v1, sface_2021dec or "
+        DLIB_SPACE + "+" + SFACE_SPACE, "Embedder space compared for identity: dlib_resnet_v1, sface_2021dec or "
         "dlib_resnet_v1+sface_2021dec (cameras must send it, or a joint space containing it; other "
         "embeddings are not used, logged once per camera).", choices=_SPACE_CHOICES, read_only=True)
     known_camera_ids: tuple[str, ...] = ()

@@ -65,7 +65,7 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "multiple of 32).", low=32, high=640),
     ParamSpec("num_threads", 1, "onnxruntime intra-op threads per model (count).", low=1, high=64),
     ParamSpec("detector_model_path", "", "YuNet ONNX file; empty = the installed default model."),
-    ParamSpec("embedder", "dlib", "Face embedder network(s): dlib (ResNet v1), sface (OpenCV Zoo SFace) or both "
+    ParamSpec("embedder", "both", "Face embedder network(s): dlib (ResNet v1), sface (OpenCV Zoo SFace) or both "
               "(both run, one 256-value embedding).", choices=("dlib", "sface", "both"), read_only=True),
     ParamSpec("dlib_model_path", "", "dlib embedder ONNX file; empty = the installed default model."),
     ParamSpec("sface_model_path", "", "SFace embedder ONNX file; empty = the installed default model."),

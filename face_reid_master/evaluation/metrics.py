@@ -335,7 +335,11 @@ def evaluate_run(
         "decision_time_all_s": _mean(all_decided),
         "tracker": tracker,
         "faces": faces_info,
-        "predefined_people": _names(evaluated, gallery_people),
+        "predefined_people": {
+            **_names(evaluated, gallery_people),
+            "pure_tracks": _names([t for t in evaluated if t.purity >= PURE_TRACK_MIN_PURITY], gallery_people),
+            "detections": _names_per_detection(log, gallery_people),
+        },
         "frames": log.n_frames,
         "frames_rejected": log.frames_rejected,
         "detections": int(log.det_gt.size),
@@ -347,6 +351,32 @@ def evaluate_run(
         result["mot"] = {"tracker": mot_metrics(log, "track"), "identity": mot_metrics(log, "face")}
         result["mot_time_s"] = round(time.perf_counter() - t0, 2)
     return result
+
+
+def _names_per_detection(log: RunLog, gallery_people: Mapping[str, int] | None) -> dict[str, Any]:
+    """Names shown on tracked detections, judged by each detection's own true person (README.md, "What is
+    counted, exactly"): unlike the per-track counts, a track the tracker swapped is right before the swap."""
+    if not gallery_people or not log.det_name.size:
+        return {}
+    tracked = (log.det_track >= 0) & (log.det_gt >= 0)
+    # true person of each shown name (-2: not a gallery name); the last entry is det_name -1: no name
+    name_gt = np.array([gallery_people.get(n, -2) for n in log.names] + [-1], dtype=np.int64)
+    shown = name_gt[log.det_name]
+    in_gallery = np.isin(log.det_gt, np.fromiter(gallery_people.values(), dtype=np.int64)) & tracked
+    others = tracked & ~in_gallery
+    right = int(np.count_nonzero(in_gallery & (shown == log.det_gt)))
+    wrong = int(np.count_nonzero(in_gallery & (shown != -1) & (shown != log.det_gt)))
+    n_gallery, n_others = int(in_gallery.sum()), int(others.sum())
+    named_others = int(np.count_nonzero(others & (shown != -1)))
+    return {
+        "gallery_detections": n_gallery,
+        "right_name": right,
+        "wrong_name": wrong,
+        "wrong_name_rate": _ratio(wrong, n_gallery),
+        "other_detections": n_others,
+        "other_named": named_others,
+        "other_named_rate": _ratio(named_others, n_others),
+    }
 
 
 def _names(evaluated: Sequence[TrackLog], gallery_people: Mapping[str, int] | None) -> dict[str, Any]:

@@ -101,7 +101,8 @@ class RunLog:
     Per detection (flat arrays, D rows, in frame order): ``det_frame`` frame index, ``det_stamp_s``,
     ``det_gt`` true person (-1 false positive), ``det_track`` track id (-1: not associated, e.g. a
     suppressed duplicate or a rejected frame), ``det_face`` the track's face id right after the frame
-    (0: none yet). ``faces``: face id -> (creation stamp, creating track id). ``days``: (day, start_s,
+    (0: none yet), ``det_name`` the index in ``names`` of the name its face had then (-1: none; empty =
+    not recorded). ``faces``: face id -> (creation stamp, creating track id). ``days``: (day, start_s,
     end_s, gt ids) of the scenario (used to split cross-day re-identifications).
     """
 
@@ -118,6 +119,8 @@ class RunLog:
     days: tuple[tuple[int, float, float, tuple[int, ...]], ...] = ()
     master_stats: dict[str, int] = field(default_factory=dict)
     runtime_s: float = 0.0
+    det_name: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         arrays = {k: getattr(self, k) for k in ("det_frame", "det_stamp_s", "det_gt", "det_track", "det_face")}
@@ -126,6 +129,10 @@ class RunLog:
             raise ValueError(f"RunLog detection arrays must be 1-D of one length, got shapes {sorted(sizes)}")
         for name, value in arrays.items():
             setattr(self, name, np.asarray(value, dtype=np.float64 if name == "det_stamp_s" else np.int64))
+        self.det_name = np.asarray(self.det_name, dtype=np.int64)
+        if self.det_name.size and (self.det_name.shape != self.det_frame.shape
+                                   or int(self.det_name.max()) >= len(self.names)):
+            raise ValueError("RunLog.det_name must have one index into names (or -1) per detection")
         if not np.all(np.isfinite(self.det_stamp_s)):
             raise ValueError("RunLog.det_stamp_s contains NaN or Inf")
         if self.det_frame.size > 1 and np.any(np.diff(self.det_frame) < 0):
@@ -176,6 +183,8 @@ def run_master(
     rows_gt: list[int] = []
     rows_track: list[int] = []
     rows_face: list[int] = []
+    rows_name: list[int] = []
+    name_index: dict[str, int] = {}
     rejected = 0
 
     def identity_changes(stamp: float) -> None:
@@ -230,6 +239,7 @@ def run_master(
         for j, person in enumerate(frame.people):
             tid = track_of.get(j, -1)
             fid = 0
+            shown = -1
             if tid >= 0:
                 log = tracks.get(tid)
                 if log is None:
@@ -244,13 +254,16 @@ def run_master(
                 fid = core.identity.face_id_of(tid) or 0
                 if fid:
                     name = core.face_name(fid)
-                    if name and name not in log.names:
-                        log.names[name] = stamp
+                    if name:
+                        shown = name_index.setdefault(name, len(name_index))
+                        if name not in log.names:
+                            log.names[name] = stamp
             rows_frame.append(i)
             rows_stamp.append(stamp)
             rows_gt.append(int(gt[j]))
             rows_track.append(int(tid))
             rows_face.append(int(fid))
+            rows_name.append(shown)
         if progress is not None and (i % 2000 == 0 or i == n - 1):
             progress(i + 1, n)
     if frames:  # let the last tracks time out, so that every track's end is recorded
@@ -270,6 +283,8 @@ def run_master(
         days=tuple((int(d), float(a), float(b), tuple(int(g) for g in ids)) for d, a, b, ids in days),
         master_stats=core.stats.as_dict(),
         runtime_s=time.perf_counter() - t_start,
+        det_name=np.array(rows_name, dtype=np.int64),
+        names=tuple(name_index),
     )
 
 

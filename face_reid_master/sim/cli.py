@@ -43,9 +43,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="people on day 2 who were not there on day 1 (default people // 3)")
     p.add_argument("--room", type=str, default=None, metavar="WxD",
                    help="room size in metres, e.g. 10x8 (default: scaled with the number of cameras)")
-    p.add_argument("--embedder", choices=("dlib", "sface", "both"), default="dlib",
-                   help="the cameras' face embedder (default dlib); both: 256-value embeddings, so one scenario "
-                        "can be evaluated in the dlib, SFace and joint spaces (face-reid-eval --space)")
+    p.add_argument("--embedder", choices=("dlib", "sface", "both"), default="both",
+                   help="the cameras' face embedder (default both: 256-value embeddings, the joint space the "
+                        "default master compares; such a scenario also serves the dlib and SFace spaces, "
+                        "face-reid-eval --space)")
     p.add_argument("--color-resolution", type=str, default=None, metavar="WxH",
                    help="colour image size in pixels, e.g. 1920x1080 (default: the depth camera's 640x480); "
                         "faces get proportionally more pixels (feature level: the photo variants and the eye "

@@ -68,7 +68,7 @@ class SimConfig:
     min_photos_per_identity: int = 2
     loss_gap_s: float = 1.5
     ground_truth_rate_hz: float = 10.0
-    embedder: str = "dlib"  # the cameras' embedder: dlib | sface | both (one scenario serves all three spaces)
+    embedder: str = "both"  # the cameras' embedder: dlib | sface | both (one scenario serves all three spaces)
     color_resolution: tuple[int, int] | None = None  # colour image W, H (px); None: the depth camera's
     motion: MotionConfig = field(default_factory=MotionConfig)
     visibility: VisibilityConfig = field(default_factory=VisibilityConfig)

@@ -54,7 +54,9 @@ __all__ = [
 IntArray = npt.NDArray[np.intp]
 MIN_OF_K_VALUES: tuple[int, ...] = (1, 2, 3, 5, 7)
 MIN_OF_K_QUERIES_PER_K = 3000
-NAME_FAR = 1e-3  # naming threshold: this share of the negative pairs is closer
+NAME_FAR = 1e-3  # naming threshold: this share of the negative pairs (--camera-views: learned faces) is closer
+NAME_SPLITS = 5  # random gallery / scene splits of every identity for the face-level naming threshold
+NAME_MAX_FEATURES = 50  # a learned face's features in that derivation (the master's max_features_per_face)
 _MAX_LISTED_SKIPPED = 100  # skipped file names written into the JSON metadata
 
 
@@ -138,6 +140,60 @@ def _sampled_pairs(names: Sequence[str], labels: npt.NDArray[np.intp], max_negat
     if n_available > max_negative_pairs:
         neg_idx = np.sort(rng.choice(neg_idx, size=max_negative_pairs, replace=False))
     return iu, ju, np.flatnonzero(same), neg_idx, n_available
+
+
+@dataclass(frozen=True)
+class NamingDistances:
+    """The naming rule's distance (min over learned x gallery features) for a person's own gallery
+    (positive) and for other people's (negative), over random splits of each identity's photos."""
+
+    positive: npt.NDArray[np.float64]
+    negative: npt.NDArray[np.float64]
+
+    def threshold(self, far: float) -> float:
+        """Distance below which a ``far`` share of the learned faces would take another person's name."""
+        return float(np.quantile(self.negative, far))
+
+
+def naming_distances(views: Mapping[str, npt.NDArray[np.float64]], rng: np.random.Generator,
+                     splits: int = NAME_SPLITS, max_features: int = NAME_MAX_FEATURES,
+                     same_source_negatives: bool = False) -> NamingDistances:
+    """Per identity with >= 3 photos and per split: a third of its photos (at least one) as the gallery (the
+    photos themselves, view 0), the camera views of the others as a learned face (at most ``max_features``
+    of them); the paper's naming distance of every learned face to every gallery (others: same source only if
+    ``same_source_negatives``). ``views[name]``: (photos, views, dim), NaN rows for views without a face."""
+    names = sorted(n for n, v in views.items() if v.shape[0] >= 3)
+    if len(names) < 2:
+        raise ValueError(f"need >= 2 identities with >= 3 photos to derive the naming threshold, got {len(names)}")
+    sources = [identity_source(n) for n in names]
+    pos: list[float] = []
+    neg: list[float] = []
+    for _ in range(splits):
+        learned, gallery = [], []
+        for n in names:
+            v = views[n]
+            order = rng.permutation(v.shape[0])
+            n_gal = max(1, v.shape[0] // 3)
+            g = v[order[:n_gal], 0]
+            rest = v[order[n_gal:]].reshape(-1, v.shape[2])
+            g, rest = g[np.isfinite(g).all(axis=1)], rest[np.isfinite(rest).all(axis=1)]
+            if len(rest) > max_features:
+                rest = rest[rng.choice(len(rest), max_features, replace=False)]
+            learned.append(rest)
+            gallery.append(g)
+        sq_g = [np.einsum("ij,ij->i", g, g) for g in gallery]
+        for i, face in enumerate(learned):
+            if not len(face):
+                continue
+            sq = np.einsum("ij,ij->i", face, face)
+            for j, g in enumerate(gallery):
+                if not len(g) or (i != j and same_source_negatives and sources[i] != sources[j]):
+                    continue
+                d2 = sq[:, None] + sq_g[j][None, :] - 2.0 * face @ g.T
+                (pos if i == j else neg).append(float(np.sqrt(max(float(d2.min()), 0.0))))
+    if len(neg) < 10 or not pos:
+        raise ValueError(f"too few learned faces to derive the naming threshold ({len(pos)} own, {len(neg)} other)")
+    return NamingDistances(np.array(pos), np.array(neg))
 
 
 @dataclass(frozen=True)
@@ -600,7 +656,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for p in emb.skipped_no_face:
         print(f"  no face: {p}", file=sys.stderr)
 
-    pair_rng, k_rng, size_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(args.seed).spawn(3))
+    pair_rng, k_rng, size_rng, name_rng = (np.random.default_rng(s)
+                                           for s in np.random.SeedSequence(args.seed).spawn(4))
     same_source = bool(args.same_source_negatives)
     try:
         chosen: list[dict[str, npt.NDArray[np.intp]]] = []
@@ -703,15 +760,28 @@ def main(argv: Sequence[str] | None = None) -> int:
                 by_size.append((f"query face eye distance [{bounds[b]:g}, {bounds[b + 1]:g}) px", fit_b, pos_b, neg_b))
     except ValueError as exc:
         return _fail(f"cannot fit the size buckets: {exc}")
-    # derived on the same data: the threshold method's distance (N_p = N_n) and naming at pair FAR 1e-3
-    name_threshold = round(float(np.quantile(negative, NAME_FAR)), 4)
+    # derived on the same data: the threshold method's distance (N_p = N_n) and the naming distance at a false
+    # name rate of 1e-3: of learned faces (camera views) against galleries, or else of photo pairs
+    naming = None
+    if args.camera_views:
+        scaled = {n: v * scale for n, v in emb.views.items()} if weights else emb.views
+        try:
+            naming = naming_distances(scaled, name_rng, same_source_negatives=same_source)
+        except ValueError as exc:
+            return _fail(f"cannot derive the naming threshold: {exc}")
+    name_threshold = round(naming.threshold(NAME_FAR) if naming else float(np.quantile(negative, NAME_FAR)), 4)
     threshold_distance = round(model.decision_distance, 4)
     metadata = {**model.metadata, "size_buckets": (
         f"N_p / N_n per eye-distance bucket of the query face, edges {list(edges)} px: every pair of a draw counts "
         "for the bucket of each of its two faces; negatives sampled per draw like the pooled fit (numpy "
         f"SeedSequence({args.seed}) stream 2)") if edges else "none (pooled fit only)",
-        "thresholds": f"threshold_distance = pooled N_p = N_n distance; name_threshold = the {NAME_FAR:g} quantile "
-                      "of the pooled negative pair distances (pair false-accept rate 1e-3)"}
+        "thresholds": "threshold_distance = pooled N_p = N_n distance; name_threshold = " + (
+            f"the {NAME_FAR:g} quantile of the naming rule's distance (min over feature pairs) from learned faces "
+            f"(<= {NAME_MAX_FEATURES} camera views of two thirds of an identity's photos) to other identities' "
+            f"galleries (the other third, as photos){', same source' if same_source else ''}: {NAME_SPLITS} random "
+            f"splits, numpy SeedSequence({args.seed}) stream 3, {naming.negative.size} other / {naming.positive.size} "
+            "own learned-face-gallery pairs" if naming else
+            f"the {NAME_FAR:g} quantile of the pooled negative pair distances (pair false-accept rate {NAME_FAR:g})")}
     face_model = FaceLikelihood(
         dataclasses.replace(model, metadata=metadata), args.space, edges, tuple(m for _, m, _, _ in by_size),
         weights, name_threshold, threshold_distance, metadata)
@@ -736,6 +806,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for label, m, pos_b, neg_b in by_size:
         print(f"  {label}: {pos_b.size} positive / {neg_b.size} negative pairs, N_p = N_n at d = "
               f"{m.decision_distance:.4f}, positive median {np.median(pos_b):.4f}")
+    if naming:
+        print(f"naming: {naming.negative.size} other / {naming.positive.size} own learned-face-gallery pairs; at "
+              f"name_threshold {name_threshold} {np.mean(naming.positive < name_threshold):.3f} of own galleries "
+              "are within reach")
     print(f"derived: threshold_distance {threshold_distance}, name_threshold {name_threshold}"
           + (f", component weights {list(weights)}" if weights else ""))
     pos_ok = float(np.mean(positive < crossing))

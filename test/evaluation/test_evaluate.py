@@ -204,7 +204,8 @@ def _frames(visits: list[tuple[int, float, float, float, np.ndarray | None]], ra
 
 
 def _config(method: str) -> MasterConfig:
-    return MasterConfig(method=method, tracker=TrackerConfig(lost_after_s=0.5, delete_after_s=1.0))
+    return MasterConfig(method=method, embedding_space="dlib_resnet_v1",  # the fixtures' embeddings
+                        tracker=TrackerConfig(lost_after_s=0.5, delete_after_s=1.0))
 
 
 @pytest.mark.parametrize("method", ["bayes", "threshold"])
@@ -311,7 +312,7 @@ def scenario_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:4]:
             shutil.copy(photo, faces / ident / photo.name)
     out = tmp_path_factory.mktemp("scenario")
-    write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=40.0, seed=5)), out)
+    write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=40.0, seed=5, embedder="dlib")), out)
     return out
 
 
@@ -396,3 +397,22 @@ def test_cli_both_methods_adds_the_paired_comparison(scenario_dir: Path, capsys)
     assert both + paired["only_bayes_successful"] == printed["bayes"]["reidentification"]["success"]
     assert both + paired["only_threshold_successful"] == printed["threshold"]["reidentification"]["success"]
     assert main([str(scenario_dir), "--method", "both", "--live", "--quiet"]) == 2
+
+
+def test_names_are_also_judged_per_detection_so_a_swapped_track_was_right_before_the_swap() -> None:
+    # one track: person 0 (alice) for 2 frames shown "alice", then swapped onto person 2 (a stranger) still shown
+    # "alice" for 3 frames; person 1 (bob) on another track shown "carol" (not in the gallery) once, then nothing
+    t1 = _track(1, 2, 0.0, 5.0, names={"alice": 0.0}, n_det=5)
+    t1.gt_counts = {0: 2, 2: 3}
+    t2 = _track(2, 1, 0.0, 5.0, names={"carol": 0.0}, n_det=2)
+    z = np.zeros(7)
+    log = RunLog("bayes", {1: t1, 2: t2}, {}, np.arange(7), z, [0, 0, 2, 2, 2, 1, 1], [1, 1, 1, 1, 1, 2, 2], z,
+                 days=((1, 0.0, 100.0, (0, 1, 2)),), det_name=[0, 0, 0, 0, 0, 1, -1], names=("alice", "carol"))
+    names = evaluate_run(log, gallery_people={"alice": 0, "bob": 1}, with_mot=False)["predefined_people"]
+    assert names["other_tracks_named"] == 1  # per track: the stranger's track was named
+    det = names["detections"]
+    assert (det["gallery_detections"], det["right_name"], det["wrong_name"]) == (4, 2, 1)
+    assert (det["other_detections"], det["other_named"]) == (3, 3)
+    assert names["pure_tracks"]["gallery_tracks"] == 1 and names["pure_tracks"]["wrong_name"] == 1  # bob's track
+    with pytest.raises(ValueError, match="det_name"):
+        RunLog("bayes", {}, {}, [0], [0.0], [0], [1], [0], det_name=[3], names=("alice",))

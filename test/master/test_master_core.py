@@ -57,6 +57,8 @@ def _walk(core: MasterCore, who: dict[str, tuple[np.ndarray, np.ndarray | None]]
 
 
 def _config(**kw) -> MasterConfig:
+    """Fast timeouts; the dlib space (the fixtures' embeddings) unless a test says otherwise."""
+    kw.setdefault("embedding_space", "dlib_resnet_v1")
     return MasterConfig(tracker=TrackerConfig(lost_after_s=0.5, delete_after_s=1.0), **kw)
 
 

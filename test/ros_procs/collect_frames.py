@@ -39,6 +39,7 @@ def main() -> int:
                     "face_found": p.face_found,
                     "face_score": p.face_score,
                     "embedding_len": len(p.embedding),
+                    "embedding_space": p.embedding_space,
                     "embedding": list(p.embedding),
                 }
                 for p in msg.people

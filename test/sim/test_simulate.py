@@ -43,7 +43,8 @@ def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def feature_dir(faces: Path, cache: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=20.0, seed=3, second_day=True, new_people=1)
+    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=20.0, seed=3, second_day=True, new_people=1,
+                    embedder="dlib")
     out = tmp_path_factory.mktemp("scenario")
     write_scenario(simulate(faces, cfg, cache_path=cache), out)
     return out
@@ -169,11 +170,11 @@ def test_second_day_brings_back_some_people_and_new_ones(feature_dir: Path) -> N
 
 
 def test_same_seed_gives_identical_files_other_seed_differs(faces: Path, cache: Path, tmp_path: Path) -> None:
-    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=10.0, seed=11)
+    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=10.0, seed=11, embedder="dlib")
     a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
     write_scenario(simulate(faces, cfg, cache_path=cache), a)
     write_scenario(simulate(faces, cfg, cache_path=cache), b)
-    write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=10.0, seed=12),
+    write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=10.0, seed=12, embedder="dlib"),
                             cache_path=cache), c)
     for name in ("frames.npz", "ground_truth.npz", "scenario.json"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
@@ -183,7 +184,7 @@ def test_same_seed_gives_identical_files_other_seed_differs(faces: Path, cache: 
 def test_pixel_level_runs_the_real_camera_pipeline(faces: Path, cache: Path, tmp_path: Path) -> None:
     # 2 people, 1 camera, 2 s at 2 Hz; with this seed both people are in view most of the time
     cfg = SimConfig(num_people=2, num_cameras=1, duration_s=2.0, rate_hz=2.0, seed=13, level="pixel",
-                    room_size_m=(7.0, 5.0))
+                    room_size_m=(7.0, 5.0), embedder="dlib")
     write_scenario(simulate(faces, cfg, cache_path=cache), tmp_path / "px")
     s = load_scenario(tmp_path / "px")
     assert s.level == "pixel" and len(s.frames) == 4

@@ -182,7 +182,9 @@ def test_malformed_input_is_logged_counted_and_survived(ros_context) -> None:
         assert rejected == {"no_camera_info": 1, "bad_color": 1, "bad_depth": 1, "size_mismatch": 1}, rejected
         assert node._worker is not None and node._worker.is_alive()
         assert [len(m.people) for m in sent] == [0, 1, 1, 1] and not sent[0].ground_plane_found
-        assert all(len(m.people[0].embedding) == 128 for m in sent[1:])
+        # the default embedder (both): one 256-value joint embedding per face
+        assert all(len(m.people[0].embedding) == 256 for m in sent[1:])
+        assert {m.people[0].embedding_space for m in sent[1:]} == {"dlib_resnet_v1+sface_2021dec"}
     finally:
         node.destroy_node()
 

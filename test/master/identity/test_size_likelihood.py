@@ -90,7 +90,8 @@ def test_every_space_ships_a_fit_with_its_derived_distances(space: str) -> None:
     assert m.name_threshold < m.threshold_distance  # naming is stricter than "same face"
     if "+" in space:
         assert len(m.component_weights) == 2
-    if space != "dlib_resnet_v1":  # fitted per face size: small faces' same-person distances spread further
+    if space == "sface_2021dec":  # fitted per face size: small faces' same-person distances spread further
+        # (the dlib and joint fits are pooled: on the development scenarios the buckets did not help, README)
         assert m.conditioned
         small, large = m.by_size[0], m.by_size[-1]
         assert small.decision_distance > large.decision_distance

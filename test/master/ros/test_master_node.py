@@ -36,6 +36,9 @@ CAM = "/cam_a/face_reid/frames"
 
 
 def _master(ros_context, tmp_path: Path, *extra: str) -> MasterNode:
+    """A master node on a temporary database, comparing dlib embeddings (what these tests send) unless set."""
+    if not any(p.startswith("embedding_space:=") for p in extra):
+        extra = ("embedding_space:=dlib_resnet_v1", *extra)
     ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", f"camera_topics:=[{CAM}]",
                        "-p", "camera_topic_regex:=''", *[a for p in extra for a in ("-p", p)]])
     return MasterNode(context=ctx)

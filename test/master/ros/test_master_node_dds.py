@@ -117,7 +117,7 @@ def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Pa
     db = tmp_path / "faces.db"
     out, master = _run_network(tmp_path, ros_domain_id, [
         f"db_path:={db}", f"gallery_path:={gallery}", "tracker.lost_after_s:=0.5", "tracker.delete_after_s:=1.0",
-        "min_face_features_for_name:=3"], [("cam_a", plan_a), ("cam_b", plan_b)])
+        "min_face_features_for_name:=3", "embedding_space:=dlib_resnet_v1"], [("cam_a", plan_a), ("cam_b", plan_b)])
     try:
         os.killpg(master.pid, signal.SIGKILL)  # no clean shutdown: nothing learned may be lost
         master.wait(timeout=10)
@@ -162,7 +162,7 @@ def test_cameras_of_two_embedders_never_mix_their_faces(ros_domain_id: int, tmp_
     plan_s = _plan(tmp_path / "s.json", sface_embeddings, [{"t0": 0.0, "t1": 5.0, "people": [colin]}],
                    "sface_2021dec")
     db = tmp_path / "faces.db"
-    out, master = _run_network(tmp_path, ros_domain_id, [f"db_path:={db}"],
+    out, master = _run_network(tmp_path, ros_domain_id, [f"db_path:={db}", "embedding_space:=dlib_resnet_v1"],
                                [("cam_dlib", plan_d), ("cam_sface", plan_s)])
     try:
         master.send_signal(signal.SIGINT)

@@ -27,6 +27,7 @@ from face_reid_master.tools.fit_likelihood import (
     excluded_from_fit,
     identity_source,
     main,
+    naming_distances,
     sample_min_of_k_distances,
 )
 
@@ -198,6 +199,9 @@ def test_camera_views_widen_same_person_distances(subset_dir: Path, tmp_path: Pa
     assert m_cam.k_exponent_positive == m_cam.k_exponent_negative == 0.0  # min-of-K only on request
     assert "--camera-views 2" in m_cam.metadata["command"] and cache.is_file()
     assert 0.5 < m_cam.decision_distance < 0.75
+    # naming derived on learned faces (camera views) vs galleries: far stricter than a pair quantile would be
+    assert "learned faces" in load_face_likelihood(cam).metadata["thresholds"]
+    assert "pair false-accept" in load_face_likelihood(clean).metadata["thresholds"]
 
 
 def test_decision_distance_is_where_the_densities_cross(subset_embeddings: dict[str, np.ndarray]) -> None:
@@ -265,3 +269,25 @@ def test_size_buckets_take_each_pair_for_the_bucket_of_each_of_its_faces() -> No
     # negatives: 4 pairs; a0 (small) with b0, b1; b1 (small) with a0, a1
     assert small_neg.size == 4 and large_neg.size == 4
     assert np.isclose(small_neg, np.hypot(1.0, 0.5)).sum() == 2  # a0-b1 counted for both of its small faces
+
+
+def test_naming_distances_take_the_rules_minimum_over_learned_and_gallery_features() -> None:
+    rng = np.random.default_rng(0)
+    centres = {"a_1": 0.0, "a_2": 3.0, "b_1": 6.0, "c_1": 10.0}  # identity -> position on axis 0; sources a, b, c
+    views = {}
+    for name, x in centres.items():
+        v = np.zeros((6, 3, 4))  # 6 photos x 3 views
+        v[..., 0] = x + 0.1 * rng.standard_normal((6, 3))
+        v[1, 2] = np.nan  # a view without a face
+        views[name] = v
+    views["d_1"] = np.zeros((2, 3, 4))  # < 3 photos: not used
+    d = naming_distances(views, np.random.default_rng(1), splits=2, max_features=4)
+    assert d.positive.size == 2 * 4 and d.negative.size == 2 * 4 * 3
+    assert d.positive.max() < 0.6 and d.negative.min() > 2.3  # nearest other identity is 3 away
+    assert d.threshold(0.0) == pytest.approx(d.negative.min())
+    same = naming_distances(views, np.random.default_rng(1), splits=5, same_source_negatives=True)
+    assert same.negative.size == 5 * 2  # only a_1 <-> a_2
+    with pytest.raises(ValueError, match="too few"):
+        naming_distances(views, np.random.default_rng(1), splits=2, same_source_negatives=True)
+    with pytest.raises(ValueError, match="identities"):
+        naming_distances({"a": views["a_1"]}, rng)
