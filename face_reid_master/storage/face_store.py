@@ -332,8 +332,9 @@ class FaceStore:
             elif space != self.embedding_space:
                 raise FaceStoreError(
                     f"face store {self.path} holds faces of embedder space {space!r} but this master compares "
-                    f"{self.embedding_space!r}: faces of different networks cannot be compared; use another "
-                    "file (face_db_path) or delete this one"
+                    f"{self.embedding_space!r}: faces of different networks cannot be compared; set the master's "
+                    f"embedding_space to {space!r} to keep using these faces (the cameras must send that space or "
+                    "a joint one containing it), or give db_path another file to start a new memory"
                 )
         except sqlite3.DatabaseError as exc:
             raise _CorruptStore(f"unreadable database ({exc})") from exc
