@@ -26,8 +26,8 @@ from numpy.typing import NDArray
 from face_reid_camera.common.checks import check_real
 from face_reid_camera.common.embedding_spaces import (
     DLIB_SPACE,
-    SFACE_SPACE,
     EMBEDDER_CHOICES,
+    SFACE_SPACE,
     embedder_space,
     extract_space,
     space_dim,
@@ -107,6 +107,10 @@ class MasterConfig:
     learn_only_consistent_features: bool = param(
         True, "An identified track's embedding joins its face only if within the decision distance (guards "
         "faces against tracker swaps; false = the paper).")
+    release_after_inconsistent: int = param(
+        3, "An identified track whose last this many face embeddings were all beyond the decision distance "
+        "was swapped onto someone else: it loses its face and is classified afresh (count; 0 = never, the "
+        "paper; needs learn_only_consistent_features).", low=0, high=1000)
     # identity (threshold baseline)
     threshold_distance: float = param(
         0.0, "Threshold method: same face below this L2 distance (0 = the value derived for embedding_space, "
@@ -121,6 +125,9 @@ class MasterConfig:
 
     def __post_init__(self) -> None:
         validate_fields(self)
+        if self.release_after_inconsistent and not self.learn_only_consistent_features:
+            raise ValueError("release_after_inconsistent needs learn_only_consistent_features (it counts the "
+                             "embeddings beyond the decision distance): set it to 0 for the paper's behaviour")
         for name in ("name_update_interval_s", "prune_interval_s"):
             check_real(name, getattr(self, name), 0.0)
 
@@ -146,6 +153,7 @@ class MasterStats:
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
+    faces_released_swapped: int = 0  # of which: the track was swapped onto someone else (it lives on)
     faces_pruned: int = 0
     store_errors: int = 0
 
@@ -216,12 +224,14 @@ class MasterCore:
                 glance_gap_s=cfg.glance_gap_s, glance_correlation=cfg.glance_correlation,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
+                release_after_inconsistent=cfg.release_after_inconsistent,
             )
         else:
             self.identity = make_identity_manager(
                 "threshold", distance_threshold=self.threshold_distance, n_votes=cfg.threshold_votes,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=self.threshold_distance if cfg.learn_only_consistent_features else None,
+                release_after_inconsistent=cfg.release_after_inconsistent,
             )
         self.people = PredefinedPeople(
             {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
@@ -406,8 +416,9 @@ class MasterCore:
             elif ev.kind == IdentityEventKind.ASSIGNED_KNOWN:
                 self.stats.faces_reidentified += 1
                 self._save_face(ev.face_id)
-            elif ev.kind == IdentityEventKind.RELEASED:
+            elif ev.kind in (IdentityEventKind.RELEASED, IdentityEventKind.SWAPPED):
                 self.stats.faces_released += 1
+                self.stats.faces_released_swapped += ev.kind == IdentityEventKind.SWAPPED
                 self._save_face(ev.face_id)
             self._name_checked.pop(ev.face_id, None)
         return events

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.identity.likelihood import LikelihoodModel
+from face_reid_master.identity.records import IdentityEventKind
 from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord
 
 __all__ = ["DEFAULT_TICK_PERIOD_S", "ProgressCallback", "RunLog", "TrackLog", "progress_to", "run_master"]
@@ -36,10 +37,11 @@ class TrackLog:
     """What happened to one track (all stamps in scenario seconds).
 
     ``gt_counts``: true person (-1 = false positive) -> detections associated with the track.
-    ``assignments``: (stamp, face id, "new" | "known") in order (Algorithm 1 assigns once per track; a
-    later change would be listed too). ``names``: name -> first stamp it was shown on one of the
-    track's detections. ``path``: (stamp, x, y) samples of the published estimate while CONFIRMED. ``face_gt``:
-    (stamp, true person) of each detection with a face embedding.
+    ``assignments``: (stamp, face id, "new" | "known") in order (Algorithm 1 assigns once per track; after
+    a swap releases its face, the next assignment is listed too; ``releases``: when each swap began).
+    ``names``: name -> first stamp it was shown on one of the track's detections. ``path``: (stamp, x, y)
+    samples of the published estimate while CONFIRMED. ``face_gt``: (stamp, true person) of each detection
+    with a face embedding.
     """
 
     track_id: int
@@ -54,6 +56,7 @@ class TrackLog:
     names: dict[str, float] = field(default_factory=dict)
     path: list[tuple[float, float, float]] = field(default_factory=list)
     face_gt: list[tuple[float, int]] = field(default_factory=list)  # (stamp, true person) of face detections
+    releases: list[float] = field(default_factory=list)  # swaps: stamp of the first face not its face's
 
     @property
     def detections(self) -> int:
@@ -85,8 +88,10 @@ class TrackLog:
         return self.face_person_until(math.inf)
 
     def face_person_until(self, stamp_s: float) -> int:
-        """:attr:`face_person` of the face detections up to ``stamp_s`` (all of them if there were none)."""
-        counts = Counter(g for s, g in self.face_gt if g >= 0 and s <= stamp_s + 1e-9)
+        """:attr:`face_person` of the face detections up to ``stamp_s`` since the track last lost a face
+        (a swap: what the track gathered before it was another person's); all of them if there were none."""
+        since = max((r for r in self.releases if r <= stamp_s), default=-math.inf)
+        counts = Counter(g for s, g in self.face_gt if g >= 0 and since - 1e-9 <= s <= stamp_s + 1e-9)
         if not counts:
             counts = Counter(g for _, g in self.face_gt if g >= 0)
         if not counts:
@@ -202,6 +207,7 @@ def run_master(
             if log is None:  # identity of a track never seen in an association (cannot happen in the core)
                 log = tracks[tid] = TrackLog(tid, stamp, stamp)
             log.assignments.append((stamp, fid, kind))
+            log.released_s = None  # holding a face again (after a swap released the previous one)
         for tid in prev_assigned.keys() - assigned.keys():
             if tid in tracks:
                 tracks[tid].released_s = stamp
@@ -231,6 +237,9 @@ def run_master(
         stamp = float(frame.stamp_s)
         tick_until(stamp)
         outcome = core.process_frame(frame)
+        for ev in outcome.identity_events:
+            if ev.kind == IdentityEventKind.SWAPPED and ev.track_id in tracks and ev.since_s is not None:
+                tracks[ev.track_id].releases.append(ev.since_s)
         gt = np.asarray(frame_gt_ids[i]).tolist()
         if not outcome.accepted:
             rejected += 1

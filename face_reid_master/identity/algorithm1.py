@@ -54,6 +54,9 @@ class Vote:
     distance: float
 
 
+_Chunk = tuple[F32Array, "FloatArray | None", float, str]  # (embeddings, eye px, stamp, source)
+
+
 @dataclass
 class TrackEntry:
     """A live track of track_list, as seen by the identity layer (read by the classification methods)."""
@@ -66,6 +69,7 @@ class TrackEntry:
     face_id: int | None = None
     confidence: float = 0.0
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
+    inconsistent: list[_Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,9 +80,6 @@ class Origin:
     source: str
     stamp_s: float
     rows: int
-
-
-_Chunk = tuple[F32Array, "FloatArray | None", float, str]  # (embeddings, eye px, stamp, source)
 
 
 def _eye_rows(chunks: list[_Chunk]) -> FloatArray:
@@ -105,7 +106,10 @@ class IdentityManagerBase:
     an observation farther than this from every feature of the track's face is not learned (counted in
     ``stats.observations_not_learned_inconsistent``).  When the tracker swaps two people, the face then
     does not absorb the other person's features, which would make that person's later tracks look like
-    this face.
+    this face.  ``release_after_inconsistent`` (0 = never, the paper; needs the gate): an identified track
+    whose last this many observations were all beyond the gate has been swapped onto someone else: its
+    face goes back to face_list (a SWAPPED event) and the track is classified afresh from those
+    observations on, so the other person does not carry this face's name.
 
     Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
     ``_current_confidence`` and may override the ``_on_*`` notifications; the single-underscore state
@@ -122,6 +126,7 @@ class IdentityManagerBase:
         exact_search_max_features: int = 20_000,
         shortlist_faces: int = 32,
         feature_gate_distance: float | None = None,
+        release_after_inconsistent: int = 0,
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
         if feature_gate_distance is not None:
@@ -129,6 +134,10 @@ class IdentityManagerBase:
                 "feature_gate_distance", feature_gate_distance, 0.0, math.inf, low_open=True, high_open=True
             )
         self.feature_gate_distance = feature_gate_distance
+        self.release_after_inconsistent = check_int("release_after_inconsistent", release_after_inconsistent, 0)
+        if self.release_after_inconsistent and feature_gate_distance is None:
+            raise ValueError("release_after_inconsistent needs feature_gate_distance (it counts the observations "
+                             "beyond it); 0 = never release")
         self.max_features_per_face = check_int("max_features_per_face", max_features_per_face, 1)
         self.exact_search_max_features = check_int("exact_search_max_features", exact_search_max_features, 0)
         self.shortlist_faces = check_int("shortlist_faces", shortlist_faces, 1)
@@ -234,10 +243,19 @@ class IdentityManagerBase:
                 face.n_observations += obs.shape[0]
                 face.last_seen_s = max(face.last_seen_s, stamp)
                 if self.feature_gate_distance is not None:
-                    obs = self._consistent(obs, face.slot)
-                    if obs.shape[0] == 0:
+                    keep = self._consistent(obs, face.slot)
+                    swapped = self._swapped_rows(track, chunks, keep)
+                    obs = obs if keep.all() else obs[keep]
+                    if swapped is not None:  # the face keeps what was its person's, then lets the track go
+                        if obs.shape[0]:
+                            bank.add_features(face.slot, obs)
+                        events.append(self._release_swapped(track, stamp, swapped[0][2]))
+                        chunks = swapped
+                        obs = chunks[0][0] if len(chunks) == 1 else np.concatenate([c[0] for c in chunks])
+                        track.n_observations = obs.shape[0]
+                    elif obs.shape[0] == 0:
                         continue
-            else:
+            if track.face_id is None:
                 slot = track.slot
                 if slot is None:
                     track.slot = bank.new_slot(obs)
@@ -264,13 +282,38 @@ class IdentityManagerBase:
         self._pending_deleted.clear()
         return events
 
-    def _consistent(self, obs: F32Array, slot: int) -> F32Array:
-        """The observations within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
+    def _consistent(self, obs: F32Array, slot: int) -> npt.NDArray[np.bool_]:
+        """Which observations lie within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
         assert self.feature_gate_distance is not None
         d = self._bank.exact_min_distances(obs, np.array([slot], dtype=np.intp))[:, 0]
         keep = d <= self.feature_gate_distance
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
-        return obs if keep.all() else obs[keep]
+        return keep
+
+    def _swapped_rows(self, track: TrackEntry, chunks: list[_Chunk], keep: npt.NDArray[np.bool_]
+                      ) -> list[_Chunk] | None:
+        """Follow the identified track's run of inconsistent observations; once it is
+        ``release_after_inconsistent`` long, the chunks from the run's start on (None: no swap)."""
+        k = self.release_after_inconsistent
+        if not k:
+            return None
+        start = 0
+        for c in chunks:
+            ok = keep[start:start + c[0].shape[0]]
+            start += c[0].shape[0]
+            if ok.all():
+                track.inconsistent.clear()
+                continue
+            last_ok = int(np.flatnonzero(ok)[-1]) if ok.any() else -1
+            if last_ok >= 0:
+                track.inconsistent.clear()
+            rows = slice(last_ok + 1, None)
+            track.inconsistent.append((c[0][rows], None if c[1] is None else c[1][rows], c[2], c[3]))
+        run = track.inconsistent
+        if sum(c[0].shape[0] for c in run) < k:
+            return None
+        track.inconsistent = []
+        return run
 
     # ------------------------------------------------------------------------------ queries
     def face_id_of(self, track_id: int) -> int | None:
@@ -343,6 +386,7 @@ class IdentityManagerBase:
                 track.confidence = 0.0
                 track.n_observations = 0
                 track.votes.clear()
+                track.inconsistent.clear()
                 self._pending_obs.pop(track.track_id, None)
         self._bank.free_slot(face.slot)
         del self._faces[fid]
@@ -447,6 +491,18 @@ class IdentityManagerBase:
         track.slot = None
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
+
+    def _release_swapped(self, track: TrackEntry, stamp: float, since: float) -> IdentityEvent:
+        """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
+        assert track.face_id is not None
+        fid, confidence = track.face_id, track.confidence
+        self._make_available(fid)
+        track.face_id = None
+        track.confidence = 0.0
+        track.votes.clear()
+        track.n_observations = 0
+        self.stats.swaps_released += 1
+        return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
         self._dead[tid] = stamp

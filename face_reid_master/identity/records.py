@@ -22,6 +22,8 @@ class IdentityEventKind(str, enum.Enum):
     ASSIGNED_KNOWN = "assigned_known"  # the track was recognised as a learned face (re-identification)
     NEW_FACE = "new_face"  # the track is an unknown person: a new face id was created for it
     RELEASED = "released"  # the track died: its face goes back to face_list (assignable again)
+    SWAPPED = "swapped"  # the track's faces stopped matching its face (a tracker swap): face back to face_list,
+    # the track is classified afresh
 
 
 @dataclass(frozen=True)
@@ -33,6 +35,7 @@ class IdentityEvent:
     face_id: int
     stamp_s: float
     confidence: float  # posterior (Bayes) or vote fraction (threshold) when the decision was made
+    since_s: float | None = None  # SWAPPED: stamp of the first observation that was not the face's person
 
 
 @dataclass
@@ -84,3 +87,4 @@ class IdentityStats:
     shortlist_searches: int = 0
     faces_forgotten: int = 0
     observations_not_learned_inconsistent: int = 0
+    swaps_released: int = 0

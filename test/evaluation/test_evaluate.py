@@ -312,7 +312,8 @@ def scenario_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:4]:
             shutil.copy(photo, faces / ident / photo.name)
     out = tmp_path_factory.mktemp("scenario")
-    write_scenario(simulate(faces, SimConfig(num_people=3, num_cameras=2, duration_s=40.0, seed=5, embedder="dlib")), out)
+    cfg = SimConfig(num_people=3, num_cameras=2, duration_s=40.0, seed=5, embedder="dlib")
+    write_scenario(simulate(faces, cfg), out)
     return out
 
 
@@ -416,3 +417,14 @@ def test_names_are_also_judged_per_detection_so_a_swapped_track_was_right_before
     assert names["pure_tracks"]["gallery_tracks"] == 1 and names["pure_tracks"]["wrong_name"] == 1  # bob's track
     with pytest.raises(ValueError, match="det_name"):
         RunLog("bayes", {}, {}, [0], [0.0], [0], [1], [0], det_name=[3], names=("alice",))
+
+
+def test_a_face_made_after_a_swap_belongs_to_whom_the_track_showed_since_the_swap() -> None:
+    # track 1: person 0's faces until 4 s (face 1), then person 1's; the swap is noticed from 5 s (releases)
+    # and face 2 made at 6 s from the faces since then: face 2 is person 1's, face 1 stays person 0's
+    t1 = _track(1, 0, 0.0, 9.0, assigned=(1.0, 1, "new"), n_det=30)
+    t1.assignments.append((6.0, 2, "new"))
+    t1.face_gt = [(0.5, 0)] * 3 + [(3.0, 0)] * 10 + [(5.0, 1), (5.5, 1), (6.0, 1)]
+    t1.releases = [5.0]
+    log = _empty_log([t1], {1: (1.0, 1), 2: (6.0, 1)})
+    assert face_persons(log) == {1: 0, 2: 1}

@@ -161,6 +161,9 @@ def test_config_validation() -> None:
         MasterConfig(method="magic")
     with pytest.raises(ValueError):
         MasterConfig(max_stamp_age_s=-1)
+    with pytest.raises(ValueError, match="release_after_inconsistent needs learn_only_consistent_features"):
+        MasterConfig(learn_only_consistent_features=False)  # the default releases swapped tracks
+    assert MasterConfig(learn_only_consistent_features=False, release_after_inconsistent=0).method == "bayes"
 
 
 def test_faces_survive_a_restart_and_can_be_forgotten(embeddings, tmp_path) -> None:

@@ -14,6 +14,7 @@ DIM = 128
 ASSIGNED = IdentityEventKind.ASSIGNED_KNOWN
 NEW = IdentityEventKind.NEW_FACE
 RELEASED = IdentityEventKind.RELEASED
+SWAPPED = IdentityEventKind.SWAPPED
 
 
 def unit_vector(i: int, scale: float = 1.0) -> np.ndarray:

@@ -15,6 +15,7 @@ from identity_test_helpers import (
     DIM,
     NEW,
     RELEASED,
+    SWAPPED,
     event_kinds,
     feed_one,
     manager_with_faces,
@@ -463,3 +464,41 @@ def test_feature_gate_keeps_a_swapped_persons_features_out_of_the_face(method: s
             assert of_person_1.sum() == 0 and m.stats.observations_not_learned_inconsistent == 6
             assert len(feats) == 5 + 1
     assert len(learned[None]) == 5 + 1 + 6
+
+
+@pytest.mark.parametrize("method", ["bayes", "threshold"])
+def test_a_swapped_track_gives_its_face_back_and_is_identified_afresh(method: str) -> None:
+    """Track 10 is face 1 (person 0); the tracker puts it on person 1 (face 2, not in view): after
+    ``release_after_inconsistent`` faces beyond the gate in a row it loses face 1 (SWAPPED, since the first
+    of them) and, from those faces, becomes face 2. An odd face in between does not release it."""
+    rng = np.random.default_rng(5)
+    kw = {"min_observations": 3} if method == "bayes" else {"n_votes": 3}
+    m = make_identity_manager(method, feature_gate_distance=0.6, release_after_inconsistent=3, **kw)
+    m.import_faces([LearnedFace(1, person_obs(0, 5, rng)), LearnedFace(2, person_obs(1, 5, rng))])
+    events = [e for t in range(3) for e in feed_one(m, 10, 0, rng, 0.1 * t)]
+    assert event_kinds(events) == [(ASSIGNED, 10, 1)]
+    for t, person in ((0.3, 1), (0.4, 1), (0.5, 0), (0.6, 1), (0.7, 1)):  # two odd faces, then the face again
+        assert feed_one(m, 10, person, rng, t) == []
+    assert m.face_id_of(10) == 1
+    events = feed_one(m, 10, 1, rng, 0.8)  # the third of person 1 in a row
+    kinds = event_kinds(events)
+    assert kinds[0] == (SWAPPED, 10, 1) and events[0].since_s == pytest.approx(0.6)
+    assert kinds[1:] == [(ASSIGNED, 10, 2)]  # the three faces of person 1 decide at once
+    assert m.stats.swaps_released == 1 and m.face_id_of(10) == 2 and 1 in m.available_face_ids()
+    feats = m.face_features(1)
+    assert np.all(np.linalg.norm(feats - CENTRES[0][None, :], axis=1) < 0.5)  # face 1 kept person 0 only
+
+
+def test_release_after_inconsistent_needs_the_gate_and_zero_never_releases() -> None:
+    with pytest.raises(ValueError, match="release_after_inconsistent"):
+        make_identity_manager("bayes", release_after_inconsistent=3)
+    with pytest.raises(ValueError, match="release_after_inconsistent"):
+        make_identity_manager("bayes", feature_gate_distance=0.6, release_after_inconsistent=-1)
+    rng = np.random.default_rng(6)
+    m = make_identity_manager("bayes", feature_gate_distance=0.6, release_after_inconsistent=0)
+    m.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
+    for t in range(3):
+        feed_one(m, 10, 0, rng, 0.1 * t)
+    for t in range(10):
+        assert feed_one(m, 10, 1, rng, 1.0 + 0.1 * t) == []
+    assert m.face_id_of(10) == 1 and m.stats.swaps_released == 0
