@@ -41,9 +41,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-DIM = 128
-CENTRE_SCALE = 0.8 / math.sqrt(2 * DIM)  # different people ~0.8 apart (dlib-like)
-NOISE_SCALE = 0.35 / math.sqrt(2 * DIM)  # one person's frames ~0.35 apart
 MARK_US = 37  # stamps are multiples of 100 us plus 37 us
 WARMUP_S = 2.0
 
@@ -74,9 +71,17 @@ def role_publisher(args: argparse.Namespace) -> int:
     qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     pubs = [node.create_publisher(CameraFrame, f"{args.prefix}/cam{c:02d}/face_reid/frames", qos)
             for c in range(args.cameras)]
-    rng = np.random.default_rng(0)
-    centres = rng.normal(0.0, CENTRE_SCALE, (args.cameras, 2, DIM)).astype(np.float32)
-    noise = rng.normal(0.0, NOISE_SCALE, (64, DIM)).astype(np.float32)
+    from face_reid_camera.common.embedding_spaces import space_dim
+    from face_reid_master.core import MasterConfig
+    from face_reid_master.identity.size_likelihood import default_face_likelihood
+
+    space = MasterConfig().embedding_space  # what the default master compares (cameras send it)
+    dim, model = space_dim(space), default_face_likelihood(space)
+    weights = model.scale(np.ones((1, dim), dtype=np.float32))[0]  # the master multiplies embeddings by these
+    unit = model.decision_distance / math.sqrt(2 * dim)  # in the master's space: different people 1.33,
+    rng = np.random.default_rng(0)  # one person's frames 0.6 times the decision distance apart
+    centres = (rng.normal(0.0, 1.33 * unit, (args.cameras, 2, dim)) / weights).astype(np.float32)
+    noise = (rng.normal(0.0, 0.6 * unit, (64, dim)) / weights).astype(np.float32)
     deadline = time.monotonic() + 60.0
     while min(p.get_subscription_count() for p in pubs) < 1:
         if time.monotonic() > deadline:
@@ -118,6 +123,7 @@ def role_publisher(args: argparse.Namespace) -> int:
                 obs.position_std_m, obs.height_m = 0.05, 1.75
                 obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
                 obs.embedding = (centres[c, j] + noise[(k + 7 * j + c) % len(noise)]).tolist()
+                obs.embedding_space = space
                 msg.people.append(obs)
             pub.publish(msg)
             sent += 1

@@ -7,7 +7,7 @@ people (steady state). Reports median / p95 per update, sustained detections per
 ratio to a reference workload timed in the same run (eq. 4 brute force: one observation against
 all stored features), so numbers from a loaded machine stay comparable. Prints one JSON object.
 
-Usage: python bench/master_update.py [--frames N]
+Usage: python bench/master_update.py [--frames N] [--space SPACE]
 """
 
 from __future__ import annotations
@@ -21,28 +21,44 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from face_reid_camera.common.embedding_spaces import space_dim  # noqa: E402
 from face_reid_master.core import MasterConfig, MasterCore  # noqa: E402
 from face_reid_master.identity.records import LearnedFace  # noqa: E402
+from face_reid_master.identity.size_likelihood import default_face_likelihood  # noqa: E402
 from face_reid_master.records import CameraFrameRecord, PersonRecord  # noqa: E402
 
-DIM = 128
-CENTRE_SCALE = 0.8 / np.sqrt(2 * DIM)  # different people ~0.8 apart (dlib-like)
-NOISE_SCALE = 0.45 / np.sqrt(2 * DIM)  # same person ~0.45 apart
+
+@dataclass(frozen=True)
+class _Space:
+    """The embeddings of one master space: people in its (weighted) space, sent as a camera would."""
+
+    name: str
+    dim: int
+    weights: np.ndarray  # what the master multiplies camera embeddings by
+    centre_scale: float  # different people 1.33 times the decision distance apart
+    noise_scale: float  # one person's embeddings 0.75 times the decision distance apart
+
+    @classmethod
+    def of(cls, name: str) -> _Space:
+        dim, model = space_dim(name), default_face_likelihood(name)
+        d = model.decision_distance / np.sqrt(2 * dim)
+        return cls(name, dim, model.scale(np.ones((1, dim), dtype=np.float32))[0], 1.33 * d, 0.75 * d)
 TARGET_MS = {(5, 20): 1.0, (20, 200): 2.0, (50, 2000): 10.0}
 CAMERAS = ("cam_0", "cam_1", "cam_2")
 
 
-def _scenario(n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator) -> dict[str, float]:
-    centres = rng.normal(0.0, CENTRE_SCALE, (n_faces + n_tracks, DIM)).astype(np.float32)
-    core = MasterCore(MasterConfig())
+def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator) -> dict[str, float]:
+    centres = rng.normal(0.0, sp.centre_scale, (n_faces + n_tracks, sp.dim)).astype(np.float32)
+    core = MasterCore(MasterConfig(embedding_space=sp.name))
     core.identity.import_faces(
-        LearnedFace(j + 1, (centres[j] + rng.normal(0.0, NOISE_SCALE, (50, DIM))).astype(np.float32))
+        LearnedFace(j + 1, (centres[j] + rng.normal(0.0, sp.noise_scale, (50, sp.dim))).astype(np.float32))
         for j in range(n_faces)
     )
     n_strangers = max(1, n_tracks // 10)
@@ -54,9 +70,9 @@ def _scenario(n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator
         people = tuple(
             PersonRecord(
                 np.array([*(grid[k] + rng.normal(0, 0.02, 2)), 0.0]), 0.05, 1.75,
-                (centres[person[k]] + rng.normal(0.0, NOISE_SCALE, DIM)).astype(np.float32)
+                ((centres[person[k]] + rng.normal(0.0, sp.noise_scale, sp.dim)) / sp.weights).astype(np.float32)
                 if (k >= n_strangers or strangers_show_faces) else None,
-                0.9, 0.9,
+                0.9, 0.9, sp.name,
             )
             for k in range(n_tracks)
         )
@@ -92,10 +108,10 @@ def _scenario(n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator
     }
 
 
-def _reference_ms(n_features: int, rng: np.random.Generator) -> float:
+def _reference_ms(sp: _Space, n_features: int, rng: np.random.Generator) -> float:
     """Eq. 4 brute force for ONE observation against ``n_features`` stored features (numpy, median)."""
-    feats = rng.normal(0.0, CENTRE_SCALE, (n_features, DIM)).astype(np.float32)
-    obs = rng.normal(0.0, CENTRE_SCALE, DIM).astype(np.float32)
+    feats = rng.normal(0.0, sp.centre_scale, (n_features, sp.dim)).astype(np.float32)
+    obs = rng.normal(0.0, sp.centre_scale, sp.dim).astype(np.float32)
     times = []
     for _ in range(30):
         t0 = time.perf_counter()
@@ -107,12 +123,15 @@ def _reference_ms(n_features: int, rng: np.random.Generator) -> float:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=200)
+    parser.add_argument("--space", default=MasterConfig().embedding_space,
+                        help="the master's embedding space (default: the default master's)")
     args = parser.parse_args()
+    sp = _Space.of(args.space)
     rng = np.random.default_rng(0)
-    out: dict[str, object] = {"threads": 1, "features_per_face": 50}
+    out: dict[str, object] = {"threads": 1, "features_per_face": 50, "embedding_space": sp.name}
     for (n_tracks, n_faces), target in TARGET_MS.items():
-        res = _scenario(n_tracks, n_faces, args.frames, rng)
-        ref = _reference_ms(n_faces * 50, rng)
+        res = _scenario(sp, n_tracks, n_faces, args.frames, rng)
+        ref = _reference_ms(sp, n_faces * 50, rng)
         res["reference_eq4_brute_force_ms"] = round(ref, 3)
         res["ratio_to_reference"] = round(res["median_ms"] / ref, 2)
         res["target_ms"] = target
