@@ -47,14 +47,15 @@ def test_wrapper_runs_the_console_script() -> None:
 
 @pytest.mark.skipif(not _installed_non_editable(), reason="face-reid is not pip-installed in this environment")
 def test_installed_master_loads_the_installed_likelihood(tmp_path: Path) -> None:
-    """Outside the checkout the installed packages find models/face_likelihood_dlib_resnet_v1.json in <prefix>/share."""
+    """Outside the checkout the installed packages find the default space's models/face_likelihood_<space>.json in
+    <prefix>/share."""
     probe = (
         "import json, face_reid_master\n"
         "from face_reid_camera.common.resources import model_path\n"
-        "from face_reid_master.core import MasterCore\n"
+        "from face_reid_master.core import MasterConfig, MasterCore\n"
         "from face_reid_master.identity.size_likelihood import default_likelihood_file\n"
         "core = MasterCore()\n"
-        "path = model_path(default_likelihood_file('dlib_resnet_v1'))\n"
+        "path = model_path(default_likelihood_file(MasterConfig().embedding_space))\n"
         "print(json.dumps({'package': face_reid_master.__file__, 'path': str(path),\n"
         "                  'decision': core.identity.likelihood.decision_distance}))\n"
     )
@@ -68,8 +69,9 @@ def test_installed_master_loads_the_installed_likelihood(tmp_path: Path) -> None
 
     got = json.loads(result.stdout)
     assert Path(got["package"]).is_relative_to(PREFIX), "the probe must import the installed copy"
-    assert Path(got["path"]) == PREFIX / "share" / "face_reid" / "models" / "face_likelihood_dlib_resnet_v1.json"
-    shipped = load_face_likelihood(REPO / "models" / "face_likelihood_dlib_resnet_v1.json")
+    name = "face_likelihood_dlib_resnet_v1+sface_2021dec.json"  # the default master's joint space
+    assert Path(got["path"]) == PREFIX / "share" / "face_reid" / "models" / name
+    shipped = load_face_likelihood(REPO / "models" / name)
     assert got["decision"] == pytest.approx(shipped.decision_distance, abs=1e-12)
 
 
