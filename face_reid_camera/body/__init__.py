@@ -1,1 +1,1 @@
-"""Body appearance of a person seen by the camera: colour and texture histograms of the body's parts."""
+"""Body appearance descriptors of a person crop (colour and texture histograms), pure numpy/OpenCV."""

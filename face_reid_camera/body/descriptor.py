@@ -1,94 +1,187 @@
-"""Body descriptor of one person crop: HSV and multi-scale SILTP histograms per horizontal body part.
+"""Body appearance descriptor of a person crop: per-part HSV colour + multi-scale SILTP texture histograms.
 
-Parts are bands of the crop's height (head and shoulders, torso, upper legs, lower legs by default), so a
-descriptor compares like with like whatever the person's distance; only the pixels of the mask (the
-person, not the background) count. Each feature is square-rooted (Hellinger: histograms then compare by
-their overlap rather than by their largest bins) and L2-normalised.
+The crop is split into horizontal parts (head/shoulders, torso, upper and lower legs) so that a red
+shirt over blue trousers differs from a blue shirt over red trousers; each part gets a joint HSV
+histogram and, at each of a few image scales (as in LOMO, Liao et al. 2015), a SILTP histogram. Every
+part histogram sums to 1, so parts weigh the same whatever their size, visible area or crop resolution.
 """
 
 from __future__ import annotations
 
-import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import cv2
 import numpy as np
-import numpy.typing as npt
+from numpy.typing import NDArray
 
-from face_reid_camera.body.hsv_histogram import hsv_histogram
-from face_reid_camera.body.siltp import siltp_histogram
+from face_reid_camera.body.hsv_histogram import check_hsv_bins, hsv_bin_index
+from face_reid_camera.body.siltp import SILTP_CODES, check_mask, siltp_codes_unchecked
+from face_reid_camera.common.checks import check_int, check_real
 
 __all__ = ["BodyDescriptor", "BodyDescriptorConfig", "body_descriptor"]
 
 
 @dataclass(frozen=True)
 class BodyDescriptorConfig:
-    """``part_edges``: band limits as fractions of the crop height from the top (increasing, 0 .. 1).
-    ``hsv_bins``: (h, s, v) bins of the colour histogram. ``siltp_tau``, ``siltp_radius`` (px): the texture
-    code's tolerance and neighbour distance. ``siltp_scales``: the crop is also shrunk by these factors
-    (0 < f <= 1) and textured again, so coarse patterns count too."""
+    """How a crop is split and described; lists given for the tuple fields are stored as tuples."""
 
+    # Fractions of the crop height from the top, strictly increasing in [0, 1]: part p is the rows from
+    # part_edges[p] to part_edges[p + 1]. Default: head/shoulders, torso, upper legs, lower legs.
     part_edges: tuple[float, ...] = (0.0, 0.2, 0.5, 0.75, 1.0)
+    # Joint (h, s, v) bins of each part's colour histogram.
     hsv_bins: tuple[int, int, int] = (8, 8, 8)
+    # SILTP relative tolerance in [0, 1) and neighbour distance (pixels, >= 1) at every scale.
     siltp_tau: float = 0.3
     siltp_radius: int = 3
+    # Resize factors in (0, 1] of the crop (INTER_AREA) at which SILTP is taken: the same radius at a
+    # smaller scale sees coarser texture (LOMO's multi-scale).
     siltp_scales: tuple[float, ...] = (1.0, 0.5)
+    # Height (px) the grey crop is resized to (aspect kept) before the SILTP scales, None = as it comes:
+    # the radius is in pixels, so without this a texture's codes would change with the person's distance.
+    # 128 is the usual re-id crop (Market-1501's 128x64 crops are used as they are). Colour is not
+    # resized: its part histograms are already independent of the resolution.
+    siltp_height: int | None = 128
 
     def __post_init__(self) -> None:
-        e = self.part_edges
-        if len(e) < 2 or e[0] != 0.0 or e[-1] != 1.0 or any(b <= a for a, b in itertools.pairwise(e)):
-            raise ValueError(f"part_edges must increase from 0.0 to 1.0, got {e}")
-        if not self.siltp_scales or any(not 0.0 < f <= 1.0 for f in self.siltp_scales):
-            raise ValueError(f"siltp_scales must be factors in (0, 1], got {self.siltp_scales}")
-        if not 0.0 <= self.siltp_tau < 1.0:
-            raise ValueError(f"siltp_tau must be in [0, 1), got {self.siltp_tau}")
-        if self.siltp_radius < 1:
-            raise ValueError(f"siltp_radius must be >= 1, got {self.siltp_radius}")
+        edges = _as_tuple("part_edges", self.part_edges)
+        if len(edges) < 2:
+            raise ValueError(f"part_edges must have at least 2 values (1 part), got {self.part_edges!r}")
+        edges = tuple(check_real(f"part_edges[{i}]", e, 0.0, 1.0) for i, e in enumerate(edges))
+        if any(b <= a for a, b in pairwise(edges)):
+            raise ValueError(f"part_edges must be strictly increasing, got {self.part_edges!r}")
+        scales = _as_tuple("siltp_scales", self.siltp_scales)
+        if not scales:
+            raise ValueError("siltp_scales must have at least one scale, got ()")
+        scales = tuple(check_real(f"siltp_scales[{i}]", s, 0.0, 1.0, low_open=True) for i, s in enumerate(scales))
+        object.__setattr__(self, "part_edges", edges)
+        object.__setattr__(self, "hsv_bins", check_hsv_bins(self.hsv_bins, "hsv_bins"))
+        object.__setattr__(self, "siltp_tau", check_real("siltp_tau", self.siltp_tau, 0.0, 1.0, high_open=True))
+        object.__setattr__(self, "siltp_radius", check_int("siltp_radius", self.siltp_radius, 1))
+        object.__setattr__(self, "siltp_scales", scales)
+        if self.siltp_height is not None:
+            object.__setattr__(self, "siltp_height", check_int("siltp_height", self.siltp_height, 1))
 
     @property
     def parts(self) -> int:
+        """Number of horizontal parts (len(part_edges) - 1)."""
         return len(self.part_edges) - 1
 
+    @property
+    def hsv_length(self) -> int:
+        """Length of :attr:`BodyDescriptor.hsv`: parts x bins[0] x bins[1] x bins[2]."""
+        return self.parts * self.hsv_bins[0] * self.hsv_bins[1] * self.hsv_bins[2]
 
-@dataclass(frozen=True)
+    @property
+    def siltp_length(self) -> int:
+        """Length of :attr:`BodyDescriptor.siltp`: parts x 81 x scales."""
+        return self.parts * SILTP_CODES * len(self.siltp_scales)
+
+
+@dataclass(frozen=True, eq=False)
 class BodyDescriptor:
-    """``hsv`` (parts x prod(hsv_bins)) and ``siltp`` (parts x 81 x scales), each unit length;
-    ``visible_fraction``: mask pixels / crop pixels."""
+    """The descriptor of one crop; ``hsv`` and ``siltp`` are unit (or all-zero) vectors, read-only.
 
-    hsv: npt.NDArray[np.float32]
-    siltp: npt.NDArray[np.float32]
-    visible_fraction: float
+    ``hsv``: the part histograms one after the other (part-major). ``siltp``: for each scale in
+    ``siltp_scales`` order, the part histograms one after the other (scale-major, then part).
+    The cosine similarity of two descriptors' vectors is their dot product.
+    """
 
-
-def _normalised(v: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
-    v = np.sqrt(v)
-    n = float(np.linalg.norm(v))
-    return (v / n if n > 0 else v).astype(np.float32)
+    hsv: NDArray[np.float32]
+    siltp: NDArray[np.float32]
+    visible_fraction: float  # mask pixels / crop pixels (1.0 without a mask)
 
 
-def body_descriptor(bgr: npt.ArrayLike, mask: npt.ArrayLike | None = None,
-                    config: BodyDescriptorConfig = BodyDescriptorConfig()) -> BodyDescriptor:
-    """The descriptor of a BGR uint8 crop (``mask``: the person's pixels, None = all)."""
-    img = np.asarray(bgr)
-    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8 or min(img.shape[:2]) < 2:
-        raise ValueError(f"bgr must be an (H >= 2, W >= 2, 3) uint8 crop, got {img.shape} {img.dtype}")
-    h = img.shape[0]
-    m = np.ones(img.shape[:2], dtype=bool) if mask is None else np.asarray(mask).astype(bool)
-    if m.shape != img.shape[:2]:
-        raise ValueError(f"mask must have the crop's shape {img.shape[:2]}, got {m.shape}")
-    rows = [round(f * h) for f in config.part_edges]
-    hsv = [hsv_histogram(img[a:b], m[a:b], config.hsv_bins) for a, b in itertools.pairwise(rows)]
-    gray = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2GRAY).astype(np.float32) + 1.0  # no zero centre
-    texture = []
-    for f in config.siltp_scales:
-        if f == 1.0:
-            g, mk = gray, m
+def _as_tuple(name: str, value: object) -> tuple:
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise ValueError(f"{name} must be a sequence of numbers, got {value!r}")
+    return tuple(value)
+
+
+def _part_histograms(
+    index: NDArray[np.integer], inside: NDArray[np.bool_] | None, edges: tuple[float, ...], n_bins: int,
+) -> NDArray[np.float32]:
+    """(parts, n_bins) histograms of the per-pixel bin ``index`` over each part's masked pixels, rows summing to 1.
+
+    One bincount over (part, bin) keys instead of one per part; empty parts stay all zeros.
+    """
+    height = index.shape[0]
+    row_edges = np.round(np.asarray(edges) * height).astype(np.intp)
+    first, last = int(row_edges[0]), int(row_edges[-1])
+    n_parts = len(edges) - 1
+    rows = np.arange(first, last)
+    row_part = np.searchsorted(row_edges, rows, side="right") - 1  # in [0, n_parts) for rows in [first, last)
+    keys = row_part[:, None] * n_bins + index[first:last]
+    selected = keys.ravel() if inside is None else keys[inside[first:last]]
+    hist = np.bincount(selected, minlength=n_parts * n_bins).astype(np.float32).reshape(n_parts, n_bins)
+    sums = hist.sum(axis=1, keepdims=True)
+    np.divide(hist, sums, out=hist, where=sums > 0)
+    return hist
+
+
+def _resized(
+    gray: NDArray[np.float32], inside: NDArray[np.bool_] | None, size: tuple[int, int],
+) -> tuple[NDArray[np.float32], NDArray[np.bool_] | None]:
+    """``gray`` and ``inside`` at ``size`` (w, h): pixel-area averaging when shrinking, bilinear when enlarging.
+
+    A resized pixel is inside the mask when at least half of what it is interpolated from is.
+    """
+    interpolation = cv2.INTER_AREA if size[1] <= gray.shape[0] else cv2.INTER_LINEAR
+    out = cv2.resize(gray, size, interpolation=interpolation)
+    if inside is None:
+        return out, None
+    return out, cv2.resize(inside.astype(np.float32), size, interpolation=interpolation) >= 0.5
+
+
+def _hellinger_unit(hists: NDArray[np.float32]) -> NDArray[np.float32]:
+    """sqrt of the concatenated histograms, then L2-normalised (all zeros stay zeros), read-only.
+
+    With the square root, the dot product of two sum-1 histograms is their Bhattacharyya coefficient
+    (Hellinger kernel): frequent bins no longer dominate, which matches histograms better than raw L2
+    or cosine does. The L2 normalisation then gives unit vectors for the cosine similarity.
+    """
+    vector = np.sqrt(hists.ravel())
+    norm = float(np.linalg.norm(vector))
+    if norm > 0.0:
+        vector /= np.float32(norm)
+    vector.setflags(write=False)
+    return vector
+
+
+def body_descriptor(
+    bgr: NDArray[np.uint8], mask: NDArray | None = None, config: BodyDescriptorConfig = BodyDescriptorConfig(),
+) -> BodyDescriptor:
+    """The :class:`BodyDescriptor` of a person crop ``bgr`` ((H, W, 3) uint8, OpenCV BGR).
+
+    ``mask`` (None = all pixels), bool/integer of shape (H, W), selects the person's pixels (e.g. from
+    depth) so background and occluders are left out; each part uses its rows' mask pixels.
+    """
+    if not isinstance(bgr, np.ndarray) or bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3 \
+            or bgr.shape[0] == 0 or bgr.shape[1] == 0:
+        shape = bgr.shape if isinstance(bgr, np.ndarray) else type(bgr).__name__
+        raise ValueError(f"bgr must be a non-empty (H, W, 3) uint8 image, got {shape}")
+    if not isinstance(config, BodyDescriptorConfig):
+        raise ValueError(f"config must be a BodyDescriptorConfig, got {type(config).__name__}")
+    height, width = bgr.shape[:2]
+    inside = check_mask(mask, (height, width))
+    bins = config.hsv_bins
+
+    hsv = _part_histograms(hsv_bin_index(bgr, bins), inside, config.part_edges, bins[0] * bins[1] * bins[2])
+
+    gray, inside_g = cv2.cvtColor(bgr.astype(np.float32), cv2.COLOR_BGR2GRAY), inside
+    if config.siltp_height is not None and config.siltp_height != height:
+        factor = config.siltp_height / height
+        gray, inside_g = _resized(gray, inside, (max(1, round(width * factor)), config.siltp_height))
+    siltp = []
+    for scale in config.siltp_scales:
+        if scale == 1.0:
+            gray_s, inside_s = gray, inside_g
         else:
-            size = (max(2, round(gray.shape[1] * f)), max(2, round(gray.shape[0] * f)))
-            g = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
-            mk = cv2.resize(m.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
-        r = [round(e * g.shape[0]) for e in config.part_edges]
-        texture += [siltp_histogram(g[a:b], mk[a:b], config.siltp_tau, config.siltp_radius)
-                    for a, b in itertools.pairwise(r)]
-    return BodyDescriptor(_normalised(np.concatenate(hsv)), _normalised(np.concatenate(texture)),
-                          float(m.mean()))
+            size = (max(1, round(gray.shape[1] * scale)), max(1, round(gray.shape[0] * scale)))
+            gray_s, inside_s = _resized(gray, inside_g, size)
+        codes = siltp_codes_unchecked(gray_s, config.siltp_tau, config.siltp_radius)
+        siltp.append(_part_histograms(codes, inside_s, config.part_edges, SILTP_CODES))
+
+    visible = 1.0 if inside is None else float(np.count_nonzero(inside)) / inside.size
+    return BodyDescriptor(_hellinger_unit(hsv), _hellinger_unit(np.concatenate(siltp)), visible)

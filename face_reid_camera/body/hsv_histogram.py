@@ -1,35 +1,82 @@
-"""Joint HSV colour histogram of a person's pixels: hue and saturation carry the clothes' colour, value
-their brightness, and a coarse joint binning tolerates the light changing between cameras."""
+"""Joint HSV colour histogram of an image region: the colour part of a body appearance descriptor.
+
+Hue and saturation describe the clothes' colour largely independently of the brightness, which varies
+between cameras and with the distance to the lights; a joint (h, s, v) histogram keeps which hue goes
+with which saturation and brightness, which three separate channel histograms would lose.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from functools import lru_cache
+
 import cv2
 import numpy as np
-import numpy.typing as npt
+from numpy.typing import NDArray
 
-__all__ = ["hsv_histogram"]
+from face_reid_camera.body.siltp import check_mask
+from face_reid_camera.common.checks import check_int
 
-_RANGES = (180, 256, 256)  # OpenCV's 8-bit HSV: H in 0..179, S and V in 0..255
+__all__ = ["HSV_RANGES", "check_hsv_bins", "hsv_bin_index", "hsv_histogram"]
+
+HSV_RANGES = (180, 256, 256)  # OpenCV 8-bit HSV: H in 0..179 (degrees / 2), S and V in 0..255
 
 
-def hsv_histogram(bgr: npt.ArrayLike, mask: npt.ArrayLike | None = None, bins: tuple[int, int, int] = (8, 8, 8)
-                  ) -> npt.NDArray[np.float32]:
-    """Histogram (prod(bins) values in (h, s, v) order, sum 1; all 0 without pixels) of the pixels of a BGR
-    uint8 image where ``mask``; channel value v falls in bin v * bins / range."""
-    img = np.asarray(bgr)
-    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8 or img.size == 0:
-        raise ValueError(f"bgr must be a non-empty (H, W, 3) uint8 image, got {img.shape} {img.dtype}")
-    if len(bins) != 3 or any(int(b) < 1 or int(b) > r for b, r in zip(bins, _RANGES, strict=True)):
-        raise ValueError(f"bins must be 3 counts within 1..(180, 256, 256), got {bins}")
-    hsv = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2HSV).reshape(-1, 3).astype(np.int32)
-    if mask is not None:
-        m = np.asarray(mask)
-        if m.shape != img.shape[:2]:
-            raise ValueError(f"mask must have the image's shape {img.shape[:2]}, got {m.shape}")
-        hsv = hsv[m.reshape(-1).astype(bool)]
-    b = np.array(bins, dtype=np.int32)
-    idx = hsv * b // np.array(_RANGES, dtype=np.int32)
-    flat = (idx[:, 0] * b[1] + idx[:, 1]) * b[2] + idx[:, 2]
-    hist = np.bincount(flat, minlength=int(np.prod(b))).astype(np.float32)
-    total = hist.sum()
-    return hist / total if total > 0 else hist
+def check_hsv_bins(bins: Sequence[int], name: str = "bins") -> tuple[int, int, int]:
+    """``bins`` as three ints, each in [1, that channel's number of values] (180 for H, 256 for S, V)."""
+    if isinstance(bins, str) or not isinstance(bins, Sequence) or len(bins) != 3:
+        raise ValueError(f"{name} must be three bin counts (h, s, v), got {bins!r}")
+    h, s, v = (check_int(f"{name}[{i}]", b, 1, high) for i, (b, high) in enumerate(zip(bins, HSV_RANGES, strict=True)))
+    return h, s, v
+
+
+def _check_bgr(bgr: object) -> NDArray[np.uint8]:
+    if not isinstance(bgr, np.ndarray):
+        raise ValueError(f"bgr must be a numpy array, got {type(bgr).__name__}")
+    if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.shape[0] == 0 or bgr.shape[1] == 0:
+        raise ValueError(f"bgr must be a non-empty (H, W, 3) uint8 image, got {bgr.dtype} {bgr.shape}")
+    return bgr
+
+
+@lru_cache(maxsize=8)
+def _bin_tables(bins: tuple[int, int, int]) -> tuple[NDArray[np.int32], ...]:
+    """Per channel, value (0..255) -> that channel's share of the flat bin index, read-only."""
+    values = np.arange(256)
+    strides = (bins[1] * bins[2], bins[2], 1)
+    tables = []
+    for b, n, stride in zip(bins, HSV_RANGES, strides, strict=True):
+        table = (np.minimum(values, n - 1) * b // n * stride).astype(np.int32)
+        table.setflags(write=False)
+        tables.append(table)
+    return tuple(tables)
+
+
+def hsv_bin_index(bgr: NDArray[np.uint8], bins: tuple[int, int, int]) -> NDArray[np.int32]:
+    """The flat (h, s, v) C-order bin of every pixel of a valid ``bgr`` image, shape (H, W); no checks.
+
+    Bin of a channel value x with range n split into b bins: x * b // n (looked up in 256-entry tables).
+    """
+    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+    h_table, s_table, v_table = _bin_tables(bins)
+    index = np.take(h_table, hsv[:, :, 0])
+    index += np.take(s_table, hsv[:, :, 1])
+    index += np.take(v_table, hsv[:, :, 2])
+    return index
+
+
+def hsv_histogram(
+    bgr: NDArray[np.uint8], mask: NDArray | None = None, bins: Sequence[int] = (8, 8, 8),
+) -> NDArray[np.float32]:
+    """Joint HSV histogram (bins[0] * bins[1] * bins[2] values, (h, s, v) C order) of the masked pixels.
+
+    ``bgr`` is an (H, W, 3) uint8 OpenCV image, ``mask`` (None = all pixels) bool/integer of shape
+    (H, W). Normalised to sum 1; all zeros when no pixel is selected.
+    """
+    image = _check_bgr(bgr)
+    counts = check_hsv_bins(bins)
+    inside = check_mask(mask, image.shape[:2])
+    index = hsv_bin_index(image, counts)
+    selected = index.ravel() if inside is None else index[inside]
+    hist = np.bincount(selected, minlength=counts[0] * counts[1] * counts[2]).astype(np.float32)
+    total = float(hist.sum())
+    return hist / np.float32(total) if total > 0 else hist

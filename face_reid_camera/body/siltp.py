@@ -1,59 +1,100 @@
-"""SILTP (Liao et al., CVPR 2010): a texture code that ignores intensity scale and small noise.
+"""Scale Invariant Local Ternary Pattern, SILTP_{N=4,R}^tau (Liao et al., CVPR 2010).
 
-Each of 4 neighbours at ``radius`` pixels (right, up, left, down) is compared with the centre I_c within a
-tolerance relative to I_c: digit 1 if brighter than (1 + tau) I_c, 2 if darker than (1 - tau) I_c, else 0;
-the code sum_k digit_k 3^k has 81 values. Multiplying the image by a constant changes no code, unlike LBP's
-absolute comparisons, so shadows and exposure changes leave the texture histogram alone.
+Each pixel compares its 4 neighbours at distance R against a band of +-tau * I_c around its own grey
+value I_c, so the code is unchanged when the image is scaled by a constant (a global illumination
+gain) and robust to noise inside the band: the texture part of the LOMO re-identification descriptor.
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
-import numpy.typing as npt
+from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import check_int, check_real
 
-__all__ = ["SILTP_CODES", "siltp_codes", "siltp_histogram"]
+__all__ = ["SILTP_CODES", "check_mask", "siltp_codes", "siltp_codes_unchecked", "siltp_histogram"]
 
-SILTP_CODES = 81  # 3 ** 4
-_OFFSETS = ((0, 1), (-1, 0), (0, -1), (1, 0))  # (row, col) unit steps: right, up, left, down
-
-
-def _as_gray(gray: npt.ArrayLike) -> npt.NDArray[np.float32]:
-    g = np.asarray(gray)
-    if g.ndim != 2 or g.size == 0:
-        raise ValueError(f"gray must be a non-empty 2-D image, got shape {g.shape}")
-    return g.astype(np.float32, copy=False)
+SILTP_CODES = 81  # 3 ** 4: four ternary digits
+# (row, col) direction of neighbour k = 0..3 (right, up, left, down); digit k has weight 3 ** k.
+_DIRECTIONS = ((0, 1), (-1, 0), (0, -1), (1, 0))
 
 
-def siltp_codes(gray: npt.ArrayLike, tau: float = 0.3, radius: int = 3) -> npt.NDArray[np.uint8]:
-    """SILTP code (0..80) of every pixel; neighbours beyond the border take the nearest edge pixel.
+def check_mask(mask: object, shape: tuple[int, ...], name: str = "mask") -> NDArray[np.bool_] | None:
+    """``mask`` as a bool array of ``shape`` (None stays None); bool or integer dtype, nonzero = inside."""
+    if mask is None:
+        return None
+    if not isinstance(mask, np.ndarray):
+        raise ValueError(f"{name} must be a numpy array or None, got {type(mask).__name__}")
+    if mask.shape != shape:
+        raise ValueError(f"{name} must have the image's shape {shape}, got {mask.shape}")
+    if mask.dtype != np.bool_ and not np.issubdtype(mask.dtype, np.integer):
+        raise ValueError(f"{name} must be bool or integer (nonzero = inside), got dtype {mask.dtype}")
+    return mask.astype(np.bool_, copy=False)
 
-    ``tau``: tolerance relative to the centre's intensity, in [0, 1). ``radius``: neighbour distance (px, >= 1).
-    """
-    t = check_real("tau", tau, 0.0, 1.0, high_open=True)
-    r = check_int("radius", radius, 1)
-    g = _as_gray(gray)
-    padded = np.pad(g, r, mode="edge")
-    h, w = g.shape
-    hi, lo = (1.0 + t) * g, (1.0 - t) * g
-    codes = np.zeros(g.shape, dtype=np.uint8)
-    for k, (dr, dc) in enumerate(_OFFSETS):
-        nb = padded[r + dr * r: r + dr * r + h, r + dc * r: r + dc * r + w]
-        digit = np.where(nb > hi, 1, np.where(nb < lo, 2, 0)).astype(np.uint8)
-        codes += digit * np.uint8(3**k)
+
+def _check_gray(gray: object) -> NDArray[np.float32]:
+    """A non-empty, finite, non-negative 2-D real image as float32."""
+    if not isinstance(gray, np.ndarray):
+        raise ValueError(f"gray must be a numpy array, got {type(gray).__name__}")
+    if gray.ndim != 2 or gray.size == 0:
+        raise ValueError(f"gray must be a non-empty 2-D image, got shape {gray.shape}")
+    if gray.dtype == np.bool_ or not (np.issubdtype(gray.dtype, np.integer) or np.issubdtype(gray.dtype, np.floating)):
+        raise ValueError(f"gray must have an integer or float dtype, got {gray.dtype}")
+    out = gray.astype(np.float32, copy=False)
+    if not np.all(np.isfinite(out)) or float(out.min()) < 0.0:
+        raise ValueError("gray must be finite and non-negative (an intensity image)")
+    return out
+
+
+def _check_params(tau: float, radius: int) -> tuple[float, int]:
+    return check_real("tau", tau, 0.0, 1.0, high_open=True), check_int("radius", radius, 1)
+
+
+def siltp_codes_unchecked(gray: NDArray[np.float32], tau: float, radius: int) -> NDArray[np.uint8]:
+    """:func:`siltp_codes` without the argument checks (``gray`` already a valid float32 image)."""
+    h, w = gray.shape
+    padded = cv2.copyMakeBorder(gray, radius, radius, radius, radius, cv2.BORDER_REPLICATE)
+    centre = padded[radius:radius + h, radius:radius + w]
+    upper = centre * np.float32(1.0 + tau)
+    lower = centre * np.float32(1.0 - tau)
+    codes = np.zeros((h, w), np.uint8)
+    for k, (dr, dc) in enumerate(_DIRECTIONS):
+        r0, c0 = radius + dr * radius, radius + dc * radius
+        neighbour = padded[r0:r0 + h, c0:c0 + w]
+        codes += (neighbour > upper).view(np.uint8) * np.uint8(3**k)
+        codes += (neighbour < lower).view(np.uint8) * np.uint8(2 * 3**k)
     return codes
 
 
-def siltp_histogram(gray: npt.ArrayLike, mask: npt.ArrayLike | None = None, tau: float = 0.3, radius: int = 3
-                    ) -> npt.NDArray[np.float32]:
-    """Histogram (81 bins, sum 1; all 0 without pixels) of the SILTP codes of the pixels where ``mask``."""
-    codes = siltp_codes(gray, tau, radius)
-    if mask is not None:
-        m = np.asarray(mask)
-        if m.shape != codes.shape:
-            raise ValueError(f"mask must have the image's shape {codes.shape}, got {m.shape}")
-        codes = codes[m.astype(bool)]
-    hist = np.bincount(codes.ravel(), minlength=SILTP_CODES).astype(np.float32)
-    total = hist.sum()
-    return hist / total if total > 0 else hist
+def siltp_codes(gray: NDArray, tau: float = 0.3, radius: int = 3) -> NDArray[np.uint8]:
+    """The SILTP code (0..80) of every pixel of the grey image ``gray`` (same shape).
+
+    ``tau`` in [0, 1) is the relative tolerance: a neighbour counts as brighter only above
+    (1 + tau) * I_c and as darker only below (1 - tau) * I_c; 0 compares exactly, LOMO uses 0.3.
+    ``radius`` >= 1 is the neighbour distance in pixels (LOMO uses 3 and 5 on 128x48 persons); a few
+    pixels, well under the image's smaller side, or most neighbours fall on the replicated border.
+    Neighbour k = 0..3 (right, up, left, down) adds 1 * 3**k when brighter and 2 * 3**k when darker;
+    neighbours outside the image take the nearest edge pixel (replicate padding). ``gray`` is any
+    non-negative real 2-D image (converted to float32).
+    """
+    tau, radius = _check_params(tau, radius)
+    return siltp_codes_unchecked(_check_gray(gray), tau, radius)
+
+
+def siltp_histogram(
+    gray: NDArray, mask: NDArray | None = None, tau: float = 0.3, radius: int = 3,
+) -> NDArray[np.float32]:
+    """The 81-bin histogram of the SILTP codes over the pixels where ``mask`` is true, summing to 1.
+
+    ``mask`` (None = all pixels) has the image's shape; all zeros when no pixel is selected.
+    ``tau`` and ``radius`` as in :func:`siltp_codes`.
+    """
+    tau, radius = _check_params(tau, radius)
+    image = _check_gray(gray)
+    inside = check_mask(mask, image.shape)
+    codes = siltp_codes_unchecked(image, tau, radius)
+    selected = codes.ravel() if inside is None else codes[inside]
+    hist = np.bincount(selected, minlength=SILTP_CODES).astype(np.float32)
+    total = float(hist.sum())
+    return hist / np.float32(total) if total > 0 else hist

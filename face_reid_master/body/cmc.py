@@ -31,18 +31,22 @@ class RankScores:
         return float(self.cmc[min(k, self.cmc.size) - 1])
 
 
-def rank_scores(distances: npt.ArrayLike, probe_labels: npt.ArrayLike, gallery_labels: npt.ArrayLike
-                ) -> RankScores:
+def rank_scores(distances: npt.ArrayLike, probe_labels: npt.ArrayLike, gallery_labels: npt.ArrayLike,
+                valid: npt.ArrayLike | None = None) -> RankScores:
     """Scores of a (probes, gallery) distance matrix with the person label of every probe and gallery row
-    (ties keep the gallery order)."""
+    (ties keep the gallery order); ``valid`` (probes, gallery) False = that gallery entry does not count for
+    that probe (e.g. seen by the probe's own camera)."""
     d = np.asarray(distances, dtype=np.float64)
     p, g = np.asarray(probe_labels), np.asarray(gallery_labels)
     if d.ndim != 2 or d.shape != (p.size, g.size):
         raise ValueError(f"distances must be (probes {p.size}, gallery {g.size}), got {d.shape}")
     if not np.all(np.isfinite(d)):
         raise ValueError("distances contain NaN or Inf")
-    order = np.argsort(d, axis=1, kind="stable")
-    correct = g[order] == p[:, None]  # (probes, gallery) in rank order
+    ok = np.ones(d.shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+    if ok.shape != d.shape:
+        raise ValueError(f"valid must have the distances' shape {d.shape}, got {ok.shape}")
+    order = np.argsort(np.where(ok, d, np.inf), axis=1, kind="stable")  # excluded entries rank last
+    correct = (g[order] == p[:, None]) & np.take_along_axis(ok, order, axis=1)  # (probes, gallery) by rank
     has = correct.any(axis=1)
     correct = correct[has]
     if not correct.shape[0]:

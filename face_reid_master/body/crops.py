@@ -17,7 +17,7 @@ import numpy as np
 
 from face_reid_camera.faces.photos import list_identity_photos
 
-__all__ = ["Crop", "ReidSplit", "camera_of", "list_crops", "reid_splits"]
+__all__ = ["Crop", "ReidSplit", "camera_of", "list_crops", "reid_splits", "same_camera"]
 
 _MARKET = re.compile(r"^-?\d+_c(\d+)(?:s\d+)?_")
 _MARS = re.compile(r"^\d+C(\d+)T\d+F\d+", re.IGNORECASE)
@@ -76,7 +76,8 @@ def list_crops(root: str | Path) -> list[Crop]:
 
 @dataclass(frozen=True)
 class ReidSplit:
-    """Indices into the crop list: metric training crops, and probe / gallery crops of the other people."""
+    """Indices into the crop list: metric training crops, and probe / gallery crops of the other people
+    (a probe is compared with the gallery crops of the other cameras only, see :func:`reid_splits`)."""
 
     train: np.ndarray
     probe: np.ndarray
@@ -86,10 +87,10 @@ class ReidSplit:
 def reid_splits(crops: list[Crop], n_splits: int, rng: np.random.Generator, train_fraction: float = 0.5
                 ) -> list[ReidSplit]:
     """The second seed's protocol: per split, a random ``train_fraction`` of the identities trains the
-    metric; of each other identity with crops from >= 2 cameras, one random camera gives the probe (one
-    random crop of it) and the other cameras' crops join the gallery. Identities whose camera is unknown or
-    single: one random crop is the probe, the rest gallery. Identities with one crop only join the gallery
-    (distractors)."""
+    metric; each other identity gives one random probe crop (from a random camera when several saw it) and
+    its other crops join the gallery; a probe is then compared with the gallery crops of other cameras only
+    (:func:`same_camera`), so its own camera's background and light cannot match it. Identities with one
+    crop, or seen by one camera only when cameras are known, join the gallery as distractors."""
     names = sorted({c.identity for c in crops})
     if len(names) < 4:
         raise ValueError(f"need >= 4 identities for disjoint training and test people, got {len(names)}")
@@ -106,18 +107,24 @@ def reid_splits(crops: list[Crop], n_splits: int, rng: np.random.Generator, trai
         for n in (names[k] for k in order[n_train:]):
             idx = by_id[n]
             cams = sorted({crops[i].camera for i in idx} - {""})
-            if len(idx) < 2:
+            if len(idx) < 2 or len(cams) == 1:
                 gallery.extend(idx)
                 continue
-            if len(cams) >= 2:
+            if cams:
                 cam = cams[int(rng.integers(len(cams)))]
                 own = [i for i in idx if crops[i].camera == cam]
-                probe.append(own[int(rng.integers(len(own)))])
-                gallery.extend(i for i in idx if crops[i].camera not in (cam, ""))
+                p = own[int(rng.integers(len(own)))]
             else:
                 p = idx[int(rng.integers(len(idx)))]
-                probe.append(p)
-                gallery.extend(i for i in idx if i != p)
+            probe.append(p)
+            gallery.extend(i for i in idx if i != p)
         train = np.array(sorted(i for n in train_ids for i in by_id[n]), dtype=np.intp)
         out.append(ReidSplit(train, np.array(probe, dtype=np.intp), np.array(sorted(gallery), dtype=np.intp)))
     return out
+
+
+def same_camera(crops: list[Crop], probe: np.ndarray, gallery: np.ndarray) -> np.ndarray:
+    """(probes, gallery) True where a gallery crop was seen by the probe's camera (never for unknown ones)."""
+    pc = np.array([crops[i].camera for i in probe], dtype=object)
+    gc = np.array([crops[i].camera for i in gallery], dtype=object)
+    return (pc[:, None] == gc[None, :]) & (pc[:, None] != "")

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_master.body.crops import Crop, camera_of, list_crops, reid_splits
+from face_reid_master.body.crops import Crop, camera_of, list_crops, reid_splits, same_camera
 
 
 @pytest.mark.parametrize(("name", "expected"), [
@@ -48,9 +48,12 @@ def test_splits_keep_training_people_apart_and_probe_against_other_cameras() -> 
         train_ids = {crops[i].identity for i in s.train}
         test_ids = {crops[i].identity for i in np.concatenate([s.probe, s.gallery])}
         assert not train_ids & test_ids and len(train_ids) == 6  # half of 12 identities
-        for p in s.probe:
-            same = [g for g in s.gallery if crops[g].identity == crops[p].identity]
-            assert same and all(crops[g].camera != crops[p].camera or crops[p].camera == "" for g in same)
+        masked = same_camera(crops, s.probe, s.gallery)
+        for row, p in enumerate(s.probe):
+            same = [k for k, g in enumerate(s.gallery) if crops[g].identity == crops[p].identity]
+            assert p not in s.gallery and any(not masked[row, k] for k in same)  # another camera's crop counts
+            assert all(masked[row, k] == (crops[s.gallery[k]].camera == crops[p].camera != "")
+                       for k in range(len(s.gallery)))
         assert {crops[i].identity for i in s.probe} <= test_ids - {"lone"}  # one crop: gallery only
     assert len({tuple(s.train) for s in splits}) > 1  # random
     with pytest.raises(ValueError, match="identities"):

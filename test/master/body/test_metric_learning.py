@@ -95,6 +95,12 @@ def test_rank_scores_by_hand() -> None:
     assert s.mean_average_precision == pytest.approx(((1 / 2 + 2 / 3) / 2 + 1.0) / 2)
     with pytest.raises(ValueError, match="gallery"):
         rank_scores(d[:, :2], ["A", "B", "C"], ["A", "B", "A"])
+    # the B entry of probe A does not count (e.g. the probe's own camera): A's first hit moves to rank 1
+    valid = np.ones((3, 3), bool)
+    valid[0, 1] = False
+    masked = rank_scores(d, ["A", "B", "C"], ["A", "B", "A"], valid)
+    np.testing.assert_allclose(masked.cmc, [1.0, 1.0, 1.0])
+    assert masked.mean_average_precision == pytest.approx(1.0)
 
 
 def test_linear_metric_rejects_bad_shapes() -> None:
