@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.body.hsv_histogram import check_hsv_bins, hsv_bin_index
-from face_reid_camera.body.siltp import SILTP_CODES, check_mask, siltp_codes_unchecked
-from face_reid_camera.common.checks import check_int, check_real
+from face_reid_camera.body.siltp import SILTP_CODES, siltp_codes_unchecked
+from face_reid_camera.common.checks import check_colour_image, check_int, check_mask, check_real
 
 __all__ = ["BodyDescriptor", "BodyDescriptorConfig", "body_descriptor"]
 
@@ -157,10 +157,7 @@ def body_descriptor(
     ``mask`` (None = all pixels), bool/integer of shape (H, W), selects the person's pixels (e.g. from
     depth) so background and occluders are left out; each part uses its rows' mask pixels.
     """
-    if not isinstance(bgr, np.ndarray) or bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3 \
-            or bgr.shape[0] == 0 or bgr.shape[1] == 0:
-        shape = bgr.shape if isinstance(bgr, np.ndarray) else type(bgr).__name__
-        raise ValueError(f"bgr must be a non-empty (H, W, 3) uint8 image, got {shape}")
+    check_colour_image(bgr, "bgr")
     if not isinstance(config, BodyDescriptorConfig):
         raise ValueError(f"config must be a BodyDescriptorConfig, got {type(config).__name__}")
     height, width = bgr.shape[:2]

@@ -14,8 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.body.siltp import check_mask
-from face_reid_camera.common.checks import check_int
+from face_reid_camera.common.checks import check_colour_image, check_int, check_mask
 
 __all__ = ["HSV_RANGES", "check_hsv_bins", "hsv_bin_index", "hsv_histogram"]
 
@@ -28,14 +27,6 @@ def check_hsv_bins(bins: Sequence[int], name: str = "bins") -> tuple[int, int, i
         raise ValueError(f"{name} must be three bin counts (h, s, v), got {bins!r}")
     h, s, v = (check_int(f"{name}[{i}]", b, 1, high) for i, (b, high) in enumerate(zip(bins, HSV_RANGES, strict=True)))
     return h, s, v
-
-
-def _check_bgr(bgr: object) -> NDArray[np.uint8]:
-    if not isinstance(bgr, np.ndarray):
-        raise ValueError(f"bgr must be a numpy array, got {type(bgr).__name__}")
-    if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3 or bgr.shape[0] == 0 or bgr.shape[1] == 0:
-        raise ValueError(f"bgr must be a non-empty (H, W, 3) uint8 image, got {bgr.dtype} {bgr.shape}")
-    return bgr
 
 
 @lru_cache(maxsize=8)
@@ -72,7 +63,7 @@ def hsv_histogram(
     ``bgr`` is an (H, W, 3) uint8 OpenCV image, ``mask`` (None = all pixels) bool/integer of shape
     (H, W). Normalised to sum 1; all zeros when no pixel is selected.
     """
-    image = _check_bgr(bgr)
+    image = check_colour_image(bgr, "bgr")
     counts = check_hsv_bins(bins)
     inside = check_mask(mask, image.shape[:2])
     index = hsv_bin_index(image, counts)

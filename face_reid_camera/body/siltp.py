@@ -11,26 +11,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.common.checks import check_int, check_real
+from face_reid_camera.common.checks import check_int, check_mask, check_real
 
-__all__ = ["SILTP_CODES", "check_mask", "siltp_codes", "siltp_codes_unchecked", "siltp_histogram"]
+__all__ = ["SILTP_CODES", "siltp_codes", "siltp_codes_unchecked", "siltp_histogram"]
 
 SILTP_CODES = 81  # 3 ** 4: four ternary digits
 # (row, col) direction of neighbour k = 0..3 (right, up, left, down); digit k has weight 3 ** k.
 _DIRECTIONS = ((0, 1), (-1, 0), (0, -1), (1, 0))
-
-
-def check_mask(mask: object, shape: tuple[int, ...], name: str = "mask") -> NDArray[np.bool_] | None:
-    """``mask`` as a bool array of ``shape`` (None stays None); bool or integer dtype, nonzero = inside."""
-    if mask is None:
-        return None
-    if not isinstance(mask, np.ndarray):
-        raise ValueError(f"{name} must be a numpy array or None, got {type(mask).__name__}")
-    if mask.shape != shape:
-        raise ValueError(f"{name} must have the image's shape {shape}, got {mask.shape}")
-    if mask.dtype != np.bool_ and not np.issubdtype(mask.dtype, np.integer):
-        raise ValueError(f"{name} must be bool or integer (nonzero = inside), got dtype {mask.dtype}")
-    return mask.astype(np.bool_, copy=False)
 
 
 def _check_gray(gray: object) -> NDArray[np.float32]:

@@ -6,8 +6,10 @@ import math
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-__all__ = ["check_bgr_image", "check_int", "check_real", "check_stamp", "is_finite_number"]
+__all__ = ["check_bgr_image", "check_colour_image", "check_int", "check_mask", "check_real", "check_stamp",
+           "is_finite_number"]
 
 
 def is_finite_number(value: object) -> bool:
@@ -56,6 +58,14 @@ def check_stamp(value: Any, name: str = "stamp_s") -> float:
     return check_real(name, value)
 
 
+def check_colour_image(image: object, name: str = "image") -> np.ndarray:
+    """:func:`check_bgr_image` that also refuses grey images: a non-empty (H, W, 3) uint8 BGR image."""
+    out = check_bgr_image(image, name)
+    if out.ndim != 3:
+        raise ValueError(f"{name} must be a (H, W, 3) colour image, got shape {out.shape}")
+    return out
+
+
 def check_bgr_image(image: object, name: str = "image", *, allow_bgra: bool = False) -> np.ndarray:
     """A non-empty uint8 (H, W) grey or (H, W, 3) BGR image ((H, W, 1) is squeezed; (H, W, 4) with ``allow_bgra``)."""
     if not isinstance(image, np.ndarray):
@@ -70,3 +80,16 @@ def check_bgr_image(image: object, name: str = "image", *, allow_bgra: bool = Fa
     if out.shape[0] == 0 or out.shape[1] == 0:
         raise ValueError(f"{name} must not be empty, got shape {image.shape}")
     return out
+
+
+def check_mask(mask: object, shape: tuple[int, ...], name: str = "mask") -> npt.NDArray[np.bool_] | None:
+    """``mask`` as a bool array of ``shape`` (None stays None); bool or integer dtype, nonzero = inside."""
+    if mask is None:
+        return None
+    if not isinstance(mask, np.ndarray):
+        raise ValueError(f"{name} must be a numpy array or None, got {type(mask).__name__}")
+    if mask.shape != shape:
+        raise ValueError(f"{name} must have the image's shape {shape}, got {mask.shape}")
+    if mask.dtype != np.bool_ and not np.issubdtype(mask.dtype, np.integer):
+        raise ValueError(f"{name} must be bool or integer (nonzero = inside), got dtype {mask.dtype}")
+    return mask.astype(np.bool_, copy=False)

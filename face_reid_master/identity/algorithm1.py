@@ -19,6 +19,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -27,7 +28,7 @@ from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats, LearnedFace
 
-__all__ = ["IdentityManagerBase", "Origin", "TrackEntry", "Vote"]
+__all__ = ["Chunk", "IdentityManagerBase", "TrackEntry", "Vote"]
 
 FloatArray = npt.NDArray[np.float64]
 F32Array = npt.NDArray[np.float32]
@@ -54,7 +55,14 @@ class Vote:
     distance: float
 
 
-_Chunk = tuple[F32Array, "FloatArray | None", float, str]  # (embeddings, eye px, stamp, source)
+class Chunk(NamedTuple):
+    """Observations of one track queued by one :meth:`IdentityManagerBase.add_observations` call: the
+    embeddings (K, dim), their eye distances (px; None = unknown), the stamp (s) and the camera."""
+
+    embeddings: F32Array
+    eye_px: FloatArray | None
+    stamp_s: float
+    source: str
 
 
 @dataclass
@@ -69,22 +77,17 @@ class TrackEntry:
     face_id: int | None = None
     confidence: float = 0.0
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
-    inconsistent: list[_Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
+    inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
 
 
-@dataclass(frozen=True, slots=True)
-class Origin:
-    """Where a run of a track's observations of one step came from: the camera (``source``), the stamp (s)
-    and how many consecutive rows of the track's observations it covers."""
-
-    source: str
-    stamp_s: float
-    rows: int
+def _rows(chunks: list[Chunk]) -> F32Array:
+    """The embeddings of a track's queued chunks, stacked."""
+    return chunks[0].embeddings if len(chunks) == 1 else np.concatenate([c.embeddings for c in chunks])
 
 
-def _eye_rows(chunks: list[_Chunk]) -> FloatArray:
+def _eye_rows(chunks: list[Chunk]) -> FloatArray:
     """Eye distance (px) of every row of a track's queued chunks (0 = unknown)."""
-    return np.concatenate([c[1] if c[1] is not None else np.zeros(c[0].shape[0]) for c in chunks])
+    return np.concatenate([c.eye_px if c.eye_px is not None else np.zeros(c.embeddings.shape[0]) for c in chunks])
 
 
 class IdentityManagerBase:
@@ -146,7 +149,7 @@ class IdentityManagerBase:
         self._tracks: dict[int, TrackEntry] = {}
         self._available: list[int] = []  # face_list in column order (Bayes: table columns 1..M)
         self._available_slots = np.zeros(0, dtype=np.intp)
-        self._pending_obs: dict[int, list[_Chunk]] = {}
+        self._pending_obs: dict[int, list[Chunk]] = {}
         self._pending_deleted: dict[int, float] = {}
         self._dead: OrderedDict[int, float] = OrderedDict()
         self._next_face_id = 1
@@ -195,7 +198,7 @@ class IdentityManagerBase:
         if tid in self._dead or tid in self._pending_deleted:
             self.stats.observations_ignored_dead_track += emb.shape[0]
             return False
-        self._pending_obs.setdefault(tid, []).append((emb, eye_px, stamp, source))
+        self._pending_obs.setdefault(tid, []).append(Chunk(emb, eye_px, stamp, source))
         self.stats.observations_received += emb.shape[0]
         track = self._tracks.get(tid)
         if track is not None:
@@ -229,12 +232,12 @@ class IdentityManagerBase:
         unassigned_ids: list[int] = []
         unassigned_obs: list[F32Array] = []
         unassigned_eye: list[FloatArray] = []
-        unassigned_origins: list[list[Origin]] = []
+        unassigned_chunks: list[list[Chunk]] = []
         bank = self._bank
         single_slots: list[int] = []  # one new feature into a full feature set: batched below
         single_obs: list[F32Array] = []
         for tid, chunks in pending.items():
-            obs = chunks[0][0] if len(chunks) == 1 else np.concatenate([c[0] for c in chunks])
+            obs = _rows(chunks)
             track = self._tracks[tid]
             track.n_observations += obs.shape[0]
             if track.face_id is not None:
@@ -249,9 +252,9 @@ class IdentityManagerBase:
                     if swapped is not None:  # the face keeps what was its person's, then lets the track go
                         if obs.shape[0]:
                             bank.add_features(face.slot, obs)
-                        events.append(self._release_swapped(track, stamp, swapped[0][2]))
+                        events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
                         chunks = swapped
-                        obs = chunks[0][0] if len(chunks) == 1 else np.concatenate([c[0] for c in chunks])
+                        obs = _rows(chunks)
                         track.n_observations = obs.shape[0]
                     elif obs.shape[0] == 0:
                         continue
@@ -262,7 +265,7 @@ class IdentityManagerBase:
                 unassigned_ids.append(tid)
                 unassigned_obs.append(obs)
                 unassigned_eye.append(_eye_rows(chunks))
-                unassigned_origins.append([Origin(c[3], c[2], c[0].shape[0]) for c in chunks])
+                unassigned_chunks.append(chunks)
             if slot is not None:
                 if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
                     single_slots.append(slot)
@@ -272,7 +275,7 @@ class IdentityManagerBase:
         if single_slots:
             bank.add_one_each(np.array(single_slots, dtype=np.intp), np.concatenate(single_obs))
         if unassigned_ids:
-            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye, unassigned_origins)
+            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye, unassigned_chunks)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for tid in list(self._pending_deleted):
@@ -290,8 +293,8 @@ class IdentityManagerBase:
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
         return keep
 
-    def _swapped_rows(self, track: TrackEntry, chunks: list[_Chunk], keep: npt.NDArray[np.bool_]
-                      ) -> list[_Chunk] | None:
+    def _swapped_rows(self, track: TrackEntry, chunks: list[Chunk], keep: npt.NDArray[np.bool_]
+                      ) -> list[Chunk] | None:
         """Follow the identified track's run of inconsistent observations; once it is
         ``release_after_inconsistent`` long, the chunks from the run's start on (None: no swap)."""
         k = self.release_after_inconsistent
@@ -299,8 +302,9 @@ class IdentityManagerBase:
             return None
         start = 0
         for c in chunks:
-            ok = keep[start:start + c[0].shape[0]]
-            start += c[0].shape[0]
+            n = c.embeddings.shape[0]
+            ok = keep[start:start + n]
+            start += n
             if ok.all():
                 track.inconsistent.clear()
                 continue
@@ -308,9 +312,10 @@ class IdentityManagerBase:
             if last_ok >= 0:
                 track.inconsistent.clear()
             rows = slice(last_ok + 1, None)
-            track.inconsistent.append((c[0][rows], None if c[1] is None else c[1][rows], c[2], c[3]))
+            track.inconsistent.append(Chunk(c.embeddings[rows], None if c.eye_px is None else c.eye_px[rows],
+                                            c.stamp_s, c.source))
         run = track.inconsistent
-        if sum(c[0].shape[0] for c in run) < k:
+        if sum(c.embeddings.shape[0] for c in run) < k:
             return None
         track.inconsistent = []
         return run
@@ -523,9 +528,9 @@ class IdentityManagerBase:
 
     # hooks for the classification method
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
-                           eye_px: list[FloatArray], origins: list[list[Origin]]) -> None:
+                           eye_px: list[FloatArray], chunks: list[list[Chunk]]) -> None:
         """Accumulate the evidence of this step's observations of unassigned tracks (one array per track;
-        ``origins``: per track, the camera and stamp of each run of its rows, in order)."""
+        ``chunks``: per track, the queued chunks its rows came from, in order: camera and stamp)."""
         raise NotImplementedError
 
     def _decide(self) -> list[tuple[int, int, float]]:

@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.identity.algorithm1 import IdentityManagerBase, Origin, TrackEntry
+from face_reid_master.identity.algorithm1 import Chunk, IdentityManagerBase, TrackEntry
 from face_reid_master.identity.glance_evidence import GlanceEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
@@ -186,7 +186,7 @@ class BayesIdentityManager(IdentityManagerBase):
 
     # ------------------------------------------------------------------------------ inference
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
-                           eye_px: list[FloatArray], origins: list[list[Origin]]) -> None:
+                           eye_px: list[FloatArray], chunks: list[list[Chunk]]) -> None:
         for tid in track_ids:
             if tid not in self._row_of:
                 self._add_row(tid)
@@ -208,7 +208,7 @@ class BayesIdentityManager(IdentityManagerBase):
             if self.max_abs_log_likelihood_ratio is not None:
                 np.clip(lr, -self.max_abs_log_likelihood_ratio, self.max_abs_log_likelihood_ratio, out=lr)
         if not self._glances.independent:
-            self._glance_evidence(track_ids, origins, lr, log_ev)
+            self._glance_evidence(track_ids, chunks, lr, log_ev)
         elif m and len(sizes) == obs.shape[0]:
             log_ev[:, 1:] = lr
         elif m:
@@ -219,18 +219,19 @@ class BayesIdentityManager(IdentityManagerBase):
         self._counts[rows] += sizes[:, None]
         self._dirty = True
 
-    def _glance_evidence(self, track_ids: list[int], origins: list[list[Origin]], lr: FloatArray,
+    def _glance_evidence(self, track_ids: list[int], chunks: list[list[Chunk]], lr: FloatArray,
                          log_ev: FloatArray) -> None:
         """log_ev rows := each track's change of glance-weighted evidence (lr: per-observation ratios)."""
         full = np.empty((lr.shape[0], lr.shape[1] + 1))
         full[:, 0] = self._log_c
         full[:, 1:] = lr
         start = 0
-        for r, (tid, runs) in enumerate(zip(track_ids, origins, strict=True)):
+        for r, (tid, runs) in enumerate(zip(track_ids, chunks, strict=True)):
             total = np.zeros(full.shape[1])
             for run in runs:
-                total += self._glances.update(tid, run.source, run.stamp_s, full[start:start + run.rows])
-                start += run.rows
+                rows = run.embeddings.shape[0]
+                total += self._glances.update(tid, run.source, run.stamp_s, full[start:start + rows])
+                start += rows
             log_ev[r] = total
 
     def _normalise(self) -> None:

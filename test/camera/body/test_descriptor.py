@@ -132,8 +132,8 @@ def test_bad_arguments_name_themselves() -> None:
             BodyDescriptorConfig(**kwargs)
     crop = np.zeros((8, 4, 3), np.uint8)
     for call, why in (
-        (lambda: body_descriptor(crop[:, :, 0]), "bgr must be a non-empty"),
-        (lambda: body_descriptor(crop.astype(np.float32)), "bgr must be a non-empty"),
+        (lambda: body_descriptor(crop[:, :, 0]), "bgr must be a .H, W, 3. colour image"),
+        (lambda: body_descriptor(crop.astype(np.float32)), "bgr must be uint8"),
         (lambda: body_descriptor(crop, np.ones((8, 5), bool)), "mask must have the image's shape"),
         (lambda: body_descriptor(crop, None, {"siltp_tau": 0.3}), "config must be a BodyDescriptorConfig"),
     ):

@@ -45,10 +45,10 @@ def test_the_mask_excludes_pixels() -> None:
 
 def test_bad_arguments_name_themselves() -> None:
     for call, why in (
-        (lambda: hsv_histogram(_COLOURS.astype(np.float32)), "bgr must be a non-empty"),
-        (lambda: hsv_histogram(_COLOURS[:, :, 0]), "bgr must be a non-empty"),
-        (lambda: hsv_histogram(np.zeros((2, 2, 4), np.uint8)), "bgr must be a non-empty"),
-        (lambda: hsv_histogram(np.zeros((0, 2, 3), np.uint8)), "bgr must be a non-empty"),
+        (lambda: hsv_histogram(_COLOURS.astype(np.float32)), "bgr must be uint8"),
+        (lambda: hsv_histogram(_COLOURS[:, :, 0]), "bgr must be a .H, W, 3. colour image"),
+        (lambda: hsv_histogram(np.zeros((2, 2, 4), np.uint8)), "bgr must have shape"),
+        (lambda: hsv_histogram(np.zeros((0, 2, 3), np.uint8)), "bgr must not be empty"),
         (lambda: hsv_histogram(_COLOURS, bins=(0, 8, 8)), r"bins\[0\]"),
         (lambda: hsv_histogram(_COLOURS, bins=(8, 8, 257)), r"bins\[2\]"),
         (lambda: hsv_histogram(_COLOURS, bins=(8, 8)), "bins must be three"),
