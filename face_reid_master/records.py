@@ -17,9 +17,25 @@ STATE_CONFIRMED = 1
 STATE_LOST = 2
 
 
+@dataclass(frozen=True, eq=False)
+class BodyRecord:
+    """A person's body as a camera described it (the ``body_*`` fields of PersonObservation).
+
+    ``descriptor``: projected appearance (float32, empty = none) in space ``space`` (the camera's
+    projection); ``geometry``: ``GEOMETRY_FIELDS`` values (m, NaN = not measured); ``visible_fraction`` and
+    ``part_visible`` 0..1.
+    """
+
+    descriptor: NDArray[np.float32]
+    space: str
+    visible_fraction: float
+    geometry: NDArray[np.float32]
+    part_visible: NDArray[np.float32] = field(default_factory=lambda: np.zeros(0, np.float32))
+
+
 @dataclass(frozen=True)
 class PersonRecord:
-    """One person seen by one camera in one frame (world frame, metres)."""
+    """One person seen by one camera in one frame (world frame, metres); ``body`` None = no body fields."""
 
     position_world: NDArray[np.float64]
     position_std_m: float = 0.1
@@ -29,6 +45,7 @@ class PersonRecord:
     face_quality: float = 0.0
     embedding_space: str = "dlib_resnet_v1"  # which network produced ``embedding`` (embedding_spaces)
     face_eye_distance_px: float = 0.0  # face size in the colour image (0 = unknown)
+    body: BodyRecord | None = None
 
 
 @dataclass(frozen=True)

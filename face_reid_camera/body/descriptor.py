@@ -1,7 +1,9 @@
 """Body appearance descriptor of a person crop: per-part HSV colour + multi-scale SILTP texture histograms.
 
 The crop is split into horizontal parts (head/shoulders, torso, upper and lower legs) so that a red
-shirt over blue trousers differs from a blue shirt over red trousers; each part gets a joint HSV
+shirt over blue trousers differs from a blue shirt over red trousers: by fractions of the crop height for
+a dataset crop (top of the head to the feet), or by each pixel's metric height above the floor for the
+camera (``part_labels``, :mod:`face_reid_camera.body.person_body`). Each part gets a joint HSV
 histogram and, at each of a few image scales (as in LOMO, Liao et al. 2015), a SILTP histogram. Every
 part histogram sums to 1, so parts weigh the same whatever their size, visible area or crop resolution.
 """
@@ -27,8 +29,9 @@ __all__ = ["BodyDescriptor", "BodyDescriptorConfig", "body_descriptor"]
 class BodyDescriptorConfig:
     """How a crop is split and described; lists given for the tuple fields are stored as tuples."""
 
-    # Fractions of the crop height from the top, strictly increasing in [0, 1]: part p is the rows from
-    # part_edges[p] to part_edges[p + 1]. Default: head/shoulders, torso, upper legs, lower legs.
+    # Fractions of the person's height from the top of the head, strictly increasing in [0, 1]: part p is
+    # what lies from part_edges[p] to part_edges[p + 1] below the top (rows of a crop; metric heights at the
+    # camera). Default: head/shoulders, torso, upper legs, lower legs.
     part_edges: tuple[float, ...] = (0.0, 0.2, 0.5, 0.75, 1.0)
     # Joint (h, s, v) bins of each part's colour histogram.
     hsv_bins: tuple[int, int, int] = (8, 8, 8)
@@ -120,6 +123,18 @@ def _part_histograms(
     return hist
 
 
+def _labelled_histograms(
+    index: NDArray[np.integer], labels: NDArray[np.integer], n_parts: int, n_bins: int,
+) -> NDArray[np.float32]:
+    """(parts, n_bins) histograms of ``index`` per part label (-1 = no part), rows summing to 1."""
+    inside = labels >= 0
+    keys = labels[inside].astype(np.intp) * n_bins + index[inside]
+    hist = np.bincount(keys, minlength=n_parts * n_bins).astype(np.float32).reshape(n_parts, n_bins)
+    sums = hist.sum(axis=1, keepdims=True)
+    np.divide(hist, sums, out=hist, where=sums > 0)
+    return hist
+
+
 def _resized(
     gray: NDArray[np.float32], inside: NDArray[np.bool_] | None, size: tuple[int, int],
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_] | None]:
@@ -151,20 +166,36 @@ def _hellinger_unit(hists: NDArray[np.float32]) -> NDArray[np.float32]:
 
 def body_descriptor(
     bgr: NDArray[np.uint8], mask: NDArray | None = None, config: BodyDescriptorConfig = BodyDescriptorConfig(),
+    part_labels: NDArray | None = None,
 ) -> BodyDescriptor:
     """The :class:`BodyDescriptor` of a person crop ``bgr`` ((H, W, 3) uint8, OpenCV BGR).
 
     ``mask`` (None = all pixels), bool/integer of shape (H, W), selects the person's pixels (e.g. from
-    depth) so background and occluders are left out; each part uses its rows' mask pixels.
+    depth) so background and occluders are left out. ``part_labels`` (None = rows by ``part_edges``), an
+    integer (H, W) array, gives each pixel's part (0 .. parts - 1; -1 = none), e.g. from its height above
+    the floor; it must come at the SILTP height (``siltp_height`` rows) when that is set, so nothing is
+    resized. Each part uses its masked pixels.
     """
     check_colour_image(bgr, "bgr")
     if not isinstance(config, BodyDescriptorConfig):
         raise ValueError(f"config must be a BodyDescriptorConfig, got {type(config).__name__}")
     height, width = bgr.shape[:2]
     inside = check_mask(mask, (height, width))
+    labels = None
+    if part_labels is not None:
+        labels = _check_part_labels(part_labels, (height, width), config)
+        if config.siltp_height is not None and config.siltp_height != height:
+            raise ValueError(f"with part_labels the crop must have siltp_height = {config.siltp_height} rows, "
+                             f"got {height}")
+        if inside is not None:
+            labels = np.where(inside, labels, -1)
     bins = config.hsv_bins
-
-    hsv = _part_histograms(hsv_bin_index(bgr, bins), inside, config.part_edges, bins[0] * bins[1] * bins[2])
+    n_bins = bins[0] * bins[1] * bins[2]
+    hsv_index = hsv_bin_index(bgr, bins)
+    if labels is None:
+        hsv = _part_histograms(hsv_index, inside, config.part_edges, n_bins)
+    else:
+        hsv = _labelled_histograms(hsv_index, labels, config.parts, n_bins)
 
     gray, inside_g = cv2.cvtColor(bgr.astype(np.float32), cv2.COLOR_BGR2GRAY), inside
     if config.siltp_height is not None and config.siltp_height != height:
@@ -173,12 +204,28 @@ def body_descriptor(
     siltp = []
     for scale in config.siltp_scales:
         if scale == 1.0:
-            gray_s, inside_s = gray, inside_g
+            gray_s, inside_s, labels_s = gray, inside_g, labels
         else:
             size = (max(1, round(gray.shape[1] * scale)), max(1, round(gray.shape[0] * scale)))
             gray_s, inside_s = _resized(gray, inside_g, size)
+            labels_s = None if labels is None else cv2.resize(labels.astype(np.int16), size,
+                                                                interpolation=cv2.INTER_NEAREST)
         codes = siltp_codes_unchecked(gray_s, config.siltp_tau, config.siltp_radius)
-        siltp.append(_part_histograms(codes, inside_s, config.part_edges, SILTP_CODES))
+        if labels_s is None:
+            siltp.append(_part_histograms(codes, inside_s, config.part_edges, SILTP_CODES))
+        else:
+            siltp.append(_labelled_histograms(codes, labels_s, config.parts, SILTP_CODES))
 
     visible = 1.0 if inside is None else float(np.count_nonzero(inside)) / inside.size
     return BodyDescriptor(_hellinger_unit(hsv), _hellinger_unit(np.concatenate(siltp)), visible)
+
+
+def _check_part_labels(labels: object, shape: tuple[int, int], config: BodyDescriptorConfig) -> NDArray[np.int16]:
+    """Integer (H, W) part labels in [-1, parts) as int16."""
+    if not isinstance(labels, np.ndarray) or labels.shape != shape or not np.issubdtype(labels.dtype, np.integer):
+        got = f"{labels.dtype} {labels.shape}" if isinstance(labels, np.ndarray) else type(labels).__name__
+        raise ValueError(f"part_labels must be an integer array of shape {shape}, got {got}")
+    if labels.size and (int(labels.min()) < -1 or int(labels.max()) >= config.parts):
+        raise ValueError(f"part_labels must be in [-1, {config.parts - 1}], "
+                         f"got {int(labels.min())}..{int(labels.max())}")
+    return labels.astype(np.int16, copy=False)
