@@ -10,6 +10,12 @@ Faces: a face crop (see :func:`crop_face_for_rendering`) is projected orthograph
 person's facing direction onto the front of the head, so a face detector sees a face of real size at
 the right place on the head, foreshortened when the person turns, and hidden exactly where the
 z-buffer says the head is hidden.
+
+Bodies: flat colours by default; with ``body_texture_bgr`` (a person crop, top of the head to the feet,
+e.g. from a re-id dataset) every body primitive (neck, shoulders, torso, arms, legs) takes its colour from
+the crop as a billboard facing the camera: a hit point's lateral offset from the body axis (across the
+line of sight) gives the crop column, its height above the floor the row (the crop's height spans the
+person's). Colour and depth stay consistent: the texture only colours surfaces the ray caster hit.
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ FACE_BOX_CENTRE_UP_M = -0.02  # box centre height relative to the head centre
 _FACE_FRONT_M = 0.09  # forward offset of the plane on which the expected face box is reported
 
 _NEAR_M = 0.05
+_REMAP_COLUMNS = 4096
 _DEFAULT_SKIN_BGR = (120, 150, 200)
 
 _PART_CRANIUM, _PART_JAW, _PART_NECK, _PART_SHOULDERS, _PART_TORSO, _PART_ARM, _PART_LEG = range(7)
@@ -62,7 +69,9 @@ class SyntheticPerson:
     ``facing_rad`` is the direction the person faces in the world xy plane (0 = +x, pi/2 = +y).
     ``face_image_bgr`` is a face crop as made by :func:`crop_face_for_rendering` with margin
     ``face_crop_margin`` (detector box centred, crop side = box height * (1 + 2 margin)); None renders a
-    plain head.
+    plain head. ``body_texture_bgr`` is a person crop (head top to feet, the person centred; square pixels)
+    mapped onto the body as a billboard facing the camera (choose the crop whose orientation matches the
+    view); None: flat ``body_color_bgr`` / ``legs_color_bgr``.
     """
 
     x_m: float
@@ -75,6 +84,7 @@ class SyntheticPerson:
     legs_color_bgr: tuple[int, int, int] = (60, 50, 45)
     hair_color_bgr: tuple[int, int, int] = (30, 40, 55)
     face_crop_margin: float = 0.15
+    body_texture_bgr: NDArray[np.uint8] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("x_m", "y_m", "facing_rad", "height_m", "shoulder_width_m", "face_crop_margin"):
@@ -101,6 +111,12 @@ class SyntheticPerson:
                     f"SyntheticPerson.face_image_bgr is too small ({face.shape[1]}x{face.shape[0]} px), "
                     "need >= 16 px"
                 )
+        texture = self.body_texture_bgr
+        if texture is not None:
+            _check_bgr(texture, "SyntheticPerson.body_texture_bgr")
+            if texture.shape[0] < 16 or texture.shape[1] < 4:
+                raise ValueError(f"SyntheticPerson.body_texture_bgr is too small ({texture.shape[1]}x"
+                                 f"{texture.shape[0]} px), need >= 4x16 px")
 
     @property
     def head_centre_world(self) -> NDArray[np.float64]:
@@ -464,6 +480,31 @@ def _head_colours(
     return colours, cores
 
 
+def _body_texture_colours(hit: _Hit, prim: _Primitive, person: SyntheticPerson, rot: NDArray[np.float64],
+                          across: NDArray[np.float64], shade: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Colours of a body primitive's hits from the person's crop, mapped as a billboard facing the camera.
+
+    ``across``: the horizontal unit vector pointing to the image's right at the person (world frame).
+    """
+    texture = person.body_texture_bgr
+    assert texture is not None
+    th, tw = texture.shape[:2]
+    world = prim.centre[:, None] + rot @ hit.local  # (3, n) hit points
+    lateral = (world[0] - person.x_m) * across[0] + (world[1] - person.y_m) * across[1]
+    width_m = person.height_m * tw / th  # square pixels: the crop's width in metres at the person
+    n = lateral.size
+    if n == 0:
+        return np.zeros((0, 3))
+    rows = -(-n // _REMAP_COLUMNS)  # cv2.remap maps must be narrower than 32767: fold the hits into rows
+    map_x = np.zeros(rows * _REMAP_COLUMNS, dtype=np.float32)
+    map_y = np.zeros_like(map_x)
+    map_x[:n] = (0.5 + lateral / width_m) * tw - 0.5
+    map_y[:n] = (1.0 - world[2] / person.height_m) * th - 0.5
+    sampled = cv2.remap(texture, map_x.reshape(rows, -1), map_y.reshape(rows, -1), cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)[:n]
+    return sampled.astype(np.float64) * (0.7 + 0.3 * shade)[:, None]
+
+
 def _expected_face_box(
     person: SyntheticPerson, intrinsics: CameraIntrinsics, pose: CameraPose
 ) -> NDArray[np.float64] | None:
@@ -594,7 +635,15 @@ def render_scene(
             head_hits[index].append((hit, offset, prim.part))
         else:
             shade = _shade(hit.normal, lights[index])
-            colour_flat[flat] = np.clip(prim.albedo * shade[:, None], 0, 255).astype(np.uint8)
+            person = people[index]
+            if person.body_texture_bgr is None:
+                colour_flat[flat] = np.clip(prim.albedo * shade[:, None], 0, 255).astype(np.uint8)
+            else:
+                to_person = np.array([person.x_m, person.y_m]) - camera_pose.translation[:2]
+                norm = float(np.linalg.norm(to_person))
+                across = np.array([to_person[1], -to_person[0]]) / norm if norm > 1e-9 else np.array([1.0, 0.0])
+                colours = _body_texture_colours(hit, prim, person, rots[index], across, shade)
+                colour_flat[flat] = np.clip(colours, 0, 255).astype(np.uint8)
 
     # pass 2: heads (hair, skin, pasted faces) where still visible; face occlusion test
     face_visible: list[bool] = []

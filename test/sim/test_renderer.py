@@ -358,6 +358,8 @@ def test_crop_face_rejects_bad_input(photo: np.ndarray, box: tuple, margin: floa
         {"face_image_bgr": np.zeros((64, 64, 3), dtype=np.float64)},
         {"face_image_bgr": np.zeros((8, 8, 3), dtype=np.uint8)},
         {"face_crop_margin": 2.0},
+        {"body_texture_bgr": np.zeros((8, 4, 3), dtype=np.uint8)},
+        {"body_texture_bgr": np.zeros((128, 48), dtype=np.uint8)},
     ],
 )
 def test_synthetic_person_validates(kwargs: dict) -> None:
@@ -390,3 +392,57 @@ def test_render_scene_validates_arguments() -> None:
     for kwargs in bad:
         with pytest.raises(ValueError):
             render_scene([person], K, pose, **kwargs)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Body textures
+
+
+def _quadrant_crop() -> np.ndarray:
+    """A 128x48 person crop: upper half red (left) / green (right), lower half blue (left) / white (right)."""
+    crop = np.zeros((128, 48, 3), dtype=np.uint8)
+    crop[:64, :24] = (0, 0, 255)
+    crop[:64, 24:] = (0, 255, 0)
+    crop[64:, :24] = (255, 0, 0)
+    crop[64:, 24:] = (255, 255, 255)
+    return crop
+
+
+def _dominant(pixels: np.ndarray) -> int:
+    """Index (B, G, R) of the strongest channel on average, or 3 for near-white."""
+    mean = pixels.reshape(-1, 3).astype(np.float64).mean(axis=0)
+    return 3 if mean.min() > 0.6 * mean.max() else int(np.argmax(mean))
+
+
+@pytest.mark.parametrize("facing", [math.pi, 0.0, math.pi / 2])
+def test_body_texture_is_a_billboard_facing_the_camera(facing: float) -> None:
+    """The crop's left half shows on the image's left, its top on the upper body, whichever way the person
+    faces (the caller picks the crop of the matching orientation); depth is that of the flat-coloured body."""
+    pose = _ceiling_camera()
+    plain = SyntheticPerson(3.0, 0.0, 1.75, facing)
+    textured = SyntheticPerson(3.0, 0.0, 1.75, facing, body_texture_bgr=_quadrant_crop())
+    a = render_scene([plain], K, pose, depth_noise=False)
+    b = render_scene([textured], K, pose, depth_noise=False)
+    assert np.array_equal(a.depth_mm, b.depth_mm) and np.array_equal(a.person_ids, b.person_ids)
+    body = b.person_ids == 0
+    rows, cols = np.nonzero(body)
+    # rows of the body at 35 % and 80 % of the height from the top (torso / legs), split at the body axis
+    top_v = K.project(pose.to_camera(np.array([[3.0, 0.0, 1.75]])))[0, 1]
+    foot_v = K.project(pose.to_camera(np.array([[3.0, 0.0, 0.0]])))[0, 1]
+    axis_u = K.project(pose.to_camera(np.array([[3.0, 0.0, 0.9]])))[0, 0]
+    for frac, left, right in ((0.35, 2, 1), (0.8, 0, 3)):
+        r = round(top_v + frac * (foot_v - top_v))
+        band = body[r - 2: r + 3]
+        img = b.rgb_bgr[r - 2: r + 3]
+        lcols = np.zeros_like(band)
+        lcols[:, : round(axis_u) - 2] = True
+        rcols = np.zeros_like(band)
+        rcols[:, round(axis_u) + 3:] = True
+        assert (band & lcols).sum() > 5 and (band & rcols).sum() > 5
+        assert _dominant(img[band & lcols]) == left
+        assert _dominant(img[band & rcols]) == right
+    assert rows.size and cols.size
+    # the head keeps its own rendering (hair / skin), not the crop's colours
+    head = b.rgb_bgr[round(top_v) + 2: round(top_v) + 6][body[round(top_v) + 2: round(top_v) + 6]]
+    assert np.array_equal(head, a.rgb_bgr[round(top_v) + 2: round(top_v) + 6][body[round(top_v) + 2:
+                                                                                   round(top_v) + 6]])
