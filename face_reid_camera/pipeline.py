@@ -1,4 +1,4 @@
-"""One camera's per-frame pipeline: depth people detection -> head ROIs -> faces -> embeddings.
+"""One camera's per-frame pipeline: depth people detection -> head ROIs -> faces -> embeddings, and bodies.
 
 Pure core (no rclpy): the camera node, the replay tool, the simulator and the benchmarks all
 call :meth:`CameraPipeline.process` with numpy images and get a :class:`FrameResult` back.
@@ -14,13 +14,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.body.observation import BodyObservation
+from face_reid_camera.body.person_body import BodyConfig, describe_body
+from face_reid_camera.body.projection import BodyProjection
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
 from face_reid_camera.faces.embedder import CombinedEmbedder, FaceEmbedder
 from face_reid_camera.faces.embedding_schedule import EmbeddingScheduler
 from face_reid_camera.faces.head_roi import head_roi_px
-from face_reid_camera.people.detector import PersonDetector, PersonDetectorConfig
+from face_reid_camera.people.detector import PersonCandidate, PersonDetector, PersonDetectorConfig
 from face_reid_camera.people.ground_plane import GroundPlane
 
 
@@ -54,11 +57,17 @@ class CameraPipelineConfig:
         40.0, "Embedding time per frame (ms; 0 = embed every face found). Over budget, faces not embedded "
         "for longest go first, best quality first; the others are reported without an embedding.",
         low=0.0, high=10000.0)
+    describe_bodies: bool = param(
+        True, "Describe each person's body: appearance (projected HSV + SILTP descriptor), depth geometry and "
+        "visibility (bool).")
+    max_bodies_per_frame: int = param(16, "Bodies described per frame, nearest people first (count).", low=0,
+                                      high=1000)
     position_std_base_m: float = param(0.05, "Position uncertainty at 0 m range (m).", low=0.0, high=5.0,
                                        low_open=True)
     position_std_per_m2: float = param(0.005, "Uncertainty growth with range squared (m/m^2).", low=0.0, high=1.0)
     person: PersonDetectorConfig = field(default_factory=PersonDetectorConfig)
     quality: FaceQualityConfig = field(default_factory=FaceQualityConfig)
+    body: BodyConfig = field(default_factory=BodyConfig)
 
     def __post_init__(self) -> None:
         validate_fields(self)
@@ -90,6 +99,7 @@ class PersonObservation:
     num_points: int
     head_roi_xywh: tuple[int, int, int, int] | None
     face: FaceObservation | None = None
+    body: BodyObservation | None = None
 
     def to_json(self) -> dict[str, object]:
         """A JSON-friendly dict (what the replay tool prints)."""
@@ -108,6 +118,16 @@ class PersonObservation:
             out["face_quality"] = round(self.face.quality, 3)
             out["face_yaw_deg"] = round(self.face.yaw_deg, 1)
             out["face_embedded"] = self.face.embedding is not None
+        if self.body is not None:
+            g = self.body.geometry
+            out["body"] = {
+                "visible_fraction": round(self.body.visible_fraction, 3),
+                "part_visible": [round(v, 3) for v in self.body.part_visible],
+                "descriptor_length": int(self.body.descriptor.size),
+                "geometry_m": {name: (round(float(v), 3) if math.isfinite(v) else None)
+                               for name, v in zip(("height", "head_height", "shoulder_width", "torso_width",
+                                                   "torso_depth", "hip_width"), g.vector().tolist(), strict=True)},
+            }
         return out
 
 
@@ -162,8 +182,9 @@ class CameraPipeline:
     """Runs the per-frame pipeline of one camera.
 
     ``face_detector`` / ``embedder`` may be None when ``config.detect_faces`` is false (people
-    only). The person detector keeps the floor estimate between frames (see PersonDetector); the
-    embedding schedule keeps which heads were embedded when (see EmbeddingScheduler).
+    only). ``body_projection`` makes the body descriptor compact (None: bodies get geometry and
+    visibility only, no appearance descriptor). The person detector keeps the floor estimate between
+    frames (see PersonDetector); the embedding schedule keeps which heads were embedded when (see EmbeddingScheduler).
     """
 
     def __init__(
@@ -173,10 +194,14 @@ class CameraPipeline:
         face_detector: YuNetDetector | None = None,
         embedder: FaceEmbedder | CombinedEmbedder | None = None,
         seed_ground_from_pose: bool = True,
+        body_projection: BodyProjection | None = None,
     ) -> None:
         if config.detect_faces and (face_detector is None or embedder is None):
             raise ValueError("detect_faces=True needs a face detector and an embedder")
+        if body_projection is not None and not isinstance(body_projection, BodyProjection):
+            raise ValueError(f"body_projection must be a BodyProjection or None, got {type(body_projection).__name__}")
         self.config = config
+        self.body_projection = body_projection
         self.camera_pose = camera_pose
         self.face_detector = face_detector
         self.embedder = embedder
@@ -232,13 +257,37 @@ class CameraPipeline:
                     head_roi_xywh=roi,
                 )
             )
-        timings = {"people_ms": (t1 - t0) * 1e3, "face_detect_ms": 0.0, "embed_ms": 0.0}
+        timings = {"people_ms": (t1 - t0) * 1e3, "face_detect_ms": 0.0, "embed_ms": 0.0, "body_ms": 0.0}
         if self.config.detect_faces and color_bgr is not None and people:
             people = self._add_faces(color_bgr, people, rois, timings, stamp)
+        if self.config.describe_bodies and color_bgr is not None and people and plane is not None:
+            assert color_intrinsics is not None
+            t_body = time.perf_counter()
+            people = self._add_bodies(color_bgr, depth_m, intrinsics, color_intrinsics, plane, detection.people,
+                                      people)
+            timings["body_ms"] = (time.perf_counter() - t_body) * 1e3
         timings["total_ms"] = (time.perf_counter() - t0) * 1e3
         return FrameResult(
             people, detection.ground_plane is not None, timings, detection.ground_plane, detection.ground_plane_source
         )
+
+    def _add_bodies(
+        self, color_bgr: NDArray[np.uint8], depth_m: NDArray[np.floating], intrinsics: CameraIntrinsics,
+        color_intrinsics: CameraIntrinsics, plane: GroundPlane, candidates: list[PersonCandidate],
+        people: list[PersonObservation],
+    ) -> list[PersonObservation]:
+        """Each person's body (nearest first, at most ``max_bodies_per_frame``), their pixels cut out by depth."""
+        tops = np.array([np.asarray(c.top_cam, dtype=np.float64) for c in candidates])
+        feet = tops - np.array([c.height_m for c in candidates])[:, None] * plane.normal[None, :]
+        order = sorted(range(len(people)), key=lambda i: float(people[i].position_camera[2]))
+        people = list(people)
+        for i in order[: self.config.max_bodies_per_frame]:
+            body = describe_body(color_bgr, depth_m, intrinsics, color_intrinsics, plane, tops[i],
+                                 float(candidates[i].height_m), np.delete(feet, i, axis=0), self.config.body,
+                                 self.body_projection)
+            if body is not None:
+                people[i] = dataclasses.replace(people[i], body=body)
+        return people
 
     def _add_faces(
         self,

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.common.checks import check_real
+from face_reid_camera.common.checks import check_real, is_finite_number
 from face_reid_camera.common.embedding_spaces import (
     DLIB_SPACE,
     EMBEDDER_CHOICES,
@@ -150,6 +150,8 @@ class MasterStats:
     embeddings_rejected_space: int = 0
     embeddings_rejected_nonfinite: int = 0
     embeddings_skipped_quality: int = 0
+    bodies_received: int = 0  # detections with well-formed body fields (not used for identity yet)
+    bodies_rejected_malformed: int = 0  # body fields with NaN / Inf appearance or out-of-range visibility
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
@@ -355,6 +357,7 @@ class MasterCore:
             std[valid],
             np.array([float(people[i].height_m) for i in person_index], dtype=np.float64),
         )
+        self._count_bodies([people[i].body for i in person_index])
         with_face = [
             (k, i) for k, i in enumerate(person_index)
             if people[i].embedding is not None and np.size(people[i].embedding) > 0
@@ -379,6 +382,20 @@ class MasterCore:
             eye = float(people[good_len[row][1]].face_eye_distance_px)
             embeddings[good_len[row][0]] = (stacked[row], np.array([eye if math.isfinite(eye) and eye > 0 else 0.0]))
         return *tracker_input, embeddings, person_index
+
+    def _count_bodies(self, bodies: list[Any]) -> None:
+        """Count the detections' body fields, well-formed or not (cameras without bodies send none)."""
+        for body in bodies:
+            if body is None:
+                continue
+            descriptor = np.asarray(body.descriptor, dtype=np.float32)
+            visible = body.visible_fraction
+            ok = descriptor.ndim == 1 and bool(np.isfinite(descriptor).all()) and is_finite_number(visible) \
+                and 0.0 <= float(visible) <= 1.0
+            if ok:
+                self.stats.bodies_received += 1
+            else:
+                self.stats.bodies_rejected_malformed += 1
 
     def _in_space(self, person: Any, camera_id: str) -> NDArray[np.float32] | None:
         """The person's embedding in the master's space (part of a joint one is fine); None: another space.

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.body.hsv_histogram import check_hsv_bins, hsv_bin_index
+from face_reid_camera.body.hsv_histogram import check_hsv_bins, hsv_bin_index, hsv_soft_bins
 from face_reid_camera.body.siltp import SILTP_CODES, siltp_codes_unchecked
 from face_reid_camera.common.checks import check_colour_image, check_int, check_mask, check_real
 
@@ -35,6 +35,9 @@ class BodyDescriptorConfig:
     part_edges: tuple[float, ...] = (0.0, 0.2, 0.5, 0.75, 1.0)
     # Joint (h, s, v) bins of each part's colour histogram.
     hsv_bins: tuple[int, int, int] = (8, 8, 8)
+    # Share saturation and value linearly between the two nearest bins (hue stays hard): brightness changes
+    # of a few levels (distance to the light, camera gain) then move weight gradually, not whole pixels.
+    hsv_soft: bool = True
     # SILTP relative tolerance in [0, 1) and neighbour distance (pixels, >= 1) at every scale.
     siltp_tau: float = 0.3
     siltp_radius: int = 3
@@ -60,6 +63,8 @@ class BodyDescriptorConfig:
         scales = tuple(check_real(f"siltp_scales[{i}]", s, 0.0, 1.0, low_open=True) for i, s in enumerate(scales))
         object.__setattr__(self, "part_edges", edges)
         object.__setattr__(self, "hsv_bins", check_hsv_bins(self.hsv_bins, "hsv_bins"))
+        if not isinstance(self.hsv_soft, bool):
+            raise ValueError(f"hsv_soft must be a bool, got {self.hsv_soft!r}")
         object.__setattr__(self, "siltp_tau", check_real("siltp_tau", self.siltp_tau, 0.0, 1.0, high_open=True))
         object.__setattr__(self, "siltp_radius", check_int("siltp_radius", self.siltp_radius, 1))
         object.__setattr__(self, "siltp_scales", scales)
@@ -102,34 +107,29 @@ def _as_tuple(name: str, value: object) -> tuple:
     return tuple(value)
 
 
-def _part_histograms(
-    index: NDArray[np.integer], inside: NDArray[np.bool_] | None, edges: tuple[float, ...], n_bins: int,
-) -> NDArray[np.float32]:
-    """(parts, n_bins) histograms of the per-pixel bin ``index`` over each part's masked pixels, rows summing to 1.
-
-    One bincount over (part, bin) keys instead of one per part; empty parts stay all zeros.
-    """
-    height = index.shape[0]
+def _row_labels(height: int, edges: tuple[float, ...]) -> NDArray[np.int16]:
+    """(height, 1) part of every row by the fractions ``edges`` (-1 outside [edges[0], edges[-1]))."""
     row_edges = np.round(np.asarray(edges) * height).astype(np.intp)
-    first, last = int(row_edges[0]), int(row_edges[-1])
-    n_parts = len(edges) - 1
-    rows = np.arange(first, last)
-    row_part = np.searchsorted(row_edges, rows, side="right") - 1  # in [0, n_parts) for rows in [first, last)
-    keys = row_part[:, None] * n_bins + index[first:last]
-    selected = keys.ravel() if inside is None else keys[inside[first:last]]
-    hist = np.bincount(selected, minlength=n_parts * n_bins).astype(np.float32).reshape(n_parts, n_bins)
-    sums = hist.sum(axis=1, keepdims=True)
-    np.divide(hist, sums, out=hist, where=sums > 0)
-    return hist
+    part = np.searchsorted(row_edges, np.arange(height), side="right") - 1
+    part[(np.arange(height) < row_edges[0]) | (np.arange(height) >= row_edges[-1])] = -1
+    return part.astype(np.int16)[:, None]
 
 
 def _labelled_histograms(
     index: NDArray[np.integer], labels: NDArray[np.integer], n_parts: int, n_bins: int,
+    weights: NDArray[np.floating] | None = None,
 ) -> NDArray[np.float32]:
-    """(parts, n_bins) histograms of ``index`` per part label (-1 = no part), rows summing to 1."""
-    inside = labels >= 0
-    keys = labels[inside].astype(np.intp) * n_bins + index[inside]
-    hist = np.bincount(keys, minlength=n_parts * n_bins).astype(np.float32).reshape(n_parts, n_bins)
+    """(parts, n_bins) histograms of the per-pixel bins ``index`` per part label (-1 = no part), rows summing
+    to 1; empty parts stay all zeros. ``index`` (H, W), or (K, H, W) with ``weights`` of that shape (soft bins:
+    K bins per pixel). ``labels`` broadcasts against (H, W). One bincount over (part, bin) keys."""
+    # pixels of no part go to one extra trash part (cheaper than selecting the others), dropped after
+    part = np.where(labels >= 0, labels, n_parts).astype(np.int32) * n_bins
+    keys = (part + index).ravel()
+    size = (n_parts + 1) * n_bins
+    hist = np.bincount(keys, minlength=size) if weights is None else \
+        np.bincount(keys, weights=weights.ravel(), minlength=size)
+    hist = hist[: n_parts * n_bins]
+    hist = hist.astype(np.float32).reshape(n_parts, n_bins)
     sums = hist.sum(axis=1, keepdims=True)
     np.divide(hist, sums, out=hist, where=sums > 0)
     return hist
@@ -173,48 +173,55 @@ def body_descriptor(
     ``mask`` (None = all pixels), bool/integer of shape (H, W), selects the person's pixels (e.g. from
     depth) so background and occluders are left out. ``part_labels`` (None = rows by ``part_edges``), an
     integer (H, W) array, gives each pixel's part (0 .. parts - 1; -1 = none), e.g. from its height above
-    the floor; it must come at the SILTP height (``siltp_height`` rows) when that is set, so nothing is
-    resized. Each part uses its masked pixels.
+    the floor. With ``part_labels`` the crop is taken at the scale it comes in (nothing is resized: give it
+    the person's full height in ``siltp_height`` rows, as the camera does, or SILTP's pixel radius means
+    something else). Each part uses its masked pixels.
     """
     check_colour_image(bgr, "bgr")
     if not isinstance(config, BodyDescriptorConfig):
         raise ValueError(f"config must be a BodyDescriptorConfig, got {type(config).__name__}")
     height, width = bgr.shape[:2]
     inside = check_mask(mask, (height, width))
-    labels = None
-    if part_labels is not None:
+    given = part_labels is not None
+
+    def labels_at(rows: int, inside_now: NDArray[np.bool_] | None) -> NDArray[np.int16]:
+        """Row-band labels of a crop of ``rows`` rows, masked (broadcasts as (rows, 1) without a mask)."""
+        labels = _row_labels(rows, config.part_edges)
+        return labels if inside_now is None else np.where(inside_now, labels, np.int16(-1))
+
+    if given:
         labels = _check_part_labels(part_labels, (height, width), config)
-        if config.siltp_height is not None and config.siltp_height != height:
-            raise ValueError(f"with part_labels the crop must have siltp_height = {config.siltp_height} rows, "
-                             f"got {height}")
         if inside is not None:
-            labels = np.where(inside, labels, -1)
+            labels = np.where(inside, labels, np.int16(-1))
+    else:
+        labels = labels_at(height, inside)
     bins = config.hsv_bins
     n_bins = bins[0] * bins[1] * bins[2]
-    hsv_index = hsv_bin_index(bgr, bins)
-    if labels is None:
-        hsv = _part_histograms(hsv_index, inside, config.part_edges, n_bins)
+    if config.hsv_soft:
+        index, weights = hsv_soft_bins(bgr, bins)
+        hsv = _labelled_histograms(index, labels, config.parts, n_bins, weights)
     else:
-        hsv = _labelled_histograms(hsv_index, labels, config.parts, n_bins)
+        hsv = _labelled_histograms(hsv_bin_index(bgr, bins), labels, config.parts, n_bins)
 
-    gray, inside_g = cv2.cvtColor(bgr.astype(np.float32), cv2.COLOR_BGR2GRAY), inside
-    if config.siltp_height is not None and config.siltp_height != height:
+    gray, inside_g, labels_g = cv2.cvtColor(bgr.astype(np.float32), cv2.COLOR_BGR2GRAY), inside, labels
+    if not given and config.siltp_height is not None and config.siltp_height != height:
         factor = config.siltp_height / height
         gray, inside_g = _resized(gray, inside, (max(1, round(width * factor)), config.siltp_height))
+        labels_g = labels_at(config.siltp_height, inside_g)
     siltp = []
     for scale in config.siltp_scales:
         if scale == 1.0:
-            gray_s, inside_s, labels_s = gray, inside_g, labels
+            gray_s, labels_s = gray, labels_g
         else:
             size = (max(1, round(gray.shape[1] * scale)), max(1, round(gray.shape[0] * scale)))
-            gray_s, inside_s = _resized(gray, inside_g, size)
-            labels_s = None if labels is None else cv2.resize(labels.astype(np.int16), size,
-                                                                interpolation=cv2.INTER_NEAREST)
+            if given:
+                gray_s = _resized(gray, None, size)[0]
+                labels_s = cv2.resize(labels_g, size, interpolation=cv2.INTER_NEAREST)
+            else:
+                gray_s, inside_s = _resized(gray, inside_g, size)
+                labels_s = labels_at(size[1], inside_s)
         codes = siltp_codes_unchecked(gray_s, config.siltp_tau, config.siltp_radius)
-        if labels_s is None:
-            siltp.append(_part_histograms(codes, inside_s, config.part_edges, SILTP_CODES))
-        else:
-            siltp.append(_labelled_histograms(codes, labels_s, config.parts, SILTP_CODES))
+        siltp.append(_labelled_histograms(codes, labels_s, config.parts, SILTP_CODES))
 
     visible = 1.0 if inside is None else float(np.count_nonzero(inside)) / inside.size
     return BodyDescriptor(_hellinger_unit(hsv), _hellinger_unit(np.concatenate(siltp)), visible)

@@ -51,6 +51,19 @@ def person_to_msg(person_cls: type, person: PersonObservation) -> Any:
         if face.embedding is not None:
             m.embedding = np.asarray(face.embedding, dtype=np.float32).tolist()
             m.embedding_space = face.embedding_space
+    body = person.body
+    if body is not None:
+        if body.descriptor.size:
+            m.body_descriptor = np.asarray(body.descriptor, dtype=np.float32).tolist()
+            m.body_descriptor_space = body.space
+        m.body_visible_fraction = float(body.visible_fraction)
+        m.body_part_visible = [float(v) for v in body.part_visible]
+        g = body.geometry
+        m.body_head_height_m = float(g.head_height_m)
+        m.body_shoulder_width_m = float(g.shoulder_width_m)
+        m.body_torso_width_m = float(g.torso_width_m)
+        m.body_hip_width_m = float(g.hip_width_m)
+        m.body_torso_depth_m = float(g.torso_depth_m)
     return m
 
 

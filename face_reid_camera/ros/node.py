@@ -80,8 +80,15 @@ class CameraNode(ManagedNode):
             )
             embedder = load_embedder(str(values["embedder"]), threads, {
                 "dlib": str(values["dlib_model_path"]), "sface": str(values["sface_model_path"])})
+        projection = None
+        if config.describe_bodies:
+            from face_reid_camera.body.projection import BODY_PROJECTION_FILE, load_body_projection
+            from face_reid_camera.common.resources import model_path
+
+            projection = load_body_projection(str(values["body_projection_path"]) or model_path(BODY_PROJECTION_FILE))
         self.values = values
-        self.pipeline = CameraPipeline(config, pose, detector, embedder, bool(values["seed_ground_from_pose"]))
+        self.pipeline = CameraPipeline(config, pose, detector, embedder, bool(values["seed_ground_from_pose"]),
+                                       projection)
         self.health = NodeHealth(f"{self.get_name()}: camera {config.camera_id}", config.camera_id,
                                  float(values["no_input_warning_s"]))
         self._camera_frame_id = str(values["camera_frame_id"])
@@ -115,7 +122,8 @@ class CameraNode(ManagedNode):
         self.get_logger().info(
             f"camera '{self.pipeline.config.camera_id}': colour={values['color_topic']} depth={values['depth_topic']} "
             f"info={values['camera_info_topic']} -> {self.publisher.topic_name} "
-            f"(faces {'on, embedder ' + str(values['embedder']) if self.pipeline.config.detect_faces else 'off'})"
+            f"(faces {'on, embedder ' + str(values['embedder']) if self.pipeline.config.detect_faces else 'off'}; "
+            f"bodies {self.pipeline.body_projection.space if self.pipeline.body_projection else 'off'})"
         )
 
     def deactivate(self) -> None:

@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from face_reid_camera.body.person_body import BodyConfig
 from face_reid_camera.camera_model import CameraPose
 from face_reid_camera.common.param_table import (
     ParamSpec,
@@ -69,6 +70,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "(both run, one 256-value embedding).", choices=("dlib", "sface", "both"), read_only=True),
     ParamSpec("dlib_model_path", "", "dlib embedder ONNX file; empty = the installed default model."),
     ParamSpec("sface_model_path", "", "SFace embedder ONNX file; empty = the installed default model."),
+    ParamSpec("body_projection_path", "", "Body descriptor projection (.npz from face-reid-fit-body); empty = the "
+              "installed default. Its space goes with every body descriptor: masters compare one space."),
     ParamSpec("no_input_warning_s", 5.0, "/diagnostics warns when no image pair arrived for this long (s).",
               low=0.0, high=3600.0, low_open=True),
 )
@@ -76,7 +79,7 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
 TABLE = ParamTable(
     NODE_NAME,
     (*config_specs(CameraPipelineConfig), *config_specs(FaceQualityConfig), *_NODE_PARAMS,
-     *config_specs(PersonDetectorConfig, "person.")),
+     *config_specs(PersonDetectorConfig, "person."), *config_specs(BodyConfig, "body.")),
     "the face-reid camera node (face-reid-camera / face-reid-replay)", USAGE,
 )
 
@@ -104,6 +107,7 @@ def pipeline_config(params: dict[str, Any]) -> CameraPipelineConfig:
         CameraPipelineConfig, params,
         person=config_from_values(PersonDetectorConfig, params, "person."),
         quality=config_from_values(FaceQualityConfig, params),
+        body=config_from_values(BodyConfig, params, "body."),
     )
 
 

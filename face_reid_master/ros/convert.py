@@ -7,9 +7,23 @@ from typing import Any
 
 import numpy as np
 
+from face_reid_camera.body.observation import GEOMETRY_FIELDS
 from face_reid_camera.common.embedding_spaces import DLIB_SPACE as LEGACY_EMBEDDING_SPACE
 from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
-from face_reid_master.records import STATE_LOST, CameraFrameRecord, NamedTrackRecord, PersonRecord
+from face_reid_master.records import STATE_LOST, BodyRecord, CameraFrameRecord, NamedTrackRecord, PersonRecord
+
+# PersonObservation field of each GEOMETRY_FIELDS value (the height is the detection's own height_m)
+_GEOMETRY_MSG_FIELDS = tuple(name if name == "height_m" else f"body_{name}" for name in GEOMETRY_FIELDS)
+
+
+def _body_from_msg(p: Any) -> BodyRecord | None:
+    """The body fields of a PersonObservation (None: the camera sent none, e.g. one from before bodies)."""
+    descriptor = np.asarray(p.body_descriptor, dtype=np.float32)
+    if not descriptor.size and not p.body_visible_fraction:
+        return None
+    geometry = np.array([getattr(p, name) for name in _GEOMETRY_MSG_FIELDS], dtype=np.float32)
+    return BodyRecord(descriptor, str(p.body_descriptor_space), float(p.body_visible_fraction), geometry,
+                      np.asarray(p.body_part_visible, dtype=np.float32))
 
 
 def frame_from_msg(msg: Any) -> CameraFrameRecord:
@@ -22,7 +36,7 @@ def frame_from_msg(msg: Any) -> CameraFrameRecord:
                 np.array([p.position_world.x, p.position_world.y, p.position_world.z]),
                 float(p.position_std_m), float(p.height_m), emb, float(p.face_score), float(p.face_quality),
                 # an empty space: a camera from before spaces were named, which ran the dlib embedder
-                str(p.embedding_space) or LEGACY_EMBEDDING_SPACE, float(p.face_eye_distance_px),
+                str(p.embedding_space) or LEGACY_EMBEDDING_SPACE, float(p.face_eye_distance_px), _body_from_msg(p),
             )
         )
     return CameraFrameRecord(msg.camera_id, stamp_to_seconds(msg.header.stamp), tuple(people), msg.header.frame_id)
@@ -49,6 +63,15 @@ def frame_record_to_msg(frame: CameraFrameRecord, stamp_s: float) -> Any:
             m.embedding = np.asarray(person.embedding, dtype=np.float32).tolist()
             m.embedding_space = person.embedding_space
             m.face_eye_distance_px = float(person.face_eye_distance_px)
+        body = person.body
+        if body is not None:
+            m.body_descriptor = np.asarray(body.descriptor, dtype=np.float32).tolist()
+            m.body_descriptor_space = body.space if body.descriptor.size else ""
+            m.body_visible_fraction = float(body.visible_fraction)
+            m.body_part_visible = np.asarray(body.part_visible, dtype=np.float32).tolist()
+            for name, value in zip(_GEOMETRY_MSG_FIELDS, np.asarray(body.geometry, dtype=np.float32), strict=True):
+                if name != "height_m":  # the detection's own height
+                    setattr(m, name, float(value))
         msg.people.append(m)
     return msg
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from face_reid_camera.body.hsv_histogram import hsv_histogram
+from face_reid_camera.body.hsv_histogram import hsv_histogram, hsv_soft_bins
 
 # BGR: pure blue, pure red / white, black.
 _COLOURS = np.array([[[255, 0, 0], [0, 0, 255]],
@@ -56,3 +56,18 @@ def test_bad_arguments_name_themselves() -> None:
     ):
         with pytest.raises(ValueError, match=why):
             call()
+
+
+def test_soft_bins_share_value_between_the_two_nearest_bin_centres() -> None:
+    # grey pixels: hue 0, saturation 0 (all in s bin 0), value = the grey level. V bins are 32 levels wide with
+    # centres at 15.5, 47.5, 79.5, ...: grey 96 lies 0.515625 bin widths past the centre of bin 2 (79.5).
+    grey = np.array([[[96, 96, 96], [79, 79, 79], [250, 250, 250]]], np.uint8)
+    index, weights = hsv_soft_bins(grey, (8, 8, 8))
+    assert index.shape == weights.shape == (4, 1, 3)
+    assert np.allclose(weights.sum(axis=0), 1.0)
+    hist = np.bincount(index[:, 0, 0], weights=weights[:, 0, 0], minlength=512)
+    assert hist[2] == pytest.approx(1 - 0.515625) and hist[3] == pytest.approx(0.515625)
+    hist = np.bincount(index[:, 0, 1], weights=weights[:, 0, 1], minlength=512)
+    assert hist[1] == pytest.approx(0.015625) and hist[2] == pytest.approx(0.984375)  # 79 is just below a centre
+    hist = np.bincount(index[:, 0, 2], weights=weights[:, 0, 2], minlength=512)
+    assert hist[7] == pytest.approx(1.0)  # beyond the last centre: the last bin only
