@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from face_reid_camera.body.descriptor import BodyDescriptor, BodyDescriptorConfig
 from face_reid_camera.common.errors import ModelLoadError
+from face_reid_camera.common.resources import model_path
 
 __all__ = [
     "BODY_PROJECTION_FILE",
@@ -175,9 +176,10 @@ def save_body_projection(projection: BodyProjection, path: str | Path) -> Path:
     return out
 
 
-def load_body_projection(path: str | Path) -> BodyProjection:
-    """Read a projection file: FileNotFoundError when missing, :class:`ModelLoadError` (path and reason) when broken."""
-    src = Path(path)
+def load_body_projection(path: str | Path | None = None) -> BodyProjection:
+    """Read a projection file (None or "": the installed ``BODY_PROJECTION_FILE``): FileNotFoundError when
+    missing, :class:`ModelLoadError` (path and reason) when broken."""
+    src = Path(path) if path else model_path(BODY_PROJECTION_FILE)
     if not src.is_file():
         raise FileNotFoundError(f"body projection file {src}: No such file (refit with face-reid-fit-body)")
     try:

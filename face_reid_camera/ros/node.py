@@ -82,10 +82,9 @@ class CameraNode(ManagedNode):
                 "dlib": str(values["dlib_model_path"]), "sface": str(values["sface_model_path"])})
         projection = None
         if config.describe_bodies:
-            from face_reid_camera.body.projection import BODY_PROJECTION_FILE, load_body_projection
-            from face_reid_camera.common.resources import model_path
+            from face_reid_camera.body.projection import load_body_projection
 
-            projection = load_body_projection(str(values["body_projection_path"]) or model_path(BODY_PROJECTION_FILE))
+            projection = load_body_projection(str(values["body_projection_path"]))
         self.values = values
         self.pipeline = CameraPipeline(config, pose, detector, embedder, bool(values["seed_ground_from_pose"]),
                                        projection)

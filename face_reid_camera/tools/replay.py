@@ -119,6 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="camera pose in the world (m, rad); seeds the floor search. Without it (and "
                              "without --params) the floor is found unseeded and world = camera pose 0")
     parser.add_argument("--no-faces", action="store_true", help="people only (no face models needed)")
+    parser.add_argument("--no-bodies", action="store_true", help="no body description (no projection needed)")
     return parser
 
 
@@ -128,6 +129,8 @@ def main(argv: list[str] | None = None) -> int:
         values = camera_params.load_params_yaml(args.params) if args.params else camera_params.defaults()
         if args.no_faces:
             values["detect_faces"] = False
+        if args.no_bodies:
+            values["describe_bodies"] = False
         config = camera_params.pipeline_config(values)
         seeded = args.params is not None or args.camera_pose is not None
         pose = (
@@ -150,7 +153,13 @@ def main(argv: list[str] | None = None) -> int:
             )
             embedder = load_embedder(str(values["embedder"]), 1, {
                 "dlib": str(values["dlib_model_path"]), "sface": str(values["sface_model_path"])})
-        pipeline = CameraPipeline(config, pose, detector, embedder, seed_ground_from_pose=seeded)
+        projection = None
+        if config.describe_bodies:
+            from face_reid_camera.body.projection import load_body_projection
+
+            projection = load_body_projection(str(values["body_projection_path"]))
+        pipeline = CameraPipeline(config, pose, detector, embedder, seed_ground_from_pose=seeded,
+                                  body_projection=projection)
     except (ValueError, FileNotFoundError, ModelLoadError, OSError) as exc:
         print(f"face-reid-replay: error: {exc}", file=sys.stderr)
         return 2

@@ -5,7 +5,8 @@ PLAN.json: {"rate_hz": 10, "embeddings": "E.npz", "segments": [{"t0": 0, "t1": 4
   {"x": 0, "y": 0, "vx": 0.5, "vy": 0, "identity": "a", "photos": [0, 1, 2]}]}]}
 Times are seconds after the first subscriber matched; E.npz holds identity -> (n, 128) embeddings;
 "embedding_space" (optional) names their space in every message (default "": a camera from before
-spaces were named, taken as dlib_resnet_v1).
+spaces were named, taken as dlib_resnet_v1). A person with "body": {"descriptor": [...], "space": "...",
+"visible": 0.9} also sends body fields (a camera that describes bodies); without it, none (an older camera).
 Stamps are the publisher's clock (the master checks them against its own).
 With --barrier-dir D --barrier-count N, N publishers start their plans together: each marks itself
 ready in D once its subscriber matched and all start at the same wall-clock time (so plans of
@@ -85,6 +86,14 @@ def main() -> int:
                     obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
                     obs.embedding = emb.astype(np.float32).tolist()
                     obs.embedding_space = plan.get("embedding_space", "")  # "": a camera from before spaces
+                body = p.get("body")
+                if body:
+                    obs.body_descriptor = [float(v) for v in body["descriptor"]]
+                    obs.body_descriptor_space = str(body["space"])
+                    obs.body_visible_fraction = float(body.get("visible", 1.0))
+                    obs.body_part_visible = [1.0, 1.0, 1.0, 1.0]
+                    obs.body_head_height_m, obs.body_shoulder_width_m = 0.25, 0.42
+                    obs.body_torso_width_m, obs.body_torso_depth_m, obs.body_hip_width_m = 0.38, 0.15, float("nan")
                 msg.people.append(obs)
         pub.publish(msg)
         k += 1

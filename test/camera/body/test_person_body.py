@@ -46,8 +46,26 @@ def _grid(frame, depth, detection, k: int, config: BodyConfig | None = None):
                      config or BodyConfig(), EDGES)
 
 
-def _person(x: float, y: float, shirt=RED, trousers=BLUE, facing: float = math.pi, height: float = 1.75):
-    return SyntheticPerson(x, y, height, facing, body_color_bgr=shirt, legs_color_bgr=trousers)
+def _person(x: float, y: float, shirt=RED, trousers=BLUE, facing: float = math.pi, height: float = 1.75,
+            texture: np.ndarray | None = None):
+    return SyntheticPerson(x, y, height, facing, body_color_bgr=shirt, legs_color_bgr=trousers,
+                           body_texture_bgr=texture)
+
+
+def _clothes(shirt, trousers, stripes: bool, seed: int) -> np.ndarray:
+    """A person crop (256 x 96, head top to feet) to texture a rendered body: head, a shirt (white stripes or
+    plain), trousers with a fine weave, a little sensor noise."""
+    rng = np.random.default_rng(seed)
+    img = np.empty((256, 96, 3), np.uint8)
+    img[:40] = (60, 90, 140)
+    img[40:128] = shirt
+    if stripes:
+        for row in range(44, 128, 16):
+            img[row: row + 6] = (235, 235, 235)
+    img[128:] = trousers
+    weave = (np.add.outer(np.arange(128), np.arange(96)) % 4 < 2)[:, :, None]
+    img[128:] = np.where(weave, img[128:], (img[128:] * 0.7).astype(np.uint8))
+    return np.clip(img + rng.normal(0.0, 4.0, img.shape), 0, 255).astype(np.uint8)
 
 
 def test_the_mask_is_the_person_not_the_floor_nor_the_person_behind() -> None:
@@ -136,18 +154,24 @@ def test_describe_body_with_and_without_projection() -> None:
     assert too_hidden is not None and too_hidden.descriptor.size == 0
 
 
-def _descriptor(distance: float, shirt, trousers, y: float = 0.0):
-    frame, depth, detection = _scene([_person(distance, y, shirt, trousers)])
+def _descriptor(distance: float, texture: np.ndarray, y: float = 0.0):
+    frame, depth, detection = _scene([_person(distance, y, texture=texture)])
     grid = _grid(frame, depth, detection, 0)
     return body_descriptor(grid.crop, grid.mask, BodyDescriptorConfig(), grid.parts)
 
 
 def test_same_person_at_2_and_4_m_nearly_the_same_other_clothes_differ() -> None:
-    near, far = _descriptor(2.3, RED, BLUE), _descriptor(4.3, RED, BLUE, y=0.6)
-    other = _descriptor(2.3, GREEN, GREY)
-    assert near.hsv @ far.hsv > 0.85, near.hsv @ far.hsv
-    assert near.hsv @ other.hsv < 0.4, near.hsv @ other.hsv
-    assert np.linalg.norm(near.hsv - far.hsv) < 0.5 * np.linalg.norm(near.hsv - other.hsv)
+    alice = _clothes(RED, BLUE, stripes=True, seed=0)
+    near, far = _descriptor(2.3, alice), _descriptor(4.3, alice, y=0.6)
+    others = [_descriptor(2.3, _clothes(GREEN, GREY, stripes=False, seed=1)),  # other colours
+              _descriptor(2.3, _clothes(RED, BLUE, stripes=False, seed=2))]  # alike, but a plain shirt
+    for feature in ("hsv", "siltp"):
+        same = np.linalg.norm(getattr(near, feature) - getattr(far, feature))
+        different = [np.linalg.norm(getattr(near, feature) - getattr(o, feature)) for o in others]
+        assert same < 0.6 * min(different) if feature == "hsv" else same < max(different), (feature, same, different)
+    assert near.hsv @ far.hsv > 0.85 and near.hsv @ others[0].hsv < 0.3
+    # the texture tells the striped shirt from the plain one where the colours nearly agree
+    assert np.linalg.norm(near.siltp - far.siltp) < np.linalg.norm(near.siltp - others[1].siltp)
 
 
 def test_config_is_validated() -> None:

@@ -188,3 +188,40 @@ def test_cameras_of_two_embedders_never_mix_their_faces(ros_domain_id: int, tmp_
         faces = store.load_faces()
         assert store.embedding_space == "dlib_resnet_v1"
     assert len(faces) == 1 and faces[0].features.shape[1] == 128
+
+
+def test_cameras_with_and_without_body_fields_both_feed_the_master(ros_domain_id: int, tmp_path: Path,
+                                                                   embeddings: Path) -> None:
+    """A camera that describes bodies (Tony: face + body fields) and an older one that sends none (Colin: face
+    only) feed one master: both are tracked and identified by face, every body is counted as received and none
+    as malformed, on /diagnostics' source (the stats) and in the log."""
+    body = {"descriptor": np.linspace(-1.0, 1.0, 48).round(4).tolist(), "space": "body_pca_hsv32_siltp16_0123abcd",
+            "visible": 0.9}
+    tony = {"x": 0.0, "y": 0.0, "vx": 0.3, "identity": "tony", "photos": [0, 1, 2, 3, 4], "body": body}
+    colin = {"x": 0.0, "y": 3.0, "vx": 0.3, "identity": "colin", "photos": [0, 1, 2, 3, 4]}
+    plan_new = _plan(tmp_path / "new.json", embeddings, [{"t0": 0.0, "t1": 5.0, "people": [tony]}], "dlib_resnet_v1")
+    plan_old = _plan(tmp_path / "old.json", embeddings, [{"t0": 0.0, "t1": 5.0, "people": [colin]}])
+    out, master = _run_network(tmp_path, ros_domain_id, [f"db_path:={tmp_path / 'faces.db'}",
+                                                         "embedding_space:=dlib_resnet_v1", "stats_log_period_s:=0.5"],
+                               [("cam_new", plan_new), ("cam_old", plan_old)])
+    time.sleep(1.0)  # one more stats line after the last frame
+    try:
+        master.send_signal(signal.SIGINT)
+        master.wait(timeout=20)
+    finally:
+        procs.stop(master)
+    log = (tmp_path / "master.log").read_text()
+    logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
+    messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    tracks = [t for m in messages for t in m["tracks"]]
+    tony_tracks = [t for t in tracks if abs(t["y"]) < 1.0]
+    colin_tracks = [t for t in tracks if abs(t["y"] - 3.0) < 1.0]
+    assert {t["face_id"] for t in tony_tracks} - {0} and {t["face_id"] for t in colin_tracks} - {0}, logs
+    stats = [line for line in log.splitlines() if "stats: {" in line]
+    assert stats, logs
+    last = stats[-1]
+    received = int(last.split("'bodies_received': ")[1].split(",")[0].split("}")[0])
+    sent = 50  # frames with Tony: 10 Hz for t in [0, 5) s, each with his body fields
+    assert 0.9 * sent <= received <= sent, received
+    assert "bodies_rejected" not in last, last
+    assert "embeddings_rejected" not in last, last
