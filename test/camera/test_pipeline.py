@@ -168,3 +168,35 @@ def test_face_pose_from_landmarks() -> None:
 def test_config_validation(kwargs: dict) -> None:
     with pytest.raises(ValueError):
         CameraPipelineConfig(**kwargs)
+
+
+def test_bodies_of_the_nearest_people_within_the_cap() -> None:
+    from face_reid_camera.body.descriptor import BodyDescriptorConfig
+    from face_reid_camera.body.projection import BodyProjection, fit_pca_block
+
+    rng = np.random.default_rng(0)
+    c = BodyDescriptorConfig()
+    projection = BodyProjection((fit_pca_block("hsv", rng.random((30, c.hsv_length)), 6),
+                                 fit_pca_block("siltp", rng.random((30, c.siltp_length)), 3)))
+    people = [SyntheticPerson(2.6, -0.7, 1.65, math.pi), SyntheticPerson(3.4, 0.6, 1.85, math.pi),
+              SyntheticPerson(4.3, -0.2, 1.75, 0.0)]
+    frame = render_scene(people, INTR, POSE, rng=np.random.default_rng(2))
+    depth = _depth_m(frame.depth_mm)
+    config = CameraPipelineConfig(camera_id="c", detect_faces=False)
+    result = CameraPipeline(config, POSE, body_projection=projection).process(frame.rgb_bgr, depth, INTR)
+    assert len(result.people) == 3 and result.timings_ms["body_ms"] > 0
+    for obs in result.people:
+        assert obs.body is not None and obs.body.descriptor.shape == (9,) and obs.body.space == projection.space
+        assert obs.body.geometry.height_m == pytest.approx(obs.height_m)
+        assert obs.to_json()["body"]["descriptor_length"] == 9
+    capped = CameraPipeline(CameraPipelineConfig(camera_id="c", detect_faces=False, max_bodies_per_frame=1), POSE,
+                            body_projection=projection).process(frame.rgb_bgr, depth, INTR)
+    described = [obs for obs in capped.people if obs.body is not None]
+    assert len(described) == 1 and described[0].position_world[0] == pytest.approx(2.6, abs=0.2)  # the nearest
+    off = CameraPipeline(CameraPipelineConfig(camera_id="c", detect_faces=False, describe_bodies=False), POSE,
+                         body_projection=projection).process(frame.rgb_bgr, depth, INTR)
+    assert all(obs.body is None for obs in off.people) and off.timings_ms["body_ms"] == 0.0
+    no_colour = CameraPipeline(config, POSE, body_projection=projection).process(None, depth, INTR)
+    assert len(no_colour.people) == 3 and all(obs.body is None for obs in no_colour.people)
+    with pytest.raises(ValueError, match="body_projection"):
+        CameraPipeline(config, POSE, body_projection="models/body_projection.npz")  # type: ignore[arg-type]

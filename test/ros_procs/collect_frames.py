@@ -41,6 +41,10 @@ def main() -> int:
                     "embedding_len": len(p.embedding),
                     "embedding_space": p.embedding_space,
                     "embedding": list(p.embedding),
+                    "body_descriptor_len": len(p.body_descriptor),
+                    "body_space": p.body_descriptor_space,
+                    "body_visible_fraction": p.body_visible_fraction,
+                    "body_shoulder_width_m": p.body_shoulder_width_m,
                 }
                 for p in msg.people
             ],

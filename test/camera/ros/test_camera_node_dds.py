@@ -69,6 +69,9 @@ def test_camera_node_publishes_people_and_embeddings(
             procs.stop(p)
     logs = {p.name: p.read_text() for p in tmp_path.glob("*.log")}
     assert len(frames) >= 5, f"too few CameraFrame messages: {len(frames)}; logs: {logs}"
+    from face_reid_camera.body.projection import load_body_projection
+
+    projection = load_body_projection()
     for frame in frames:
         assert frame["camera_id"] == "cam_test" and frame["frame_id"] == "world"
         assert frame["ground_plane_found"]
@@ -83,6 +86,10 @@ def test_camera_node_publishes_people_and_embeddings(
         assert all(p["embedding_len"] in (0, 256) for p in with_face)  # 0: not embedded in this frame (budget)
         assert all(p["embedding_space"] == "dlib_resnet_v1+sface_2021dec" for p in with_face if p["embedding_len"])
         assert all(p["embedding_len"] == 0 for p in frame["people"] if not p["face_found"])
+        # every person's body too: the shipped projection's descriptor, mostly visible, shoulders measured
+        assert all(p["body_descriptor_len"] == projection.length and p["body_space"] == projection.space
+                   and p["body_visible_fraction"] > 0.5 and 0.2 < p["body_shoulder_width_m"] < 0.7
+                   for p in frame["people"]), frame["people"]
         # the face-less person is the one facing away (y = 1.2)
         no_face = [p for p in frame["people"] if not p["face_found"]]
         assert abs(no_face[0]["world"][1] - 1.2) < 0.3
