@@ -11,6 +11,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -202,6 +203,7 @@ class CameraPipeline:
             raise ValueError(f"body_projection must be a BodyProjection or None, got {type(body_projection).__name__}")
         self.config = config
         self.body_projection = body_projection
+        self.body_errors = 0  # bodies that could not be described (the person is still reported, without one)
         self.camera_pose = camera_pose
         self.face_detector = face_detector
         self.embedder = embedder
@@ -282,9 +284,13 @@ class CameraPipeline:
         order = sorted(range(len(people)), key=lambda i: float(people[i].position_camera[2]))
         people = list(people)
         for i in order[: self.config.max_bodies_per_frame]:
-            body = describe_body(color_bgr, depth_m, intrinsics, color_intrinsics, plane, tops[i],
-                                 float(candidates[i].height_m), np.delete(feet, i, axis=0), self.config.body,
-                                 self.body_projection)
+            try:
+                body = describe_body(color_bgr, depth_m, intrinsics, color_intrinsics, plane, tops[i],
+                                     float(candidates[i].height_m), np.delete(feet, i, axis=0), self.config.body,
+                                     self.body_projection)
+            except (ValueError, cv2.error, FloatingPointError):  # a degenerate view: the position still counts
+                self.body_errors += 1
+                continue
             if body is not None:
                 people[i] = dataclasses.replace(people[i], body=body)
         return people

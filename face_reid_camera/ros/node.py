@@ -286,6 +286,7 @@ class CameraNode(ManagedNode):
             "out_of_order": sync.stats.rejected_out_of_order if sync else 0,
             "camera_info_received": self._intrinsics is not None,
             "floor_found": self._floor_found if self._floor_found is not None else "no frame yet",
+            "body_errors": self.pipeline.body_errors if self.pipeline is not None else 0,
         }
         for reason in REJECT_REASONS:
             extra.setdefault(f"rejected_{reason}", health.rejected.get(reason, 0))

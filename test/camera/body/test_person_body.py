@@ -179,3 +179,24 @@ def test_config_is_validated() -> None:
         BodyConfig(radius_m=0.0)
     with pytest.raises(ValueError, match="min_visible_fraction"):
         BodyConfig(min_visible_fraction=1.5)
+
+
+def test_broken_depth_and_odd_heads_give_no_body_or_a_hidden_one_never_an_error() -> None:
+    frame, depth, detection = _scene([_person(3.0, 0.0)])
+    cand, plane = detection.people[0], detection.ground_plane
+    projection = _projection()
+    rng = np.random.default_rng(3)
+    broken = [np.full_like(depth, np.nan), np.zeros_like(depth), np.full_like(depth, np.inf), -depth,
+              np.where(rng.random(depth.shape) < 0.7, np.nan, depth).astype(np.float32)]
+    for bad in broken:
+        body = describe_body(frame.rgb_bgr, bad, INTR, INTR, plane, cand.top_cam, cand.height_m, np.zeros((0, 3)),
+                             BodyConfig(), projection)
+        assert body is not None and 0.0 <= body.visible_fraction <= 1.0
+    hidden = describe_body(frame.rgb_bgr, np.full_like(depth, np.nan), INTR, INTR, plane, cand.top_cam,
+                           cand.height_m, np.zeros((0, 3)), BodyConfig(), projection)
+    assert hidden.visible_fraction == 0.0 and hidden.descriptor.size == 0
+    assert all(math.isnan(v) for v in hidden.geometry.vector()[1:])
+    # a head behind the camera, at the camera, and far outside the image
+    for top in (np.array([0.0, 0.0, -2.0]), np.zeros(3), np.array([40.0, -1.0, 3.0])):
+        assert describe_body(frame.rgb_bgr, depth, INTR, INTR, plane, top, 1.7, np.zeros((0, 3)), BodyConfig(),
+                             projection) is None
