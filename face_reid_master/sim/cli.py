@@ -2,8 +2,10 @@
 
 Example: ``face-reid-sim --faces FACES --people 6 --cameras 3 --duration 200 --seed 1 --out S``.
 The directory format is documented in :mod:`face_reid_master.sim.scenario_files`. Progress goes to stderr, the
-summary (JSON) to stdout. Exit status: 0 done, 2 bad arguments or unusable faces folder, 1 other errors
-(e.g. missing models).
+summary (JSON) to stdout. ``--bodies CROPS`` adds bodies (:mod:`face_reid_master.sim.bodies`): clothes from a
+folder of person crops, described with the cameras' body projection (``--body-projection``, default the
+shipped one). Exit status: 0 done, 2 bad arguments or unusable faces / crops folder, 1 other errors (e.g.
+missing models or body projection).
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from face_reid_camera.body.projection import BODY_PROJECTION_FILE, load_body_projection
+from face_reid_camera.common.resources import model_path
+from face_reid_master.sim.bodies import BodySimConfig, InsufficientBodiesError
 from face_reid_master.sim.photos import InsufficientFacesError
 from face_reid_master.sim.scenario_files import write_scenario
 from face_reid_master.sim.simulate import LEVELS, SimConfig, simulate
@@ -51,6 +56,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="colour image size in pixels, e.g. 1920x1080 (default: the depth camera's 640x480); "
                         "faces get proportionally more pixels (feature level: the photo variants and the eye "
                         "distance follow)")
+    p.add_argument("--bodies", type=Path, default=None, metavar="DIR",
+                   help="folder with one sub-folder of person crops per identity (e.g. PKU-Reid, Market-1501): "
+                        "every person wears one crop identity per day (another one on day 2) and detections carry "
+                        "body descriptors, visibility and geometry")
+    p.add_argument("--body-projection", type=Path, default=None, metavar="FILE",
+                   help=f"the cameras' body descriptor projection (default: the shipped models/{BODY_PROJECTION_FILE}"
+                        ", made by face-reid-fit-body)")
     p.add_argument("--cache", type=Path, default=None,
                    help="npz file caching the photo embeddings (keyed by path, mtime and size)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -86,6 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             num_people=args.people, num_cameras=args.cameras, duration_s=duration, seed=args.seed, level=args.level,
             rate_hz=args.rate_hz, second_day=args.second_day, new_people=args.new_people,
             room_size_m=_room(args.room), embedder=args.embedder, color_resolution=_resolution(args.color_resolution),
+            bodies=BodySimConfig() if args.bodies is not None else None,
         )
     except ValueError as exc:
         parser.print_usage(sys.stderr)
@@ -93,10 +106,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if args.new_people is not None and not args.second_day:
         print("face-reid-sim: note: --new-people has no effect without --second-day", file=sys.stderr)
+    if args.body_projection is not None and args.bodies is None:
+        print("face-reid-sim: note: --body-projection has no effect without --bodies", file=sys.stderr)
     t0 = time.perf_counter()
     try:
-        result = simulate(args.faces, config, cache_path=args.cache, log=log)
-    except InsufficientFacesError as exc:
+        projection = None
+        if args.bodies is not None:
+            projection = load_body_projection(args.body_projection if args.body_projection is not None
+                                              else model_path(BODY_PROJECTION_FILE))
+        result = simulate(args.faces, config, cache_path=args.cache, log=log, bodies_dir=args.bodies,
+                          body_projection=projection)
+    except (InsufficientFacesError, InsufficientBodiesError) as exc:
         print(f"face-reid-sim: error: {exc}", file=sys.stderr)
         return 2
     except (FileNotFoundError, RuntimeError) as exc:  # missing / broken models

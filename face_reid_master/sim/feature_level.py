@@ -4,7 +4,9 @@ A camera detects each person it can see (misses at ``miss_probability``) with a 
 with distance, plus a per-camera calibration bias) and a noisy height; a visible face is found with a
 probability falling off with angle and range, and carries the embedding of a variant of its glance's photo
 allowed at its range, plus a little Gaussian noise (``embedding_noise_std`` per dimension). False positives
-are clutter in the camera's view, never with a face.
+are clutter in the camera's view, never with a face. With bodies (:mod:`~face_reid_master.sim.bodies`)
+every true detection also carries its body (descriptor of its crop as this camera sees it, visibility,
+geometry); false positives carry none.
 """
 
 from __future__ import annotations
@@ -16,10 +18,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.pipeline import FaceQualityConfig, face_quality
-from face_reid_master.sim.frame_table import DetectionColumns
+from face_reid_master.sim.bodies import BodyWorld, feature_bodies
+from face_reid_master.sim.frame_table import BodyRows, DetectionColumns
 from face_reid_master.sim.motion import sample_trajectories
 from face_reid_master.sim.photos import IdentityPhotos, glance_photos, range_bucket, valid_variants, variant_eye_px
-from face_reid_master.sim.streams import S_CAMERA, S_FACES, S_FP, stream_rng
+from face_reid_master.sim.streams import S_BODY_VIEW, S_CAMERA, S_FACES, S_FP, stream_rng
 from face_reid_master.sim.visibility import camera_visibility
 from face_reid_master.sim.world import World
 
@@ -35,9 +38,10 @@ _EYE_DISTANCE_M = 0.063
 def feature_camera_day(
     cfg: SimConfig, world: World, cam_index: int, day: Day, stamps: NDArray[np.float64],
     identities: list[IdentityPhotos], photo_offsets: list[int], heights: NDArray[np.float64],
-    camera_bias: NDArray[np.float64], glance_counter: list[int],
+    camera_bias: NDArray[np.float64], glance_counter: list[int], bodies: BodyWorld | None = None,
 ) -> DetectionColumns:
-    """Camera messages of one camera over one day, made directly from the world model."""
+    """Camera messages of one camera over one day, made directly from the world model (with ``bodies``: their
+    body rows too)."""
     camera = world.cameras[cam_index]
     dim = int(identities[0].photos[0].embeddings.shape[1])
     # colour at its own resolution (same horizontal field of view as depth): faces have more pixels
@@ -101,6 +105,11 @@ def feature_camera_day(
                         zip(score, eye_px, face_angle, strict=True)], dtype=np.float32)
     cols.append(f_idx, gt, pos, std, height, has_face, embeddings, score, quality, face_photo,
                 glance_of[f_idx[fi], p_idx[fi]], variants, variant_px)
+    if bodies is not None:
+        rows = feature_bodies(bodies, camera, cam_index, day.day, day.gt_ids, stamps, xy, facing, heights, in_room,
+                              detected, f_idx, p_idx, height, rng_m, fx_color, cfg.glance_gap_s,
+                              stream_rng(cfg.seed, S_BODY_VIEW, day.day, cam_index), cfg.visibility)
+        cols.append_bodies(np.ones(n, dtype=bool), rows)
     # false positives: clutter somewhere in the camera's view, never with a face
     n_fp = rng_fp.poisson(cfg.false_positives_per_frame, size=n_f)
     fp_frames = np.repeat(np.arange(n_f), n_fp)
@@ -119,4 +128,6 @@ def feature_camera_day(
         cols.append(fp_frames[keep], np.full(m, -1, np.int32), fp_pos, fp_std,
                 rng_fp.uniform(1.0, 2.0, size=m), np.zeros(m, bool), np.zeros((0, dim), np.float32),
                 np.zeros(0), np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.int16))
+        if bodies is not None:
+            cols.append_bodies(np.zeros(m, dtype=bool), BodyRows.empty(bodies.dim, bodies.parts))
     return cols

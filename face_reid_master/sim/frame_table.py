@@ -1,7 +1,8 @@
 """Simulated camera messages in columns: per camera and day while simulating, then one flat frame table.
 
 The flat table is what ``frames.npz`` stores (:mod:`face_reid_master.sim.scenario_files`): frames in stamp
-order (ties: camera order), the detections of each frame (shuffled within it), the faces in detection order.
+order (ties: camera order), the detections of each frame (shuffled within it), the faces in detection order,
+and (with bodies, ``--bodies``) the bodies in detection order.
 """
 
 from __future__ import annotations
@@ -14,7 +15,44 @@ from numpy.typing import NDArray
 
 from face_reid_master.sim.streams import S_SHUFFLE, stream_rng
 
-__all__ = ["DetectionColumns", "FrameTable", "assemble_frames"]
+__all__ = ["BodyRows", "DetectionColumns", "FrameTable", "assemble_frames"]
+
+
+@dataclass(frozen=True)
+class BodyRows:
+    """Body rows of some detections: projected descriptor (m, k) (zeros where not ``described``), visible
+    fraction, per-part visibility (m, parts), geometry (m, 6) in GEOMETRY_FIELDS order (NaN = not measured),
+    the crop shown (index into the scenario's crops list, -1 unknown), the true view angle (deg, the person's
+    facing relative to the direction to the camera, counter-clockwise; NaN unknown) and the body glance."""
+
+    descriptor: NDArray[np.float32]
+    described: NDArray[np.bool_]
+    visible: NDArray[np.float32]
+    part_visible: NDArray[np.float32]
+    geometry: NDArray[np.float32]
+    crop: NDArray[np.int32]
+    view_deg: NDArray[np.float32]
+    glance: NDArray[np.int32]
+
+    @staticmethod
+    def empty(dim: int, parts: int) -> BodyRows:
+        return BodyRows(np.zeros((0, dim), np.float32), np.zeros(0, bool), np.zeros(0, np.float32),
+                        np.zeros((0, parts), np.float32), np.zeros((0, 6), np.float32), np.zeros(0, np.int32),
+                        np.zeros(0, np.float32), np.zeros(0, np.int32))
+
+    @staticmethod
+    def concat(rows: list[BodyRows]) -> BodyRows:
+        return BodyRows(*(np.concatenate([getattr(r, f) for r in rows]) for f in _BODY_ROW_FIELDS))
+
+    def take(self, index: NDArray[np.integer]) -> BodyRows:
+        return BodyRows(*(getattr(self, f)[index] for f in _BODY_ROW_FIELDS))
+
+    def arrays(self) -> dict[str, NDArray[Any]]:
+        """The frames.npz arrays: ``body_<field>``."""
+        return {f"body_{f}": getattr(self, f) for f in _BODY_ROW_FIELDS}
+
+
+_BODY_ROW_FIELDS = ("descriptor", "described", "visible", "part_visible", "geometry", "crop", "view_deg", "glance")
 
 
 @dataclass
@@ -35,6 +73,8 @@ class DetectionColumns:
     face_variant: list[NDArray[np.int16]] = field(default_factory=list)
     face_eye_px: list[NDArray[np.float32]] = field(default_factory=list)
     dim: int = 128  # embedding length (256 for a camera running both embedders)
+    has_body: list[NDArray[np.bool_]] = field(default_factory=list)  # per batch, with bodies only
+    bodies: list[BodyRows] = field(default_factory=list)  # rows for the detections with a body
 
     def append(self, frame: NDArray[Any], gt: NDArray[Any], pos: NDArray[Any], std: NDArray[Any],
                height: NDArray[Any], has_face: NDArray[Any], emb: NDArray[Any], score: NDArray[Any],
@@ -58,6 +98,15 @@ class DetectionColumns:
         self.face_eye_px.append(np.zeros(n_faces, np.float32) if eye_px is None else
                                 np.asarray(eye_px, dtype=np.float32).reshape(n_faces))
 
+    def append_bodies(self, has_body: NDArray[Any], rows: BodyRows) -> None:
+        """The bodies of the batch added last by :meth:`append` (every batch gets one call, or none does)."""
+        flags = np.asarray(has_body, dtype=bool)
+        if flags.size != self.frame[-1].size or int(flags.sum()) != rows.described.size:
+            raise ValueError(f"has_body ({flags.size}, {int(flags.sum())} set) does not match the last batch "
+                             f"({self.frame[-1].size}) and its {rows.described.size} body rows")
+        self.has_body.append(flags)
+        self.bodies.append(rows)
+
 
 @dataclass
 class FrameTable:
@@ -68,10 +117,15 @@ class FrameTable:
     offsets: NDArray[np.int64]
     det: dict[str, NDArray[Any]]
     face: dict[str, NDArray[Any]]
+    body: BodyRows | None = None  # with bodies: rows in detection order, det["body"] indexes them
 
 
-def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionColumns]], seed: int) -> FrameTable:
-    """Merge the cameras' columns into one frame table in stamp order, detections shuffled within frames."""
+def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionColumns]], seed: int,
+                    body_shape: tuple[int, int] | None = None) -> FrameTable:
+    """Merge the cameras' columns into one frame table in stamp order, detections shuffled within frames.
+
+    ``body_shape`` (descriptor length, parts): the scenario has bodies (every batch has its body columns).
+    """
     frame_cam, frame_stamp, frame_key = [], [], []
     det_parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("frame", "gt", "position", "std", "height", "face")}
     face_parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("embedding", "score", "quality", "photo", "glance",
@@ -79,7 +133,15 @@ def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionCo
     dim = next((cols.dim for _, _, cols in per_camera), 128)
     n_frames = 0
     n_faces = 0
+    with_bodies = body_shape is not None
+    body_flags: list[NDArray[np.bool_]] = []
+    body_rows: list[BodyRows] = []
     for cam_index, stamps, cols in per_camera:
+        if with_bodies and len(cols.has_body) != len(cols.frame):
+            raise ValueError(f"camera {cam_index}: {len(cols.frame)} detection batches, {len(cols.has_body)} with "
+                             "bodies (all or none must have them)")
+        body_flags.extend(cols.has_body)
+        body_rows.extend(cols.bodies)
         frame_cam.append(np.full(stamps.size, cam_index, dtype=np.int16))
         frame_stamp.append(stamps)
         frame_key.append(np.arange(stamps.size) + n_frames)
@@ -140,4 +202,16 @@ def assemble_frames(per_camera: list[tuple[int, NDArray[np.float64], DetectionCo
     }
     counts = np.bincount(det_frame, minlength=order.size)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return FrameTable(cam[order], stamp[order], offsets, det, face)
+    body = None
+    if with_bodies:
+        flags = cat(body_flags, bool)
+        assert body_shape is not None
+        rows = BodyRows.concat([BodyRows.empty(*body_shape), *body_rows])
+        body_row = np.full(flags.size, -1, dtype=np.int64)
+        body_row[flags] = np.arange(int(flags.sum()))
+        body_row = body_row[det_order]
+        has_b = body_row >= 0
+        det["body"] = np.full(body_row.size, -1, dtype=np.int32)
+        det["body"][has_b] = np.arange(int(has_b.sum()), dtype=np.int32)
+        body = rows.take(body_row[has_b])
+    return FrameTable(cam[order], stamp[order], offsets, det, face, body)

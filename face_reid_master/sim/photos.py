@@ -160,7 +160,8 @@ class PhotoBank:
         assert self.cache_path is not None
         try:
             with np.load(self.cache_path, allow_pickle=False) as data:
-                space = str(data["space"]) if "space" in data.files else "dlib_resnet_v1"
+                # write_npz stores the 0-d space string as a 1-element array (np.ascontiguousarray)
+                space = str(data["space"].reshape(-1)[0]) if "space" in data.files else "dlib_resnet_v1"
                 if space != self.space:
                     raise ValueError(f"it holds embeddings of space {space!r}, not {self.space!r}")
                 keys = [str(k) for k in data["keys"]]

@@ -15,6 +15,19 @@
   values; 256 for both embedders), ``face_score``, ``face_quality`` (E,) float32, ``face_photo`` (E,) int32
   photo index (-1 unknown), ``face_glance`` (E,) int32, ``face_variant`` (E,) int16 (-1 at pixel level),
   ``face_eye_px`` (E,) float32 size of the face the embedding shows (optional: 0 = unknown).
+  Bodies (optional, scenarios made with ``--bodies``; :mod:`face_reid_master.sim.bodies`): ``det_body`` (D,)
+  int32 row into the body arrays or -1 (false positives at feature level, undescribed detections at pixel
+  level); ``body_descriptor`` (B, k) float32 projected appearance in space ``body_space`` (zeros where not
+  ``body_described`` (B,) bool: too little visible); ``body_visible`` (B,) float32 share of the height seen;
+  ``body_part_visible`` (B, parts) float32; ``body_geometry`` (B, 6) float32 in GEOMETRY_FIELDS order
+  (height, head height, shoulder / torso width, torso depth, hip width; m, NaN = not measured);
+  ``body_crop`` (B,) int32 index into ``body_crops`` (the crop shown, -1 unknown); ``body_view_deg`` (B,)
+  float32 the true view angle (the person's facing relative to the direction to the camera, counter-
+  clockwise, 0 = facing it; NaN unknown); ``body_glance`` (B,) int32 (-1 unknown).
+  scenario.json then has ``bodies_dir``, ``body_space``, ``body_descriptor_length``, ``body_crops`` (index,
+  identity = crop folder, path relative to ``bodies_dir``, camera, orientation, view_deg),
+  ``body_orientation_view_deg`` (the view each PKU-Reid orientation code is taken to show), and per identity
+  ``clothes`` ({"1": crop folder worn on day 1, "2": ... on day 2}) and ``body_measures`` (m).
 - ``ground_truth.npz``: ``t_s`` (T,) at ``ground_truth_rate_hz`` for each day, ``day`` (T,) int8,
   ``gt_id`` (P,) int32, ``xy`` (P, T, 2) float32 (NaN when the person is absent that day),
   ``facing_rad`` (P, T) float32, ``in_room`` (P, T), ``in_view`` (P, T, M), ``face_visible`` (P, T, M) bool.
@@ -27,7 +40,7 @@ import json
 import os
 import zipfile
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -36,11 +49,12 @@ from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.embedding_spaces import DLIB_SPACE, space_dim
-from face_reid_master.records import CameraFrameRecord, PersonRecord
+from face_reid_master.records import BodyRecord, CameraFrameRecord, PersonRecord
 from face_reid_master.sim.visibility import coverage_fraction
 from face_reid_master.sim.world import SimCamera, World
 
 if TYPE_CHECKING:
+    from face_reid_master.sim.bodies import BodyWorld
     from face_reid_master.sim.frame_table import FrameTable
     from face_reid_master.sim.photos import IdentityPhotos, PhotoBank
     from face_reid_master.sim.simulate import Day, SimConfig
@@ -79,8 +93,9 @@ class SimResult:
 def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities: list[IdentityPhotos],
                       photo_offsets: list[int], days: list[Day], heights: NDArray[np.float64],
                       phases: NDArray[np.float64], table: FrameTable, gt: dict[str, NDArray[Any]],
-                      loss_info: list[dict[str, Any]], n_glances: int) -> dict[str, Any]:
-    """The ``scenario.json`` document of a simulated scenario."""
+                      loss_info: list[dict[str, Any]], n_glances: int, bodies: BodyWorld | None = None
+                      ) -> dict[str, Any]:
+    """The ``scenario.json`` document of a simulated scenario (``bodies``: with its body keys)."""
     photos = []
     for ident, offset in zip(identities, photo_offsets, strict=True):
         for k, ph in enumerate(ident.photos):
@@ -115,7 +130,7 @@ def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities:
         "skipped_no_face": sorted(set(bank.skipped_no_face)),
         "identities_with_too_few_photos": sorted(set(bank.too_few_photos)),
     }
-    return {
+    document = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
         "generator": "face-reid-sim",
@@ -142,6 +157,32 @@ def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities:
                  for d in days],
         "summary": summary,
     }
+    if bodies is not None:
+        _add_bodies(document, bodies, table)
+    return document
+
+
+def _add_bodies(document: dict[str, Any], bodies: BodyWorld, table: FrameTable) -> None:
+    """The body keys of scenario.json: crops folder and list, space, clothes and measures per identity."""
+    from face_reid_master.sim.bodies import MEASURE_FIELDS, PKU_VIEW_DEG
+
+    bank = bodies.bank
+    document["bodies_dir"] = str(bank.bodies_dir)
+    document["body_space"] = bodies.space
+    document["body_descriptor_length"] = bodies.dim
+    document["body_crops"] = bank.crops_document()
+    document["body_orientation_view_deg"] = {str(o): v for o, v in PKU_VIEW_DEG.items()}
+    for ident in document["identities"]:
+        gt = ident["gt_id"]
+        ident["clothes"] = {str(d): bodies.clothes[(gt, d)].name for d in ident["days"]}
+        ident["body_measures"] = {name: round(float(v), 4) for name, v in
+                                  zip(MEASURE_FIELDS, bodies.measures[gt], strict=True)}
+    rows = table.body
+    summary = document["summary"]
+    summary["body_detections"] = 0 if rows is None else int(rows.described.size)
+    summary["body_descriptors"] = 0 if rows is None else int(rows.described.sum())
+    summary["body_glances"] = int(bodies.glance_counter[0])
+    summary["body_crops_skipped_unreadable"] = sorted(set(bank.skipped_unreadable))
 
 
 def write_npz(path: Path, arrays: dict[str, NDArray[Any]]) -> None:
@@ -170,6 +211,9 @@ def write_scenario(result: SimResult, out_dir: str | Path) -> Path:
         "face_quality": table.face["quality"], "face_photo": table.face["photo"], "face_glance": table.face["glance"],
         "face_variant": table.face["variant"], "face_eye_px": table.face["eye_px"],
     }
+    if table.body is not None:
+        arrays["det_body"] = table.det["body"]
+        arrays.update(table.body.arrays())
     write_npz(out / "frames.npz", arrays)
     write_npz(out / "ground_truth.npz", result.ground_truth)
     tmp = out / "scenario.json.tmp"
@@ -197,7 +241,8 @@ class Scenario:
     """A loaded scenario: the frames as master-core records in stamp order, plus parallel ground truth.
 
     ``frame_gt_ids[i][j]`` is the true person (gt_id, -1 = false positive) of ``frames[i].people[j]``;
-    ``frame_face_photos[i][j]`` the photo index its face came from (-1: no face / unknown).
+    ``frame_face_photos[i][j]`` the photo index its face came from (-1: no face / unknown);
+    ``frame_body_crops[i][j]`` the index into ``body_crops`` of the crop its body showed (-1: no body / unknown).
     """
 
     directory: Path
@@ -207,6 +252,7 @@ class Scenario:
     frame_gt_ids: list[NDArray[np.int32]]
     frame_face_photos: list[NDArray[np.int32]]
     ground_truth: GroundTruth
+    frame_body_crops: list[NDArray[np.int32]] = field(default_factory=list)
 
     @property
     def level(self) -> str:
@@ -232,6 +278,8 @@ class Scenario:
 _FRAME_KEYS = ("frame_camera", "frame_stamp_s", "frame_offsets", "det_position", "det_std_m", "det_height_m",
                "det_gt_id", "det_face", "face_embedding", "face_score", "face_quality", "face_photo", "face_glance",
                "face_variant")
+_BODY_KEYS = ("det_body", "body_descriptor", "body_described", "body_visible", "body_part_visible", "body_geometry",
+              "body_crop", "body_view_deg", "body_glance")
 _GT_KEYS = ("t_s", "day", "gt_id", "xy", "facing_rad", "in_room", "in_view", "face_visible")
 
 
@@ -285,7 +333,7 @@ def load_scenario(directory: str | Path) -> Scenario:
         n_ids = len(doc["identities"])
     except (KeyError, TypeError, ValueError) as exc:
         raise ScenarioFormatError(f"{doc_path} has malformed cameras/identities: {exc}") from exc
-    a = _read_npz(base / "frames.npz", _FRAME_KEYS, ("face_eye_px",))
+    a = _read_npz(base / "frames.npz", _FRAME_KEYS, ("face_eye_px", *_BODY_KEYS))
     space = str(doc.get("embedding_space", DLIB_SPACE))
     try:
         dim = space_dim(space)
@@ -315,6 +363,7 @@ def load_scenario(directory: str | Path) -> Scenario:
     if not (np.isfinite(a["det_position"]).all() and np.isfinite(a["face_embedding"]).all()
             and np.isfinite(a["frame_stamp_s"]).all()):
         problems.append("non-finite positions, stamps or embeddings")
+    problems.extend(_body_problems(a, doc, n_d))
     if problems:
         raise ScenarioFormatError(f"{base / 'frames.npz'}: " + "; ".join(problems))
     g = _read_npz(base / "ground_truth.npz", _GT_KEYS)
@@ -328,20 +377,71 @@ def load_scenario(directory: str | Path) -> Scenario:
     emb, f_score, f_quality, f_photo = a["face_embedding"], a["face_score"].tolist(), a["face_quality"].tolist(), \
         a["face_photo"]
     f_eye = eye_px.tolist()
+    bodies = _body_records(a, doc)
+    det_crop = np.full(n_d, -1, dtype=np.int32)
+    if "det_body" in a:
+        has_body = a["det_body"] >= 0
+        det_crop[has_body] = a["body_crop"][a["det_body"][has_body]]
+    body_crops: list[NDArray[np.int32]] = []
     for i in range(n_f):
         lo, hi = int(offsets[i]), int(offsets[i + 1])
         people = []
         photos = np.full(hi - lo, -1, dtype=np.int32)
         for j in range(lo, hi):
             k = det_face[j]
+            body = bodies[j]
             if k >= 0:
                 people.append(PersonRecord(pos[j], std[j], height[j], emb[k], f_score[k], f_quality[k], space,
-                                           f_eye[k]))
+                                           f_eye[k], body))
                 photos[j - lo] = f_photo[k]
             else:
-                people.append(PersonRecord(pos[j], std[j], height[j]))
+                people.append(PersonRecord(pos[j], std[j], height[j], body=body))
         frames.append(CameraFrameRecord(camera_ids[int(a["frame_camera"][i])], float(a["frame_stamp_s"][i]),
                                         tuple(people)))
         gt_ids.append(det_gt[lo:hi])
         face_photos.append(photos)
-    return Scenario(base, doc, cameras, frames, gt_ids, face_photos, ground_truth)
+        body_crops.append(det_crop[lo:hi])
+    return Scenario(base, doc, cameras, frames, gt_ids, face_photos, ground_truth, body_crops)
+
+
+def _body_problems(a: dict[str, NDArray[Any]], doc: dict[str, Any], n_d: int) -> list[str]:
+    """What is wrong with the optional body arrays (all or none, consistent shapes, a body space)."""
+    present = [k for k in _BODY_KEYS if k in a]
+    if not present:
+        return []
+    if len(present) != len(_BODY_KEYS):
+        return [f"body arrays incomplete: lacks {[k for k in _BODY_KEYS if k not in a]}"]
+    if not isinstance(doc.get("body_space"), str):
+        return ["body arrays without a body_space in scenario.json"]
+    n_b = a["body_described"].size
+    problems = []
+    if a["det_body"].shape != (n_d,) or (n_d and (a["det_body"].min() < -1 or a["det_body"].max() >= n_b)):
+        problems.append("det_body does not index the body arrays")
+    if (a["body_descriptor"].ndim != 2 or a["body_descriptor"].shape[0] != n_b or a["body_geometry"].shape != (n_b, 6)
+            or a["body_part_visible"].ndim != 2 or a["body_part_visible"].shape[0] != n_b
+            or any(a[k].shape != (n_b,) for k in ("body_visible", "body_crop", "body_view_deg", "body_glance"))):
+        problems.append("body arrays disagree in shape")
+    elif not np.isfinite(a["body_descriptor"]).all():
+        problems.append("non-finite body descriptors")
+    n_crops = len(doc.get("body_crops", []))
+    if n_b and (a["body_crop"].min() < -1 or a["body_crop"].max() >= n_crops):
+        problems.append("body_crop out of range of body_crops")
+    return problems
+
+
+def _body_records(a: dict[str, NDArray[Any]], doc: dict[str, Any]) -> list[BodyRecord | None]:
+    """The BodyRecord of every detection (None: no body; every one None for scenarios without bodies)."""
+    n_d = a["det_gt_id"].size
+    if "det_body" not in a:
+        return [None] * n_d
+    space = str(doc["body_space"])
+    desc, described, visible = a["body_descriptor"], a["body_described"], a["body_visible"].tolist()
+    geometry, parts = a["body_geometry"], a["body_part_visible"]
+    empty = np.zeros(0, dtype=np.float32)
+    records: list[BodyRecord | None] = []
+    for b in a["det_body"].tolist():
+        if b < 0:
+            records.append(None)
+            continue
+        records.append(BodyRecord(desc[b] if described[b] else empty, space, visible[b], geometry[b], parts[b]))
+    return records

@@ -7,6 +7,10 @@ the camera messages at one of two levels sharing all of these: ``feature``
 rendered frames through the real camera pipeline). The result is written by
 :func:`~face_reid_master.sim.scenario_files.write_scenario`; the same seed gives byte-identical files.
 
+Bodies (``config.bodies`` and a crops folder, :mod:`~face_reid_master.sim.bodies`): every person wears a crop
+identity per day (a new one on day 2) and has body measures; detections then carry body descriptors,
+visibility and geometry. Bodies draw from their own random streams: without them the files are unchanged.
+
 Days: with ``second_day`` the same room and cameras are replayed ``day_gap_s`` after day 1 ends with
 ``people - new_people`` of the day-1 people (their day-2 photos) and ``new_people`` identities never seen
 on day 1.
@@ -23,8 +27,17 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.body.projection import BodyProjection
 from face_reid_camera.common.checks import is_finite_number
 from face_reid_camera.common.embedding_spaces import EMBEDDER_CHOICES, embedder_space
+from face_reid_master.sim.bodies import (
+    BodyBank,
+    BodySimConfig,
+    BodyWorld,
+    assign_clothes,
+    camera_light_gains,
+    make_measures,
+)
 from face_reid_master.sim.feature_level import feature_camera_day
 from face_reid_master.sim.frame_table import DetectionColumns, assemble_frames
 from face_reid_master.sim.ground_truth import sample_ground_truth
@@ -32,7 +45,17 @@ from face_reid_master.sim.motion import MotionConfig, Trajectory, plan_trajector
 from face_reid_master.sim.photos import PhotoBank
 from face_reid_master.sim.pixel_level import pixel_camera_frames
 from face_reid_master.sim.scenario_files import SimResult, scenario_document
-from face_reid_master.sim.streams import S_CAMERA, S_IDENTITIES, S_MOTION, S_PHASE, S_WORLD, stream_rng
+from face_reid_master.sim.streams import (
+    S_BODIES,
+    S_BODY_LIGHT,
+    S_BODY_MEASURES,
+    S_CAMERA,
+    S_IDENTITIES,
+    S_MOTION,
+    S_PHASE,
+    S_WORLD,
+    stream_rng,
+)
 from face_reid_master.sim.visibility import VisibilityConfig
 from face_reid_master.sim.world import Room, make_world, room_size_for
 
@@ -72,6 +95,7 @@ class SimConfig:
     color_resolution: tuple[int, int] | None = None  # colour image W, H (px); None: the depth camera's
     motion: MotionConfig = field(default_factory=MotionConfig)
     visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
+    bodies: BodySimConfig | None = None  # None: no bodies (simulate needs a crops folder otherwise)
 
     def __post_init__(self) -> None:
         for name, low, high in (("num_people", 1, 500), ("num_cameras", 1, 64), ("min_photos_per_identity", 1, 1000)):
@@ -117,6 +141,8 @@ class SimConfig:
                                  f"{self.color_resolution!r}")
         if not isinstance(self.motion, MotionConfig) or not isinstance(self.visibility, VisibilityConfig):
             raise ValueError("motion / visibility must be MotionConfig / VisibilityConfig instances")
+        if self.bodies is not None and not isinstance(self.bodies, BodySimConfig):
+            raise ValueError(f"bodies must be a BodySimConfig or None, got {type(self.bodies).__name__}")
 
     @property
     def frame_rate_hz(self) -> float:
@@ -132,6 +158,8 @@ class SimConfig:
         out = asdict(self)
         out["frame_rate_hz"] = self.frame_rate_hz
         out["num_new_people"] = self.num_new_people
+        if self.bodies is None:
+            del out["bodies"]  # scenarios without bodies keep their files of before
         return out
 
 
@@ -152,9 +180,21 @@ def camera_stamps(start_s: float, duration_s: float, rate_hz: float, phase_s: fl
 
 
 def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | None = None,
-             log: TextIO | None = None, bank: PhotoBank | None = None) -> SimResult:
-    """Run a scenario. Raises InsufficientFacesError for an empty / too small faces folder."""
+             log: TextIO | None = None, bank: PhotoBank | None = None, bodies_dir: str | Path | None = None,
+             body_projection: BodyProjection | None = None) -> SimResult:
+    """Run a scenario. Raises InsufficientFacesError for an empty / too small faces folder.
+
+    With ``config.bodies``: the crops folder ``bodies_dir`` and the cameras' ``body_projection`` are needed;
+    InsufficientBodiesError for an unusable crops folder.
+    """
     cfg = config
+    if (cfg.bodies is None) != (bodies_dir is None):
+        raise ValueError("bodies_dir and config.bodies go together (a crops folder for a config with bodies)")
+    body_bank = None
+    if cfg.bodies is not None:
+        if body_projection is None:
+            raise ValueError("config.bodies needs the cameras' body_projection")
+        body_bank = BodyBank(bodies_dir, body_projection, log)  # type: ignore[arg-type]
 
     def say(message: str) -> None:
         if log is not None:
@@ -191,6 +231,16 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
             day.trajectories.append(plan_trajectory(world, rng, cfg.duration_s, cfg.motion, start_s=day.start_s,
                                                     height_m=float(heights_all[gt])))
 
+    bodies = None
+    if cfg.bodies is not None:
+        assert body_bank is not None
+        clothes = assign_clothes(body_bank, days, stream_rng(cfg.seed, S_BODIES))
+        say(f"clothes: {len(clothes)} crop identities of {len(body_bank.identity_names)} in {body_bank.bodies_dir} "
+            f"({len(body_bank.crops)} crops)")
+        bodies = BodyWorld(body_bank, cfg.bodies, clothes,
+                           make_measures(heights_all, stream_rng(cfg.seed, S_BODY_MEASURES)),
+                           camera_light_gains(cfg.num_cameras, cfg.bodies, stream_rng(cfg.seed, S_BODY_LIGHT)))
+
     per_camera: list[tuple[int, NDArray[np.float64], DetectionColumns]] = []
     glance_counter = [0]
     t1 = time.perf_counter()
@@ -204,16 +254,16 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
         if cfg.level == "feature":
             for c in range(cfg.num_cameras):
                 cols = feature_camera_day(cfg, world, c, day, stamps[c], identities, photo_offsets, heights,
-                                          camera_bias[c], glance_counter)
+                                          camera_bias[c], glance_counter, bodies)
                 per_camera.append((c, stamps[c], cols))
         else:
             cols_list = pixel_camera_frames(cfg, world, day, stamps, identities, photo_offsets, heights, bank,
-                                            glance_counter, log, frames_done, frames_total)
+                                            glance_counter, log, frames_done, frames_total, bodies)
             per_camera.extend((c, stamps[c], cols) for c, cols in enumerate(cols_list))
-    table = assemble_frames(per_camera, cfg.seed)
+    table = assemble_frames(per_camera, cfg.seed, None if bodies is None else (bodies.dim, bodies.parts))
     say(f"camera frames done in {time.perf_counter() - t1:.1f} s: {table.stamp_s.size} frames, "
         f"{table.det['gt_id'].size} detections, {table.face['score'].size} faces")
     gt_arrays, loss_info = sample_ground_truth(cfg, world, days, heights_all)
     document = scenario_document(cfg, bank, world, identities, photo_offsets, days, heights_all, phases, table,
-                                 gt_arrays, loss_info, glance_counter[0])
+                                 gt_arrays, loss_info, glance_counter[0], bodies)
     return SimResult(document, table, gt_arrays)

@@ -29,6 +29,7 @@ __all__ = [
     "LossSummary",
     "Visibility",
     "VisibilityConfig",
+    "body_band_visibility",
     "camera_views",
     "camera_visibility",
     "count_losses",
@@ -169,6 +170,61 @@ def _occluded(
     blocks = in_front & (dist < radius_m) & (ray_z < heights[None, None, :]) & inside[:, None, :]
     blocks &= ~np.eye(n_p, dtype=bool)[None]
     return blocks.any(axis=2)
+
+
+def body_band_visibility(
+    camera: SimCamera,
+    xy: NDArray[np.floating],
+    heights_m: NDArray[np.floating],
+    in_room: NDArray[np.bool_],
+    bands: int,
+    frames: NDArray[np.integer],
+    people: NDArray[np.integer],
+    config: VisibilityConfig | None = None,
+) -> BoolArray:
+    """Which horizontal bands of a person's body a camera sees, at the (frame, person) pairs ``frames``,
+    ``people`` (n,) of ``xy`` (T, P, 2): (n, bands), band 0 at the head top.
+
+    Band k spans k / bands .. (k + 1) / bands of the height below the head top; it is seen when the point of
+    the body axis at its middle projects inside the image and the line of sight to it passes no nearer
+    person (the cylinders of :func:`camera_visibility`, tested as there). Feet out of the image or hidden
+    behind someone in front show as unseen lower bands.
+    """
+    cfg = config if config is not None else VisibilityConfig()
+    pos = np.asarray(xy, dtype=np.float64)
+    if pos.ndim != 3 or pos.shape[2] != 2:
+        raise ValueError(f"xy must have shape (T, P, 2), got {pos.shape}")
+    if isinstance(bands, bool) or not isinstance(bands, (int, np.integer)) or not 1 <= bands <= 64:
+        raise ValueError(f"bands must be an integer in [1, 64], got {bands!r}")
+    n_t, n_p = pos.shape[:2]
+    heights = np.asarray(heights_m, dtype=np.float64).reshape(-1)
+    inside = np.asarray(in_room, dtype=bool)
+    f_idx, p_idx = np.asarray(frames, dtype=np.intp).reshape(-1), np.asarray(people, dtype=np.intp).reshape(-1)
+    if heights.shape != (n_p,) or inside.shape != (n_t, n_p) or f_idx.shape != p_idx.shape:
+        raise ValueError(f"heights_m {heights.shape}, in_room {inside.shape}, frames {f_idx.shape}, people "
+                         f"{p_idx.shape} do not match xy {pos.shape}")
+    cam = camera.position
+    r = cfg.occluder_radius_m
+    fractions = 1.0 - (np.arange(bands) + 0.5) / bands
+    out = np.zeros((f_idx.size, int(bands)), dtype=bool)
+    for lo in range(0, f_idx.size, 8192):  # bounded memory: (chunk, P, bands)
+        f, p = f_idx[lo: lo + 8192], p_idx[lo: lo + 8192]
+        own = pos[f, p]  # (n, 2)
+        z = heights[p][:, None] * fractions  # (n, bands)
+        points = np.concatenate([np.broadcast_to(own[:, None, :], (*z.shape, 2)), z[..., None]], axis=2)
+        seen = _in_image(camera, points, cfg.image_margin_px) & inside[f, p][:, None]
+        # the horizontal ray to every band is the same: closest approach to each other person once
+        d = own - cam[:2]
+        d2 = np.maximum((d * d).sum(axis=1), 1e-12)
+        rel = pos[f] - cam[:2]  # (n, P, 2)
+        s = (rel * d[:, None, :]).sum(axis=2) / d2[:, None]
+        dist = np.linalg.norm(cam[:2] + s[..., None] * d[:, None, :] - pos[f], axis=2)
+        near = (s > 0.0) & (s < 1.0 - r / np.sqrt(d2)[:, None]) & (dist < r) & inside[f]
+        near[np.arange(f.size), p] = False
+        ray_z = cam[2] + s[:, :, None] * (z[:, None, :] - cam[2])  # (n, P, bands)
+        seen &= ~(near[:, :, None] & (ray_z < heights[None, :, None])).any(axis=1)
+        out[lo: lo + 8192] = seen
+    return out
 
 
 def camera_views(cameras: Sequence[SimCamera], xy: NDArray[np.floating], facing_rad: NDArray[np.floating],

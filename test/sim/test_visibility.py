@@ -10,6 +10,7 @@ import pytest
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_master.sim.visibility import (
     VisibilityConfig,
+    body_band_visibility,
     camera_views,
     camera_visibility,
     count_losses,
@@ -163,3 +164,25 @@ def test_glance_numbering_bridges_short_gaps() -> None:
     assert set(ids[30:35]) == {1}
     assert (ids[~vis] == -1).all()
     assert glance_ids(t, np.zeros(t.size, dtype=bool))[1] == 0
+
+
+def test_body_bands_lose_the_feet_to_the_image_border_and_to_someone_in_front() -> None:
+    """From a camera 2.4 m high tilted 20 deg: a person 5 m away is seen whole; at 1.5 m the feet leave the
+    image; behind someone at 3 m the lower body is hidden while the head still shows over them."""
+    cam = _camera()
+    xy = np.array([[[5.0, 0.0], [20.0, 9.0]], [[1.5, 0.0], [20.0, 9.0]], [[5.0, 0.0], [3.0, 0.05]]])
+    heights = np.array([1.75, 1.6])
+    inside = np.array([[True, False], [True, False], [True, True]])
+    bands = body_band_visibility(cam, xy, heights, inside, 8, np.array([0, 1, 2, 2]), np.array([0, 0, 0, 1]))
+    assert bands.shape == (4, 8)
+    assert bands[0].all()  # far, alone: everything
+    assert bands[1, :3].all() and not bands[1, -1]  # near: head and torso, no feet
+    assert bands[2, 0] and not bands[2, -1]  # behind the 1.6 m person: the head over them, not the feet
+    assert bands[2].sum() < 8 and bands[3].all()  # the person in front is whole
+    # a band is seen only if its point is in the image and unoccluded: matches camera_visibility's shoulders
+    vis = camera_visibility(cam, xy, np.zeros((3, 2)), heights, inside)
+    assert vis.detectable[0, 0] and vis.detectable[2, 1]
+    with pytest.raises(ValueError, match="bands"):
+        body_band_visibility(cam, xy, heights, inside, 0, np.array([0]), np.array([0]))
+    with pytest.raises(ValueError, match="frames"):
+        body_band_visibility(cam, xy, heights, inside, 8, np.array([0, 1]), np.array([0]))
