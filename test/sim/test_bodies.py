@@ -342,3 +342,32 @@ def load_projection(path: Path) -> BodyProjection:
     from face_reid_camera.body.projection import load_body_projection
 
     return load_body_projection(path)
+
+
+def test_crop_descriptor_ignores_background_and_hidden_bands(tmp_path: Path, projection: BodyProjection) -> None:
+    """Only the crop's central columns (the person) and its seen bands count, as at a camera cutting the person
+    out by depth; the light changes the descriptor."""
+    rng = np.random.default_rng(3)
+    crop = _person_crop((200, 30, 30), (40, 40, 40), 2, rng)
+    other_background = crop.copy()
+    other_background[:, :5] = (0, 255, 0)  # (SILTP looks 3 px beyond the mask at full, 6 at half size)
+    other_background[:, -5:] = (255, 0, 255)
+    other_legs = crop.copy()
+    other_legs[104:] = (0, 0, 255)  # within bands 6 and 7 of 8 (rows 96-127), beyond SILTP's reach of band 5
+    for name, image in (("a", crop), ("b", other_background), ("c", other_legs)):
+        (tmp_path / "crops" / name).mkdir(parents=True)
+        cv2.imwrite(str(tmp_path / "crops" / name / "01_7.png"), image)
+    bank = BodyBank(tmp_path / "crops", projection)
+    for name in "abc":
+        assert bank.load_identity(name) is not None
+    one = np.ones(3)
+    full, upper = 0xFF, 0x3F
+
+    def desc(i: int, bands: int = full, gains: np.ndarray = one, key: tuple[int, ...] = (0, 0)) -> np.ndarray:
+        return bank.descriptor(i, gains, key, bands, 8, 128, 0.5)
+
+    assert np.allclose(desc(0), desc(1), atol=1e-6)  # background left out
+    assert not np.allclose(desc(0), desc(2), atol=1e-3)  # legs differ ...
+    assert np.allclose(desc(0, upper), desc(2, upper), atol=1e-6)  # ... unless hidden
+    assert not np.allclose(desc(0), desc(0, gains=np.array([0.6, 0.9, 1.3]), key=(1, 0)), atol=1e-3)
+    assert desc(0) is desc(0)  # cached
