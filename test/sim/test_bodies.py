@@ -180,6 +180,11 @@ def test_descriptors_are_the_crops_own_and_tell_clothes_apart(feature_dir: Path)
     off = ~np.eye(pick.size, dtype=bool)
     assert np.median(d[same & off]) < 0.6 * np.median(d[~same])
     assert len(set(names)) >= 4
+    # frames of a glance change a little (frame variants + noise), much less than clothes do
+    glances = a["body_glance"][rows][keep]
+    within = [np.median(np.linalg.norm(desc[glances == g] - desc[glances == g].mean(0), axis=1))
+              for g in np.unique(glances) if (glances == g).sum() > 3]
+    assert len(within) >= 5 and 0.02 < np.median(within) < 0.4 * np.median(d[~same])
     # undescribed rows (too little seen) are zeros
     assert not a["body_descriptor"][~a["body_described"]].any()
 
