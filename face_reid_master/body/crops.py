@@ -9,7 +9,9 @@ camera 4, tracklet, frame), PKU-Reid ``01_5.png`` (camera 01, body orientation 5
 from __future__ import annotations
 
 import csv
+import fnmatch
 import re
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,7 +19,7 @@ import numpy as np
 
 from face_reid_camera.faces.photos import list_identity_photos
 
-__all__ = ["Crop", "ReidSplit", "camera_of", "list_crops", "reid_splits", "same_camera"]
+__all__ = ["Crop", "ReidSplit", "camera_mask", "camera_of", "filter_crops", "list_crops", "reid_splits", "same_camera"]
 
 _MARKET = re.compile(r"^-?\d+_c(\d+)(?:s\d+)?_")
 _MARS = re.compile(r"^\d+C(\d+)T\d+F\d+", re.IGNORECASE)
@@ -74,6 +76,26 @@ def list_crops(root: str | Path) -> list[Crop]:
     return crops
 
 
+def filter_crops(crops: Sequence[Crop], include: Sequence[str] = (), exclude: Sequence[str] = (),
+                 exclude_identities: Collection[str] = ()) -> list[Crop]:
+    """The crops whose identity matches one of the ``include`` globs (none given: every identity), matches
+    none of the ``exclude`` globs and is not one of ``exclude_identities`` (ValueError if none is left)."""
+    for name, patterns in (("include", include), ("exclude", exclude)):
+        if isinstance(patterns, str) or any(not isinstance(p, str) or not p for p in patterns):
+            raise ValueError(f"{name} must be a sequence of non-empty glob patterns, got {patterns!r}")
+
+    def keep(identity: str) -> bool:
+        if include and not any(fnmatch.fnmatchcase(identity, p) for p in include):
+            return False
+        return identity not in exclude_identities and not any(fnmatch.fnmatchcase(identity, p) for p in exclude)
+
+    out = [c for c in crops if keep(c.identity)]
+    if not out:
+        raise ValueError(f"no crop left after --include {list(include)} / --exclude {list(exclude)} and "
+                         f"{len(exclude_identities)} excluded identities")
+    return out
+
+
 @dataclass(frozen=True)
 class ReidSplit:
     """Indices into the crop list: metric training crops, and probe / gallery crops of the other people
@@ -125,6 +147,11 @@ def reid_splits(crops: list[Crop], n_splits: int, rng: np.random.Generator, trai
 
 def same_camera(crops: list[Crop], probe: np.ndarray, gallery: np.ndarray) -> np.ndarray:
     """(probes, gallery) True where a gallery crop was seen by the probe's camera (never for unknown ones)."""
-    pc = np.array([crops[i].camera for i in probe], dtype=object)
-    gc = np.array([crops[i].camera for i in gallery], dtype=object)
+    return camera_mask([crops[i].camera for i in probe], [crops[i].camera for i in gallery])
+
+
+def camera_mask(probe_cameras: Sequence[str], gallery_cameras: Sequence[str]) -> np.ndarray:
+    """(probes, gallery) True where both cameras are known and equal (see :func:`same_camera`)."""
+    pc = np.array(list(probe_cameras), dtype=object)
+    gc = np.array(list(gallery_cameras), dtype=object)
     return (pc[:, None] == gc[None, :]) & (pc[:, None] != "")

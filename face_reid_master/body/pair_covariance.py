@@ -27,6 +27,16 @@ class PairCovariances:
     n_intra_pairs: int
     n_extra_pairs: int
 
+    def subset(self, index: npt.ArrayLike) -> PairCovariances:
+        """The covariances of the features ``index`` only (a difference's coordinates are the features'):
+        candidate feature sets are scored without recomputing the pair sums."""
+        i = np.asarray(index, dtype=np.intp).reshape(-1)
+        d = self.intra.shape[0]
+        if i.size == 0 or i.min() < 0 or i.max() >= d:
+            raise ValueError(f"index must select features in [0, {d}), got {i.tolist()}")
+        grid = np.ix_(i, i)
+        return PairCovariances(self.intra[grid], self.extra[grid], self.n_intra_pairs, self.n_extra_pairs)
+
 
 def _pair_scatter(n: float, s: FloatArray, scatter: FloatArray) -> FloatArray:
     """Sum over all ordered pairs (i, j) of a set of (x_i - x_j)(x_i - x_j)^T."""

@@ -8,15 +8,17 @@ In that subspace M = Sigma_I'^-1 - Sigma_E'^-1 with Sigma' = W^T Sigma W, the lo
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.linear_metric import LinearMetric
-from face_reid_master.body.pair_covariance import pair_covariances
+from face_reid_master.body.pair_covariance import PairCovariances, pair_covariances
 
-__all__ = ["fit_xqda"]
+__all__ = ["fit_xqda", "xqda_for_dims", "xqda_from_covariances"]
 
 
 def fit_xqda(features: npt.ArrayLike, labels: npt.ArrayLike, *, regularisation: float = 1e-3,
@@ -28,21 +30,35 @@ def fit_xqda(features: npt.ArrayLike, labels: npt.ArrayLike, *, regularisation: 
     dimensions kept (None: all whose eigenvalue exceeds 1, the directions where different people differ
     more than one person does; at least one).
     """
+    return xqda_from_covariances(pair_covariances(features, labels), regularisation=regularisation,
+                                 max_dims=max_dims)
+
+
+def xqda_from_covariances(cov: PairCovariances, *, regularisation: float = 1e-3,
+                          max_dims: int | None = None) -> LinearMetric:
+    """:func:`fit_xqda` from the pair covariances (e.g. a :meth:`PairCovariances.subset` of features)."""
+    return xqda_for_dims(cov, regularisation=regularisation, max_dims=(max_dims,))[0]
+
+
+def xqda_for_dims(cov: PairCovariances, *, regularisation: float,
+                  max_dims: Sequence[int | None]) -> list[LinearMetric]:
+    """One XQDA metric per subspace cap in ``max_dims`` (None: no cap), from one eigen-decomposition."""
     reg = check_real("regularisation", regularisation, 0.0, 1e6)
-    cov = pair_covariances(features, labels)
     d = cov.intra.shape[0]
-    if max_dims is not None:
-        max_dims = check_int("max_dims", max_dims, 1, d)
+    caps = [None if m is None else check_int("max_dims", m, 1, d) for m in max_dims]
+    if not caps:
+        raise ValueError("max_dims must hold at least one cap (None = no cap)")
     intra = cov.intra + reg * max(float(np.trace(cov.intra)) / d, 1e-12) * np.eye(d)
     values, vectors = scipy.linalg.eigh(cov.extra, intra)  # ascending; vectors^T intra vectors = I
     order = np.argsort(values)[::-1]
     values, vectors = values[order], vectors[:, order]
-    r = max(1, int(np.count_nonzero(values > 1.0)))
-    if max_dims is not None:
-        r = min(r, max_dims)
-    w = vectors[:, :r]
-    intra_sub = w.T @ intra @ w
-    extra_sub = w.T @ cov.extra @ w
-    metric = np.linalg.inv(intra_sub) - np.linalg.inv(extra_sub)
-    return LinearMetric(w, metric, "xqda", {"eigenvalues": values[:r].tolist(), "regularisation": reg,
-                                             "n_intra_pairs": cov.n_intra_pairs, "n_extra_pairs": cov.n_extra_pairs})
+    above = max(1, int(np.count_nonzero(values > 1.0)))
+    out = []
+    for cap in caps:
+        r = above if cap is None else min(above, cap)
+        w = vectors[:, :r]
+        metric = np.linalg.inv(w.T @ intra @ w) - np.linalg.inv(w.T @ cov.extra @ w)
+        out.append(LinearMetric(w, metric, "xqda", {
+            "eigenvalues": values[:r].tolist(), "regularisation": reg, "max_dims": cap,
+            "n_intra_pairs": cov.n_intra_pairs, "n_extra_pairs": cov.n_extra_pairs}))
+    return out

@@ -1,9 +1,13 @@
 """face-reid-eval-body: body re-identification on labelled crops, CMC and mAP per feature and metric.
 
-The camera's body descriptor code (:mod:`face_reid_camera.body.descriptor`) describes every crop; per
-random split half of the identities train KISSME and XQDA, the other half are probes (one camera) against
-a gallery (the other cameras), as in the second seed. Prints one JSON object; ``--plot`` saves the CMC
-curves.
+As the camera and master would: the camera's descriptor code (:mod:`face_reid_camera.body.descriptor`)
+describes every crop; per random split half of the identities are the training people: the per-block PCA
+projection (what a camera sends) is fitted on their crops, then KISSME and XQDA on their projected vectors;
+the other half are probes (one camera) against a gallery (the other cameras), as in the second seed.
+Euclidean distances are reported on the raw descriptors and on the projected vectors. The components kept,
+the regularisation and XQDA's subspace cap are chosen per split by cross-validation over the training
+identities only (:mod:`face_reid_master.body.model_selection`). Prints one JSON object; ``--plot`` saves
+the CMC curves.
 """
 
 from __future__ import annotations
@@ -12,92 +16,131 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from face_reid_master.body.cmc import rank_scores
-from face_reid_master.body.crops import Crop, list_crops, reid_splits, same_camera
+from face_reid_camera.body.projection import FEATURES
+from face_reid_master.body.cmc import RankScores, rank_scores
+from face_reid_master.body.crop_descriptors import describe_crops
+from face_reid_master.body.crops import Crop, filter_crops, list_crops, reid_splits, same_camera
+from face_reid_master.body.features import (
+    METRIC_FEATURES,
+    feature_columns,
+    fit_projection,
+    parse_pca_dims,
+    raw_feature,
+)
 from face_reid_master.body.kissme import fit_kissme
-from face_reid_master.body.linear_metric import LinearMetric, euclidean_metric
+from face_reid_master.body.linear_metric import euclidean_metric
+from face_reid_master.body.model_selection import (
+    DEFAULT_MAX_LENGTH,
+    SearchGrid,
+    Selection,
+    dims_candidates,
+    select_parameters,
+)
 from face_reid_master.body.xqda import fit_xqda
 
-__all__ = ["describe_crops", "evaluate", "main"]
+__all__ = ["METHODS", "evaluate", "main"]
 
 RANKS = (1, 5, 10, 20)
-KISSME_PCA_DIMS = 100  # KISSME's usual PCA before the metric (fewer when there are fewer training crops)
+METHODS = ("euclidean_raw", "euclidean_pca", "kissme", "xqda")
 
 
-def describe_crops(crops: Sequence[Crop], log: Any = None) -> tuple[dict[str, np.ndarray], list[int], float]:
-    """Per feature ("hsv", "siltp", "fused") the descriptors (n, d) of the readable crops, their indices in
-    ``crops``, and the mean time per crop (ms)."""
-    from face_reid_camera.body.descriptor import BodyDescriptorConfig, body_descriptor
-    from face_reid_camera.faces.photos import PhotoError, progress_bar, read_photo
-
-    config = BodyDescriptorConfig()
-    bar = progress_bar(len(crops), "describing crops", log) if log else None
-    hsv, siltp, kept = [], [], []
-    spent = 0.0
-    for k, crop in enumerate(crops):
-        try:
-            image = read_photo(crop.path)
-        except PhotoError as exc:
-            if log:
-                print(f"skipped: {exc}", file=log)
-            continue
-        t0 = time.perf_counter()
-        d = body_descriptor(image, None, config)
-        spent += time.perf_counter() - t0
-        hsv.append(d.hsv)
-        siltp.append(d.siltp)
-        kept.append(k)
-        if bar:
-            bar(k + 1)
-    if not kept:
-        raise ValueError("no crop could be read")
-    h, s = np.asarray(hsv, dtype=np.float64), np.asarray(siltp, dtype=np.float64)
-    fused = np.hstack([h, s]) / np.sqrt(2.0)  # each part unit-length: the fused vector too
-    return {"hsv": h, "siltp": s, "fused": fused}, kept, 1e3 * spent / len(kept)
+def _fit_grid(grid: SearchGrid, n_train: int) -> SearchGrid:
+    """``grid`` with at most the ``n_train - 1`` components a PCA of ``n_train`` crops gives."""
+    pairs = tuple(dict.fromkeys(tuple(min(d, n_train - 1) for d in p) for p in grid.pca_dims))
+    return SearchGrid(pairs, grid.regularisations, grid.subspace_dims)
 
 
-def _metrics(x: np.ndarray, labels: np.ndarray) -> dict[str, LinearMetric]:
-    pca = min(KISSME_PCA_DIMS, x.shape[1], max(1, x.shape[0] - len(set(labels.tolist()))))
-    return {"euclidean": euclidean_metric(x.shape[1]), "kissme": fit_kissme(x, labels, pca_dims=pca),
-            "xqda": fit_xqda(x, labels)}
+def _split_scores(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArray[Any], cameras: list[str],
+                  train: npt.NDArray[np.intp], grid: SearchGrid, folds: int, rng: np.random.Generator
+                  ) -> tuple[dict[str, dict[str, Callable[[npt.NDArray[np.intp], npt.NDArray[np.intp]], Any]]],
+                             Selection]:
+    """Per feature and method a distance function (probe rows, gallery rows) fitted on the ``train`` rows, and
+    the parameters chosen on them."""
+    train_features = {b: features[b][train] for b in FEATURES}
+    grid = _fit_grid(grid, train.size)
+    widest = fit_projection(train_features, grid.max_dims())
+    scores = widest.project_many(train_features)
+    selection = select_parameters({b: scores[:, s] for b, s in widest.slices().items()}, labels[train],
+                                  [cameras[i] for i in train], grid, folds, rng)
+    projection = fit_projection(train_features, selection.pca_dims)  # what a camera would send
+    wire = projection.project_many(features).astype(np.float64)
+    out: dict[str, dict[str, Any]] = {}
+    for f in METRIC_FEATURES:
+        raw = raw_feature(features, f)
+        x = wire[:, feature_columns(projection.slices(), f)]
+        xq, ks = selection.xqda[f], selection.kissme[f]
+        metrics = {
+            "euclidean_raw": (euclidean_metric(raw.shape[1]), raw),
+            "euclidean_pca": (euclidean_metric(x.shape[1]), x),
+            "kissme": (fit_kissme(x[train], labels[train], regularisation=ks.regularisation), x),
+            "xqda": (fit_xqda(x[train], labels[train], regularisation=xq.regularisation, max_dims=xq.max_dims), x),
+        }
+        out[f] = {m: (lambda p, g, metric=metric, data=data: metric.distances(data[p], data[g]))
+                  for m, (metric, data) in metrics.items()}
+    return out, selection
 
 
-def evaluate(features: dict[str, np.ndarray], labels: np.ndarray, cameras: list[str], n_splits: int, seed: int,
-             progress: Callable[[int], None] | None = None) -> dict[str, dict[str, dict[str, Any]]]:
-    """Rank-k and mAP per feature and metric, mean (and std of rank-1) over ``n_splits`` random splits."""
+def _summary(runs: list[RankScores]) -> dict[str, Any]:
+    r1 = np.array([s.rank(1) for s in runs])
+    longest = max(s.cmc.size for s in runs)
+    curve = np.mean([np.pad(s.cmc, (0, longest - s.cmc.size), mode="edge") for s in runs], axis=0)
+    return {
+        **{f"rank{k}": round(float(np.mean([s.rank(k) for s in runs])), 4) for k in RANKS},
+        "rank1_std": round(float(r1.std()), 4),
+        "map": round(float(np.mean([s.mean_average_precision for s in runs])), 4),
+        "probes_per_split": round(float(np.mean([s.probes for s in runs])), 1),
+        "cmc": [round(float(v), 4) for v in curve[:50]],
+    }
+
+
+def evaluate(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArray[Any], cameras: list[str],
+             n_splits: int, seed: int, grid: SearchGrid, folds: int = 3,
+             progress: Callable[[int], None] | None = None) -> tuple[dict[str, dict[str, dict[str, Any]]],
+                                                                      list[Selection]]:
+    """Rank-k and mAP per feature and method, mean (and std of rank-1) over ``n_splits`` random splits of the
+    identities (``seed``), and each split's chosen parameters. ``features``: per block of ``FEATURES`` the
+    raw descriptors (n, d)."""
     rng = np.random.default_rng(seed)
+    inner_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
     pseudo = [Crop(str(lab), Path(""), cam) for lab, cam in zip(labels.tolist(), cameras, strict=True)]
     splits = reid_splits(pseudo, n_splits, rng)
-    scores: dict[str, dict[str, list[Any]]] = {}
+    scores: dict[str, dict[str, list[RankScores]]] = {f: {m: [] for m in METHODS} for f in METRIC_FEATURES}
+    selections = []
     for k, split in enumerate(splits):
         valid = ~same_camera(pseudo, split.probe, split.gallery)
-        for name, x in features.items():
-            for method, metric in _metrics(x[split.train], labels[split.train]).items():
-                s = rank_scores(metric.distances(x[split.probe], x[split.gallery]), labels[split.probe],
-                                labels[split.gallery], valid)
-                scores.setdefault(name, {}).setdefault(method, []).append(s)
+        distances, selection = _split_scores(features, labels, cameras, split.train, grid, folds, inner_rng)
+        selections.append(selection)
+        for f, by_method in distances.items():
+            for method, distance in by_method.items():
+                scores[f][method].append(rank_scores(distance(split.probe, split.gallery), labels[split.probe],
+                                                     labels[split.gallery], valid))
         if progress:
             progress(k + 1)
-    out: dict[str, dict[str, dict[str, Any]]] = {}
-    for name, by_method in scores.items():
-        for method, runs in by_method.items():
-            r1 = np.array([s.rank(1) for s in runs])
-            longest = max(s.cmc.size for s in runs)
-            curve = np.mean([np.pad(s.cmc, (0, longest - s.cmc.size), mode="edge") for s in runs], axis=0)
-            out.setdefault(name, {})[method] = {
-                **{f"rank{k}": round(float(np.mean([s.rank(k) for s in runs])), 4) for k in RANKS},
-                "rank1_std": round(float(r1.std()), 4),
-                "map": round(float(np.mean([s.mean_average_precision for s in runs])), 4),
-                "probes_per_split": round(float(np.mean([s.probes for s in runs])), 1),
-                "cmc": [round(float(v), 4) for v in curve[:50]],
-            }
-    return out
+    return {f: {m: _summary(runs) for m, runs in by_method.items()} for f, by_method in scores.items()}, selections
+
+
+def _chosen_summary(selections: list[Selection]) -> dict[str, Any]:
+    """How often each value was chosen over the splits."""
+
+    def counts(values: list[Any]) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for v in values:
+            out[str(v)] = out.get(str(v), 0) + 1
+        return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+    return {
+        "pca_dims": counts(["_".join(f"{b}{s.pca_dims[b]}" for b in FEATURES) for s in selections]),
+        **{f"{method}_{f}": counts([(getattr(s, method)[f].regularisation, getattr(s, method)[f].max_dims)
+                                    for s in selections])
+           for method in ("xqda", "kissme") for f in METRIC_FEATURES},
+    }
 
 
 def _plot(results: dict[str, dict[str, dict[str, Any]]], path: Path, title: str) -> None:
@@ -126,49 +169,80 @@ def _plot(results: dict[str, dict[str, dict[str, Any]]], path: Path, title: str)
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="face-reid-eval-body", description=__doc__.splitlines()[0])
     p.add_argument("crops", type=Path, metavar="CROPS_DIR", help="one sub-folder of person crops per identity")
+    p.add_argument("--include", action="append", default=[], metavar="PATTERN",
+                   help="only identities whose folder name matches this glob (repeatable), e.g. 'pkureid_*'")
+    p.add_argument("--exclude", action="append", default=[], metavar="PATTERN",
+                   help="leave out identities whose folder name matches this glob (repeatable)")
     p.add_argument("--splits", type=int, default=10, help="random train / test splits averaged (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the splits (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the splits and folds (default 0)")
+    p.add_argument("--pca-dims", metavar="hsv=N,siltp=N",
+                   help="fixed PCA components per block (default: chosen per split by cross-validation)")
+    p.add_argument("--max-length", type=int, default=DEFAULT_MAX_LENGTH,
+                   help=f"most projected values per person (all blocks) when the components are chosen "
+                   f"(default {DEFAULT_MAX_LENGTH})")
+    p.add_argument("--folds", type=int, default=3,
+                   help="cross-validation folds over each split's training identities (default 3)")
     p.add_argument("--out", type=Path, help="also write the JSON to this file")
     p.add_argument("--plot", type=Path, help="save the CMC curves to this PNG")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 
 
+def _fail(message: str) -> int:
+    print(f"face-reid-eval-body: error: {message}", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the evaluation; returns the exit status (2 on unusable input)."""
     args = _parser().parse_args(list(argv) if argv is not None else None)
     log = None if args.quiet else sys.stderr
-    if args.splits < 1:
-        print(f"face-reid-eval-body: error: --splits must be >= 1, got {args.splits}", file=sys.stderr)
-        return 2
+    for name in ("splits", "folds", "max_length"):
+        low = 2 if name == "folds" else 1
+        if getattr(args, name) < low:
+            return _fail(f"--{name.replace('_', '-')} must be >= {low}, got {getattr(args, name)}")
     t0 = time.perf_counter()
     try:
-        crops = list_crops(args.crops)
-        features, kept, ms_per_crop = describe_crops(crops, log)
-        labels = np.array([crops[k].identity for k in kept])
-        cameras = [crops[k].camera for k in kept]
+        grid = SearchGrid((tuple(parse_pca_dims(args.pca_dims)[b] for b in FEATURES),) if args.pca_dims
+                          else dims_candidates(max_length=args.max_length))
+        crops = filter_crops(list_crops(args.crops), args.include, args.exclude)
+        described = describe_crops(crops, log=log)
+        labels, cameras = described.labels, described.cameras
         bar = None
         if log:
             from face_reid_camera.faces.photos import progress_bar
 
             bar = progress_bar(args.splits, "splits", log)
-        results = evaluate(features, labels, cameras, args.splits, args.seed, bar)
+        results, selections = evaluate(described.features, labels, cameras, args.splits, args.seed, grid,
+                                       args.folds, bar)
     except ValueError as exc:
-        print(f"face-reid-eval-body: error: {exc}", file=sys.stderr)
-        return 2
+        return _fail(str(exc))
     out: dict[str, Any] = {
         "crops_dir": str(args.crops),
-        "crops": len(kept),
-        "skipped_unreadable": len(crops) - len(kept),
+        "include": args.include,
+        "exclude": args.exclude,
+        "crops": len(described.crops),
+        "skipped_unreadable": len(described.skipped),
         "identities": len(set(labels.tolist())),
         "crops_with_camera": int(sum(bool(c) for c in cameras)),
         "splits": args.splits,
         "seed": args.seed,
-        "protocol": "per split: half of the identities train the metrics; each other identity gives one "
-                    "random probe crop, compared with the gallery of every other test crop seen by another "
-                    "camera (cameras unknown: every other crop)",
-        "descriptor_ms_per_crop": round(ms_per_crop, 3),
-        "feature_dims": {k: int(v.shape[1]) for k, v in features.items()},
+        "protocol": "per split: half of the identities are the training people (PCA projection per block, "
+                    "then KISSME / XQDA on the projected vectors); each other identity gives one random probe "
+                    "crop, compared with the gallery of every other test crop seen by another camera (cameras "
+                    "unknown: every other crop); euclidean_raw on the descriptors, the others on the projected "
+                    "vectors",
+        "hyperparameters": {
+            "chosen_on": f"{args.folds}-fold cross-validation over each split's training identities (every crop "
+                         "a probe against the fold's crops of other cameras; rank-1, then mAP); components by "
+                         "the fused XQDA" + (" (fixed by --pca-dims)" if args.pca_dims else
+                                             f" within {args.max_length} values per person"),
+            "grid": grid.to_dict(),
+            "chosen_counts": _chosen_summary(selections),
+            "per_split": [s.to_dict() for s in selections],
+        },
+        "descriptor_ms_per_crop": round(described.ms_per_crop, 3),
+        "feature_dims": {f: int(raw_feature(described.features, f).shape[1]) for f in METRIC_FEATURES},
         "results": results,
         "run_time_s": round(time.perf_counter() - t0, 1),
     }

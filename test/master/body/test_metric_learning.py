@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from face_reid_master.body.cmc import rank_scores
-from face_reid_master.body.kissme import fit_kissme
+from face_reid_master.body.kissme import fit_kissme, kissme_from_covariances
 from face_reid_master.body.linear_metric import LinearMetric, euclidean_metric
 from face_reid_master.body.pair_covariance import pair_covariances
-from face_reid_master.body.xqda import fit_xqda
+from face_reid_master.body.xqda import fit_xqda, xqda_for_dims
 
 
 def test_pair_covariances_equal_the_average_over_every_ordered_pair() -> None:
@@ -108,3 +108,28 @@ def test_linear_metric_rejects_bad_shapes() -> None:
         LinearMetric(np.eye(3), np.eye(2))
     with pytest.raises(ValueError, match="features"):
         euclidean_metric(3).distances(np.zeros((2, 4)), np.zeros((2, 3)))
+
+
+def test_covariance_subset_and_fits_from_covariances_match_the_fits_on_those_columns() -> None:
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(40, 6)) + np.repeat(rng.normal(size=(8, 6)) * 2, 5, axis=0)
+    y = np.repeat(np.arange(8), 5)
+    cols = [4, 1, 2]
+    sub = pair_covariances(x, y).subset(cols)
+    direct = pair_covariances(x[:, cols], y)
+    np.testing.assert_allclose(sub.intra, direct.intra, atol=1e-12)
+    np.testing.assert_allclose(sub.extra, direct.extra, atol=1e-12)
+    with pytest.raises(ValueError, match="index"):
+        pair_covariances(x, y).subset([6])
+    capped = xqda_for_dims(sub, regularisation=1e-3, max_dims=[1, None])
+    for cap, metric in zip((1, None), capped, strict=True):
+        alone = fit_xqda(x[:, cols], y, regularisation=1e-3, max_dims=cap)
+        np.testing.assert_allclose(np.abs(metric.projection), np.abs(alone.projection), atol=1e-9)  # signs free
+        np.testing.assert_allclose(metric.distances(x[:5, cols], x[:, cols]), alone.distances(x[:5, cols], x[:, cols]),
+                                   atol=1e-6)  # sqrt of rounding: 1e-15 -> 3e-8
+    assert capped[0].projection.shape[1] == 1 and capped[1].projection.shape[1] >= 1
+    assert capped[0].info["eigenvalues"] == capped[1].info["eigenvalues"][:1]  # the leading direction of both
+    k = kissme_from_covariances(sub, regularisation=1e-2)
+    np.testing.assert_allclose(k.metric, fit_kissme(x[:, cols], y, regularisation=1e-2).metric, atol=1e-12)
+    with pytest.raises(ValueError, match="max_dims"):
+        xqda_for_dims(sub, regularisation=1e-3, max_dims=[4])

@@ -1,4 +1,5 @@
-"""face-reid-eval-body on a small generated crops folder: the JSON report and the exit status."""
+"""face-reid-eval-body: the JSON report and exit status on generated crops, and the PCA-then-metric evaluation
+(projection fitted on the training people only, learned metrics against a nuisance that fools Euclidean)."""
 
 from __future__ import annotations
 
@@ -7,16 +8,20 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
-from face_reid_master.tools.eval_body import main
+from face_reid_master.body.model_selection import SearchGrid
+from face_reid_master.tools import eval_body
+from face_reid_master.tools.eval_body import METHODS, evaluate, main
 
 
-def _crops(root: Path) -> None:
-    """8 people (shirt / trousers colours) x 2 cameras (a light change) x 2 crops, Market-1501 names."""
+def _crops(root: Path, people: int = 12) -> None:
+    """``people`` (shirt / trousers colours) x 2 cameras (a light change) x 2 crops, Market-1501 names; one
+    identity folder 'other_x' too."""
     rng = np.random.default_rng(0)
-    for pid in range(8):
+    for pid in range(people):
         shirt, trousers = rng.integers(0, 256, 3), rng.integers(0, 256, 3)
-        folder = root / f"p{pid}"
+        folder = root / (f"p{pid:02d}" if pid else "other_x")
         folder.mkdir(parents=True)
         for cam, gain in ((1, 1.0), (2, 0.8)):
             for k in range(2):
@@ -26,18 +31,63 @@ def _crops(root: Path) -> None:
                 cv2.imwrite(str(folder / f"{pid:04d}_c{cam}s1_{k:06d}_00.jpg"), img)
 
 
-def test_eval_body_reports_every_feature_and_metric(tmp_path: Path, capsys) -> None:
+def test_eval_body_reports_every_feature_and_method(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _crops(tmp_path / "crops")
     out = tmp_path / "r.json"
-    assert main([str(tmp_path / "crops"), "--splits", "2", "--quiet", "--out", str(out),
-                 "--plot", str(tmp_path / "cmc.png")]) == 0
+    assert main([str(tmp_path / "crops"), "--include", "p*", "--splits", "2", "--quiet", "--out", str(out),
+                 "--pca-dims", "hsv=6,siltp=4", "--folds", "2", "--plot", str(tmp_path / "cmc.png")]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed == json.loads(out.read_text())
-    assert (printed["crops"], printed["identities"], printed["crops_with_camera"]) == (32, 8, 32)
+    assert (printed["crops"], printed["identities"], printed["crops_with_camera"]) == (44, 11, 44)  # 'other_x' out
     assert set(printed["results"]) == {"hsv", "siltp", "fused"}
     for by_method in printed["results"].values():
-        assert set(by_method) == {"euclidean", "kissme", "xqda"}
-    assert printed["results"]["hsv"]["euclidean"]["rank5"] > 0.7  # distinct colours: easy
+        assert tuple(by_method) == METHODS
+    assert printed["results"]["hsv"]["euclidean_raw"]["rank5"] > 0.7  # distinct colours: easy
+    assert printed["feature_dims"] == {"hsv": 2048, "siltp": 648, "fused": 2696}
+    hp = printed["hyperparameters"]
+    assert hp["chosen_counts"]["pca_dims"] == {"hsv6_siltp4": 2} and len(hp["per_split"]) == 2
+    assert hp["per_split"][0]["pca_dims"] == {"hsv": 6, "siltp": 4}
     assert (tmp_path / "cmc.png").stat().st_size > 1000
     assert main([str(tmp_path / "missing"), "--quiet"]) == 2
     assert main([str(tmp_path / "crops"), "--splits", "0", "--quiet"]) == 2
+    assert main([str(tmp_path / "crops"), "--include", "nobody_*", "--quiet"]) == 2
+    assert main([str(tmp_path / "crops"), "--pca-dims", "hsv=6", "--quiet"]) == 2
+
+
+def _nuisance_features(rng: np.random.Generator, people: int = 24, shots: int = 6
+                       ) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+    """Descriptor-sized vectors: per block, identity in 6 directions (spread 1, 0.15 within a person) and a
+    per-crop nuisance 4x larger in 4 other directions; 2 cameras."""
+    labels = np.repeat([f"id{i:02d}" for i in range(people)], shots)
+    features = {}
+    for name, dim in (("hsv", 2048), ("siltp", 648)):
+        x = np.zeros((labels.size, dim))
+        x[:, :6] = np.repeat(rng.normal(size=(people, 6)), shots, axis=0) + rng.normal(0, 0.15, (labels.size, 6))
+        x[:, 6:10] = rng.normal(0, 4.0, (labels.size, 4))
+        x[:, 10:40] = rng.normal(0, 0.05, (labels.size, 30))
+        features[name] = x
+    cameras = ["1", "2"] * (labels.size // 2)
+    return features, labels, cameras
+
+
+def test_pca_then_metric_evaluation_fits_on_training_people_and_beats_euclidean(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    features, labels, cameras = _nuisance_features(np.random.default_rng(3))
+    fitted_rows = []
+    real_fit = eval_body.fit_projection
+
+    def spy(train_features, dims, *args, **kwargs):
+        fitted_rows.append(len(train_features["hsv"]))
+        return real_fit(train_features, dims, *args, **kwargs)
+
+    monkeypatch.setattr(eval_body, "fit_projection", spy)
+    grid = SearchGrid(((4, 4), (10, 10)), regularisations=(1e-3,), subspace_dims=(None,))
+    results, selections = evaluate(features, labels, cameras, n_splits=2, seed=0, grid=grid, folds=3)
+    assert set(fitted_rows) == {12 * 6}  # half of the 24 people: the projection never sees a test person
+    # 4 components hold the nuisance (the largest variance) only: cross-validation must take 10
+    assert all(s.pca_dims == {"hsv": 10, "siltp": 10} for s in selections)
+    for name in ("hsv", "siltp", "fused"):
+        r = results[name]
+        assert r["xqda"]["rank1"] >= 0.9 and r["kissme"]["rank1"] >= 0.9, (name, r)
+        assert r["euclidean_raw"]["rank1"] < 0.6 and r["euclidean_pca"]["rank1"] < 0.6, (name, r)
+        assert r["xqda"]["map"] > r["euclidean_raw"]["map"] + 0.3
