@@ -10,7 +10,7 @@ candidate set of columns takes their sub-matrix.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import product
 from typing import Any
@@ -128,10 +128,11 @@ def _scores(metric: LinearMetric, x: npt.NDArray[np.float64], labels: npt.NDArra
 
 
 def select_parameters(scores: Mapping[str, npt.ArrayLike], labels: npt.ArrayLike, cameras: Sequence[str],
-                      grid: SearchGrid, folds: int, rng: np.random.Generator) -> Selection:
+                      grid: SearchGrid, folds: int, rng: np.random.Generator,
+                      progress: Callable[[int, int], None] | None = None) -> Selection:
     """Choose the metric parameters on ``scores`` (per block of ``FEATURES``: (n, k) PCA scores, leading
     component first, k >= the grid's most), ``labels`` and ``cameras`` (one per row) by ``folds``-fold
-    cross-validation over the identities (see the module doc)."""
+    cross-validation over the identities (see the module doc); ``progress(done, total)`` after each fold."""
     y = np.asarray(labels)
     cams = list(cameras)
     need = grid.max_dims()
@@ -179,6 +180,8 @@ def select_parameters(scores: Mapping[str, npt.ArrayLike], labels: npt.ArrayLike
                             _scores(kissme_from_covariances(sub, regularisation=reg), xt, y[test], valid))
                     except ValueError as exc:
                         raise ValueError(f"fold {k + 1} of {folds}: {exc}") from None
+        if progress:
+            progress(k + 1, folds)
 
     def mean(key: tuple[str, str, tuple[int, ...], float, int | None]) -> tuple[float, float]:
         runs = np.array(results[key])

@@ -60,9 +60,9 @@ def _fit_grid(grid: SearchGrid, n_train: int) -> SearchGrid:
 def _split_scores(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArray[Any], cameras: list[str],
                   train: npt.NDArray[np.intp], grid: SearchGrid, folds: int, rng: np.random.Generator
                   ) -> tuple[dict[str, dict[str, Callable[[npt.NDArray[np.intp], npt.NDArray[np.intp]], Any]]],
-                             Selection]:
-    """Per feature and method a distance function (probe rows, gallery rows) fitted on the ``train`` rows, and
-    the parameters chosen on them."""
+                             Selection, dict[str, int]]:
+    """Per feature and method a distance function (probe rows, gallery rows) fitted on the ``train`` rows, the
+    parameters chosen on them and each feature's XQDA subspace dimension r."""
     train_features = {b: features[b][train] for b in FEATURES}
     grid = _fit_grid(grid, train.size)
     widest = fit_projection(train_features, grid.max_dims())
@@ -72,6 +72,7 @@ def _split_scores(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.
     projection = fit_projection(train_features, selection.pca_dims)  # what a camera would send
     wire = projection.project_many(features).astype(np.float64)
     out: dict[str, dict[str, Any]] = {}
+    subspace: dict[str, int] = {}
     for f in METRIC_FEATURES:
         raw = raw_feature(features, f)
         x = wire[:, feature_columns(projection.slices(), f)]
@@ -84,7 +85,8 @@ def _split_scores(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.
         }
         out[f] = {m: (lambda p, g, metric=metric, data=data: metric.distances(data[p], data[g]))
                   for m, (metric, data) in metrics.items()}
-    return out, selection
+        subspace[f] = int(metrics["xqda"][0].projection.shape[1])
+    return out, selection, subspace
 
 
 def _summary(runs: list[RankScores]) -> dict[str, Any]:
@@ -102,11 +104,11 @@ def _summary(runs: list[RankScores]) -> dict[str, Any]:
 
 def evaluate(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArray[Any], cameras: list[str],
              n_splits: int, seed: int, grid: SearchGrid, folds: int = 3,
-             progress: Callable[[int], None] | None = None) -> tuple[dict[str, dict[str, dict[str, Any]]],
-                                                                      list[Selection]]:
+             progress: Callable[[int], None] | None = None
+             ) -> tuple[dict[str, dict[str, dict[str, Any]]], list[dict[str, Any]]]:
     """Rank-k and mAP per feature and method, mean (and std of rank-1) over ``n_splits`` random splits of the
-    identities (``seed``), and each split's chosen parameters. ``features``: per block of ``FEATURES`` the
-    raw descriptors (n, d)."""
+    identities (``seed``), and each split's chosen parameters (:meth:`Selection.to_dict` and the XQDA
+    subspace dimensions). ``features``: per block of ``FEATURES`` the raw descriptors (n, d)."""
     rng = np.random.default_rng(seed)
     inner_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
     pseudo = [Crop(str(lab), Path(""), cam) for lab, cam in zip(labels.tolist(), cameras, strict=True)]
@@ -115,8 +117,9 @@ def evaluate(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArr
     selections = []
     for k, split in enumerate(splits):
         valid = ~same_camera(pseudo, split.probe, split.gallery)
-        distances, selection = _split_scores(features, labels, cameras, split.train, grid, folds, inner_rng)
-        selections.append(selection)
+        distances, selection, subspace = _split_scores(features, labels, cameras, split.train, grid, folds,
+                                                       inner_rng)
+        selections.append({**selection.to_dict(), "xqda_subspace_dims": subspace})
         for f, by_method in distances.items():
             for method, distance in by_method.items():
                 scores[f][method].append(rank_scores(distance(split.probe, split.gallery), labels[split.probe],
@@ -126,7 +129,7 @@ def evaluate(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArr
     return {f: {m: _summary(runs) for m, runs in by_method.items()} for f, by_method in scores.items()}, selections
 
 
-def _chosen_summary(selections: list[Selection]) -> dict[str, Any]:
+def _chosen_summary(selections: list[dict[str, Any]]) -> dict[str, Any]:
     """How often each value was chosen over the splits."""
 
     def counts(values: list[Any]) -> dict[str, int]:
@@ -136,10 +139,11 @@ def _chosen_summary(selections: list[Selection]) -> dict[str, Any]:
         return dict(sorted(out.items(), key=lambda kv: -kv[1]))
 
     return {
-        "pca_dims": counts(["_".join(f"{b}{s.pca_dims[b]}" for b in FEATURES) for s in selections]),
-        **{f"{method}_{f}": counts([(getattr(s, method)[f].regularisation, getattr(s, method)[f].max_dims)
-                                    for s in selections])
+        "pca_dims": counts(["_".join(f"{b}{s['pca_dims'][b]}" for b in FEATURES) for s in selections]),
+        **{f"{method}_{f}": counts([(s[method][f]["regularisation"], s[method][f]["max_dims"]) for s in selections])
            for method in ("xqda", "kissme") for f in METRIC_FEATURES},
+        "xqda_subspace_dims_mean": {f: round(float(np.mean([s["xqda_subspace_dims"][f] for s in selections])), 1)
+                                    for f in METRIC_FEATURES},
     }
 
 
@@ -239,7 +243,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                              f" within {args.max_length} values per person"),
             "grid": grid.to_dict(),
             "chosen_counts": _chosen_summary(selections),
-            "per_split": [s.to_dict() for s in selections],
+            "per_split": selections,
         },
         "descriptor_ms_per_crop": round(described.ms_per_crop, 3),
         "feature_dims": {f: int(raw_feature(described.features, f).shape[1]) for f in METRIC_FEATURES},

@@ -264,8 +264,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if tuple(b.name for b in widest.blocks) != FEATURES:
             raise ValueError(f"the projection must have the blocks {FEATURES}, got {[b.name for b in widest.blocks]}")
         scores = widest.project_many(described.features)
+        bar = None
+        if log:
+            from face_reid_camera.faces.photos import progress_bar
+
+            bar = progress_bar(args.folds, "choosing the parameters (folds)", log)
         selection = select_parameters({b: scores[:, s] for b, s in widest.slices().items()}, labels, cameras, grid,
-                                      args.folds, streams[0])
+                                      args.folds, streams[0], bar)
         data = _data_metadata(args, described, excluded)
         if kept_projection is not None:
             projection = kept_projection

@@ -85,7 +85,8 @@ def test_pca_then_metric_evaluation_fits_on_training_people_and_beats_euclidean(
     results, selections = evaluate(features, labels, cameras, n_splits=2, seed=0, grid=grid, folds=3)
     assert set(fitted_rows) == {12 * 6}  # half of the 24 people: the projection never sees a test person
     # 4 components hold the nuisance (the largest variance) only: cross-validation must take 10
-    assert all(s.pca_dims == {"hsv": 10, "siltp": 10} for s in selections)
+    assert all(s["pca_dims"] == {"hsv": 10, "siltp": 10} for s in selections)
+    assert all(s["xqda_subspace_dims"]["hsv"] == 6 for s in selections)  # the identity's 6 directions, no more
     for name in ("hsv", "siltp", "fused"):
         r = results[name]
         assert r["xqda"]["rank1"] >= 0.9 and r["kissme"]["rank1"] >= 0.9, (name, r)
