@@ -3,12 +3,16 @@ crop filter."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
-from face_reid_master.body.crops import Crop, filter_crops
+from face_reid_camera.body.descriptor import body_descriptor
+from face_reid_master.body.crop_descriptors import describe_crops
+from face_reid_master.body.crops import Crop, filter_crops, list_crops
 from face_reid_master.body.features import (
     feature_blocks,
     feature_columns,
@@ -37,7 +41,7 @@ def test_raw_fused_vectors_stay_unit_length_and_the_projection_is_pca_per_block(
         feats[name] /= np.linalg.norm(feats[name], axis=1, keepdims=True)
     fused = raw_feature(feats, "fused")
     assert fused.shape == (20, 2696) and np.allclose(np.linalg.norm(fused, axis=1), 1.0)
-    assert raw_feature(feats, "hsv") is not None and np.array_equal(raw_feature(feats, "siltp"), feats["siltp"])
+    assert np.array_equal(raw_feature(feats, "siltp"), feats["siltp"])
     projection = fit_projection(feats, {"hsv": 5, "siltp": 3})
     assert [(b.name, b.output_dim) for b in projection.blocks] == [("hsv", 5), ("siltp", 3)]
     wire = projection.project_many(feats)
@@ -68,3 +72,26 @@ def test_filter_crops_by_globs_and_names() -> None:
         filter_crops(crops, ["duke_*"])
     with pytest.raises(ValueError, match="include"):
         filter_crops(crops, "pkureid_*")
+
+
+def test_crops_are_described_by_the_camera_code_and_unreadable_ones_skipped(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    images = {}
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        images[name] = rng.integers(0, 256, (128, 64, 3), dtype=np.uint8)
+        cv2.imwrite(str(tmp_path / name / "0001_c1s1_000001_00.png"), images[name])
+    (tmp_path / "b" / "0001_c2s1_000002_00.png").write_bytes(b"not an image")
+    log = io.StringIO()
+    described = describe_crops(list_crops(tmp_path), log=log)
+    assert [c.identity for c in described.crops] == ["a", "b"] and described.labels.tolist() == ["a", "b"]
+    assert described.cameras == ["1", "1"] and [p.name for p in described.skipped] == ["0001_c2s1_000002_00.png"]
+    assert "skipped" in log.getvalue() and "100% (3/3)" in log.getvalue()
+    for k, name in enumerate(("a", "b")):
+        d = body_descriptor(images[name])
+        assert np.array_equal(described.features["hsv"][k], d.hsv) and np.array_equal(described.features["siltp"][k],
+                                                                                       d.siltp)
+    (tmp_path / "a" / "0001_c1s1_000001_00.png").write_bytes(b"")
+    (tmp_path / "b" / "0001_c1s1_000001_00.png").write_bytes(b"")
+    with pytest.raises(ValueError, match="no crop could be read"):
+        describe_crops(list_crops(tmp_path))
