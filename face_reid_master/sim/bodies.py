@@ -50,6 +50,7 @@ from face_reid_camera.body.descriptor import body_descriptor
 from face_reid_camera.body.observation import GEOMETRY_FIELDS
 from face_reid_camera.body.projection import BodyProjection
 from face_reid_camera.common.checks import check_int, check_real
+from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, crop_person_mask
 from face_reid_master.body.crops import Crop, list_crops
 from face_reid_master.sim.frame_table import BodyRows
 from face_reid_master.sim.visibility import VisibilityConfig, body_band_visibility, glance_ids
@@ -119,7 +120,7 @@ class BodySimConfig:
     # person out by depth): rendered bodies described by the camera pipeline come nearer to their crop's
     # descriptor (median distance 0.62 -> 0.42 on 10 PKU-Reid front crops at 3 m, other crops ~0.8; with a
     # 64 + 32 PCA projection fitted on the shared crops).
-    silhouette_width: float = 0.5
+    silhouette_width: float = CROP_SILHOUETTE
     geometry_noise_base_m: float = 0.01  # std of a measured width / height at 0 m ...
     geometry_noise_per_m: float = 0.006  # ... growing with range
 
@@ -271,10 +272,7 @@ class BodyBank:
             w = image.shape[1]
             band_of_row = np.minimum((np.arange(h) * bands) // h, bands - 1)
             seen_rows = ((bands_seen >> band_of_row) & 1).astype(bool)
-            half = max(1, round(silhouette * w / 2.0))
-            person_cols = np.zeros(w, dtype=bool)
-            person_cols[max(0, w // 2 - half): w // 2 + half] = True
-            mask = seen_rows[:, None] & person_cols[None, :]
+            mask = seen_rows[:, None] & crop_person_mask(h, w, silhouette)
             desc = body_descriptor(image, mask, self.projection.descriptor_config)
             out = self._descriptors[key] = self.projection.project(desc)
         return out

@@ -25,7 +25,7 @@ import numpy.typing as npt
 
 from face_reid_camera.body.projection import FEATURES
 from face_reid_master.body.cmc import RankScores, rank_scores
-from face_reid_master.body.crop_descriptors import describe_crops
+from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, describe_crops
 from face_reid_master.body.crops import Crop, filter_crops, list_crops, reid_splits, same_camera
 from face_reid_master.body.features import (
     METRIC_FEATURES,
@@ -188,6 +188,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="cross-validation folds over each split's training identities (default 3)")
     p.add_argument("--out", type=Path, help="also write the JSON to this file")
     p.add_argument("--plot", type=Path, help="save the CMC curves to this PNG")
+    p.add_argument("--silhouette", type=float, default=CROP_SILHOUETTE, metavar="SHARE",
+                   help=f"central share of a crop's columns described as the person, in (0, 1] (default "
+                        f"{CROP_SILHOUETTE}: the camera cuts the person out by depth; 1 = every pixel)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 
@@ -210,7 +213,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         grid = SearchGrid((tuple(parse_pca_dims(args.pca_dims)[b] for b in FEATURES),) if args.pca_dims
                           else dims_candidates(max_length=args.max_length))
         crops = filter_crops(list_crops(args.crops), args.include, args.exclude)
-        described = describe_crops(crops, log=log)
+        described = describe_crops(crops, log=log, silhouette=args.silhouette)
         labels, cameras = described.labels, described.cameras
         bar = None
         if log:
@@ -245,6 +248,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "chosen_counts": _chosen_summary(selections),
             "per_split": selections,
         },
+        "silhouette": args.silhouette,
         "descriptor_ms_per_crop": round(described.ms_per_crop, 3),
         "feature_dims": {f: int(raw_feature(described.features, f).shape[1]) for f in METRIC_FEATURES},
         "results": results,

@@ -34,7 +34,7 @@ from face_reid_camera.body.projection import (
     save_body_projection,
 )
 from face_reid_camera.common.errors import ModelLoadError
-from face_reid_master.body.crop_descriptors import CropDescriptors, describe_crops
+from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, CropDescriptors, describe_crops
 from face_reid_master.body.crops import Crop, filter_crops, list_crops
 from face_reid_master.body.features import METRIC_FEATURES, fit_projection, parse_pca_dims
 from face_reid_master.body.metric_file import BODY_METRIC_FILE, BodyMetricModel, load_body_metric, save_body_metric
@@ -98,6 +98,9 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0, help="seed of the folds and pair samples (default 0)")
     p.add_argument("--out-dir", type=Path, default=None,
                    help="where the files go (default: the models directory)")
+    p.add_argument("--silhouette", type=float, default=CROP_SILHOUETTE, metavar="SHARE",
+                   help=f"central share of a crop's columns described as the person, in (0, 1] (default "
+                        f"{CROP_SILHOUETTE}: the camera cuts the person out by depth; 1 = every pixel)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = p.parse_args(argv)
     for name, low in (("max_length", 2), ("folds", 2), ("max_negative_pairs", 10), ("seed", 0)):
@@ -177,7 +180,9 @@ def _data_metadata(args: argparse.Namespace, described: CropDescriptors, exclude
         "excluded": {"patterns": list(args.exclude), "included_patterns": list(args.include),
                      "scenario_crop_identities": sorted(excluded)},
         "identities": identities,
-        "descriptor": "face_reid_camera.body.descriptor.body_descriptor, default row-band parts, no mask",
+        "descriptor": "face_reid_camera.body.descriptor.body_descriptor, default row-band parts, the central "
+                      f"{args.silhouette} of each crop's columns (face_reid_master.body.crop_descriptors)",
+        "silhouette": args.silhouette,
         "fitted_utc": _fitted_utc(),
     }
 
@@ -240,7 +245,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         excluded = scenario_clothes(args.exclude_scenario)
         kept_projection = load_body_projection(args.projection) if args.projection is not None else None
         crops = filter_crops(list_crops(args.crops), args.include, args.exclude, excluded)
-        described = describe_crops(crops, kept_projection.descriptor_config if kept_projection else None, log)
+        described = describe_crops(crops, kept_projection.descriptor_config if kept_projection else None, log,
+                                   args.silhouette)
     except (ValueError, FileNotFoundError, ModelLoadError) as exc:
         return _fail(str(exc))
     labels, cameras = described.labels, described.cameras

@@ -88,9 +88,14 @@ def test_crops_are_described_by_the_camera_code_and_unreadable_ones_skipped(tmp_
     assert described.cameras == ["1", "1"] and [p.name for p in described.skipped] == ["0001_c2s1_000002_00.png"]
     assert "skipped" in log.getvalue() and "100% (3/3)" in log.getvalue()
     for k, name in enumerate(("a", "b")):
-        d = body_descriptor(images[name])
+        person = np.zeros((128, 64), bool)
+        person[:, 16:48] = True  # the central half of the columns stands in for the camera's depth mask
+        d = body_descriptor(images[name], person)
         assert np.array_equal(described.features["hsv"][k], d.hsv) and np.array_equal(described.features["siltp"][k],
                                                                                        d.siltp)
+        assert not np.array_equal(d.hsv, body_descriptor(images[name]).hsv)
+    every_pixel = describe_crops(list_crops(tmp_path), silhouette=1.0)
+    assert np.array_equal(every_pixel.features["hsv"][0], body_descriptor(images["a"]).hsv)
     (tmp_path / "a" / "0001_c1s1_000001_00.png").write_bytes(b"")
     (tmp_path / "b" / "0001_c1s1_000001_00.png").write_bytes(b"")
     with pytest.raises(ValueError, match="no crop could be read"):
