@@ -42,6 +42,9 @@ _MAX_HEAD_HEIGHT_M = 0.40
 _ROW_MIN_PIXELS = 2  # a grid row shows a part when at least this many of its pixels do
 _WIDTH_PERCENTILES = (3.0, 97.0)  # robust extent: outliers at the mask's edge do not count
 _DEFAULT_CROP_ROWS = 128  # the person's height in grid rows when the descriptor takes crops as they come
+_BOX_ALONG_M = 0.2  # the crop covers this much in front of / behind the body axis (radius_m across it)
+_MAX_DEPTH_M = 1000.0  # depth beyond this is not a return
+_GEOMETRY_SAMPLES = 2000  # geometry from at most about this many of the person's samples
 
 
 @dataclass(frozen=True)
@@ -68,8 +71,8 @@ class BodyGrid:
     ``edge_rows``: where each part edge of the body axis lies in crop rows (outside [0, rows) when that
     part is out of the image); ``person_rows_px``: the person's height in colour-image rows. ``lateral`` /
     ``along`` / ``height``: each sample's offset from the body axis across and along the line of sight, and
-    its height above the floor (m; NaN without depth). ``pixel_u`` (cols,) / ``pixel_v`` (rows,): the colour-image
-    coordinates of the grid's sample columns and rows.
+    its height above the floor (m, float32; meaningless where ``mask`` is false, e.g. without depth).
+    ``pixel_u`` (cols,) / ``pixel_v`` (rows,): the colour-image coordinates of the grid's sample columns and rows.
     """
 
     crop: NDArray[np.uint8]
@@ -110,7 +113,8 @@ def body_grid(
     """
     foot, up, across, along = _axis_frame(plane, np.asarray(top_cam, dtype=np.float64), height_m)
     r = config.radius_m
-    corners = np.array([foot + a * r * across + b * r * along + z * up
+    depth_reach = min(r, _BOX_ALONG_M)  # a body is shallow along the line of sight: a narrower crop
+    corners = np.array([foot + a * r * across + b * depth_reach * along + z * up
                         for a in (-1.0, 1.0) for b in (-1.0, 1.0) for z in (0.0, height_m)])
     if np.any(corners[:, 2] <= 0.1):
         return None  # (partly) behind or at the camera
@@ -139,24 +143,32 @@ def body_grid(
     sx, sy = depth_intr.width / color_intr.width, depth_intr.height / color_intr.height
     ud = np.clip(np.rint((u + 0.5) * sx - 0.5), 0, depth_intr.width - 1).astype(np.intp)
     vd = np.clip(np.rint((v + 0.5) * sy - 0.5), 0, depth_intr.height - 1).astype(np.intp)
-    z = np.asarray(depth_m[vd[:, None], ud[None, :]], dtype=np.float64)
-    valid = np.isfinite(z) & (z > 0.0)
-    z = np.where(valid, z, np.nan)
-    xn = (ud - depth_intr.cx) / depth_intr.fx
-    yn = (vd - depth_intr.cy) / depth_intr.fy
-    # camera-frame points relative to the foot, in the axis frame (no (N, 3) array: three broadcasts)
-    px, py = xn[None, :] * z - foot[0], yn[:, None] * z - foot[1]
-    pz = z - foot[2]
-    height = px * up[0] + py * up[1] + pz * up[2]
-    lateral = px * across[0] + py * across[1] + pz * across[2]
-    along_d = px * along[0] + py * along[1] + pz * along[2]
-    radial2 = lateral * lateral + along_d * along_d
+    z = np.asarray(depth_m[vd[:, None], ud[None, :]], dtype=np.float32)
+    valid = (z > 0.0) & (z < _MAX_DEPTH_M)  # NaN and inf fail
+    z = np.where(valid, z, np.float32(0.0))  # no NaN / inf in the arithmetic below (those samples stay out)
+    xn = ((ud - depth_intr.cx) / depth_intr.fx).astype(np.float32)
+    yn = ((vd - depth_intr.cy) / depth_intr.fy).astype(np.float32)
+    # camera-frame points relative to the foot, in the axis frame: float32 broadcasts, no (N, 3) array
+    fx_, fy_, fz_ = (float(c) for c in foot)
+    px, py = xn[None, :] * z - np.float32(fx_), yn[:, None] * z - np.float32(fy_)
+    pz = z - np.float32(fz_)
+
+    def along_axis(axis: FloatArray) -> NDArray[np.float32]:
+        a0, a1, a2 = (np.float32(c) for c in axis)
+        out = px * a0
+        out += py * a1
+        out += pz * a2
+        return out
+
+    height, lateral, along_d = along_axis(up), along_axis(across), along_axis(along)
+    radial2 = lateral * lateral
+    radial2 += along_d * along_d
     mask = valid & (height > config.floor_margin_m) & (height < height_m + 0.1) & (radial2 < r * r)
     others = np.asarray(other_feet_cam, dtype=np.float64).reshape(-1, 3)
     for other in others:  # a pixel nearer to another person's axis is theirs
         d = other - foot
         d -= float(d @ up) * up
-        ox, oy = float(d @ across), float(d @ along)
+        ox, oy = np.float32(d @ across), np.float32(d @ along)
         mask &= radial2 < (lateral - ox) ** 2 + (along_d - oy) ** 2
     below_top = (height_m - height) / height_m
     parts = np.zeros(below_top.shape, dtype=np.int16)
@@ -174,9 +186,8 @@ def part_visibility(grid: BodyGrid, part_edges: tuple[float, ...]) -> tuple[floa
     n_parts = len(part_edges) - 1
     rows = grid.parts.shape[0]
     labels = grid.parts
-    counts = np.zeros((rows, n_parts), dtype=np.int64)
     r_idx, c_idx = np.nonzero(labels >= 0)
-    np.add.at(counts, (r_idx, labels[r_idx, c_idx]), 1)
+    counts = np.bincount(r_idx * n_parts + labels[r_idx, c_idx], minlength=rows * n_parts).reshape(rows, n_parts)
     seen_rows = counts >= _ROW_MIN_PIXELS
     per_part = []
     seen_total = 0.0
@@ -207,6 +218,8 @@ def measure_geometry(grid: BodyGrid, part_edges: tuple[float, ...]) -> BodyGeome
     h_total = grid.person_height_m
     m = grid.mask
     lat, alo, hgt = grid.lateral[m], grid.along[m], grid.height[m]
+    step = max(1, lat.size // _GEOMETRY_SAMPLES)  # a few thousand points measure as well as all of them
+    lat, alo, hgt = lat[::step], alo[::step], hgt[::step]
     frac = hgt / h_total
 
     def band(lo: float, hi: float) -> NDArray[np.bool_]:
@@ -222,12 +235,11 @@ def measure_geometry(grid: BodyGrid, part_edges: tuple[float, ...]) -> BodyGeome
     slice_of = np.floor(below / _HEAD_SLICE_M).astype(np.int64)
     near = (slice_of >= 0) & (slice_of < n_slices)
     if np.count_nonzero(near) >= 2 * _MIN_BAND_POINTS:
-        s, x = slice_of[near], lat[near]
-        lo = np.full(n_slices, np.inf)
-        hi = np.full(n_slices, -np.inf)
-        np.minimum.at(lo, s, x)
-        np.maximum.at(hi, s, x)
-        widths = np.where(np.isfinite(lo), hi - lo, np.nan)
+        order = np.argsort(slice_of[near], kind="stable")
+        s, x = slice_of[near][order], lat[near][order]
+        starts = np.flatnonzero(np.r_[True, s[1:] != s[:-1]])  # one run per occupied slice
+        widths = np.full(n_slices, np.nan)
+        widths[s[starts]] = np.maximum.reduceat(x, starts) - np.minimum.reduceat(x, starts)
         top_slices = widths[: max(1, round(_HEAD_TOP_M / _HEAD_SLICE_M))]
         if np.any(np.isfinite(top_slices)):
             head_w = float(np.nanmedian(top_slices))
@@ -264,6 +276,11 @@ def describe_body(
     descriptor = np.zeros(0, dtype=np.float32)
     space = ""
     if projection is not None and visible >= config.min_visible_fraction and grid.person_rows_px >= config.min_rows_px:
-        d = body_descriptor(grid.crop, grid.mask, desc_config, grid.parts)
-        descriptor, space = projection.project(d), projection.space
+        # only the columns around the person's pixels (a margin for SILTP's neighbours at both scales)
+        cols = np.flatnonzero(grid.mask.any(axis=0))
+        if cols.size:
+            margin = 2 * desc_config.siltp_radius
+            c0, c1 = max(0, int(cols[0]) - margin), min(grid.mask.shape[1], int(cols[-1]) + 1 + margin)
+            d = body_descriptor(grid.crop[:, c0:c1], grid.mask[:, c0:c1], desc_config, grid.parts[:, c0:c1])
+            descriptor, space = projection.project(d), projection.space
     return BodyObservation(descriptor, space, visible, per_part, geometry)
