@@ -53,6 +53,7 @@ from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, crop_person_mask
 from face_reid_master.body.crops import Crop, list_crops
 from face_reid_master.sim.frame_table import BodyRows
+from face_reid_master.sim.photos import choose_usable
 from face_reid_master.sim.visibility import VisibilityConfig, body_band_visibility, glance_ids
 from face_reid_master.sim.world import SimCamera, check_min_max
 
@@ -231,14 +232,7 @@ class BodyBank:
 
     def choose(self, count: int, rng: np.random.Generator) -> list[ClothesIdentity]:
         """``count`` distinct usable crop identities in a random order (read only as needed)."""
-        names = self.identity_names
-        chosen: list[ClothesIdentity] = []
-        for i in rng.permutation(len(names)):
-            if len(chosen) == count:
-                break
-            ident = self.load_identity(names[int(i)])
-            if ident is not None:
-                chosen.append(ident)
+        chosen = choose_usable(self.identity_names, count, rng, self.load_identity)
         if len(chosen) < count:
             raise InsufficientBodiesError(
                 f"crops folder {self.bodies_dir} has {len(chosen)} usable crop identities, the scenario needs "

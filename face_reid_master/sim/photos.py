@@ -13,9 +13,10 @@ from __future__ import annotations
 import math
 import zipfile
 import zlib
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, TextIO, TypeVar
 
 import cv2
 import numpy as np
@@ -25,12 +26,15 @@ from face_reid_camera.common.embedding_spaces import embedder_space, space_dim
 from face_reid_master.sim.scenario_files import write_npz
 from face_reid_master.sim.visibility import glance_ids
 
+T = TypeVar("T")
+
 __all__ = [
     "NUM_VARIANTS",
     "IdentityPhotos",
     "InsufficientFacesError",
     "PhotoBank",
     "PhotoVariants",
+    "choose_usable",
     "glance_photos",
     "range_bucket",
     "valid_variants",
@@ -265,15 +269,9 @@ class PhotoBank:
 
     def choose(self, count: int, rng: np.random.Generator) -> list[IdentityPhotos]:
         """``count`` usable identities in a random order (folders are embedded only as needed)."""
-        names = sorted(self.identity_files)
-        chosen: list[IdentityPhotos] = []
-        for i in rng.permutation(len(names)):
-            if len(chosen) == count:
-                break
-            ident = self.load_identity(names[int(i)])
-            if ident is not None:
-                chosen.append(ident)
-                self._say(f"  identity {ident.name}: {len(ident.photos)} usable photos")
+        chosen = choose_usable(sorted(self.identity_files), count, rng, self.load_identity)
+        for ident in chosen:
+            self._say(f"  identity {ident.name}: {len(ident.photos)} usable photos")
         if len(chosen) < count:
             raise InsufficientFacesError(
                 f"faces folder {self.faces_dir} has only {len(chosen)} usable identities (>= {self.min_photos} "
@@ -282,6 +280,20 @@ class PhotoBank:
                 f"without a face"
             )
         return chosen
+
+
+def choose_usable(names: Sequence[str], count: int, rng: np.random.Generator,
+                  load: Callable[[str], T | None]) -> list[T]:
+    """Up to ``count`` loaded items of ``names`` in a random order, skipping the ones ``load`` refuses (None);
+    each name is loaded only when its turn comes, so a large folder costs only what the scenario uses."""
+    chosen: list[T] = []
+    for i in rng.permutation(len(names)):
+        if len(chosen) == count:
+            break
+        item = load(names[int(i)])
+        if item is not None:
+            chosen.append(item)
+    return chosen
 
 
 def variant_eye_px(photo: PhotoVariants, variant: int | NDArray[np.integer]) -> NDArray[np.float64]:

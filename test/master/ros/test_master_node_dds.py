@@ -100,6 +100,23 @@ def _run_network(tmp_path: Path, domain_id: int, master_params: list[str],
     return out, master
 
 
+def _interrupt(master: Any, tmp_path: Path) -> tuple[str, str]:
+    """Stop the master with Ctrl-C; its log, and every process's log (for assertion messages)."""
+    try:
+        master.send_signal(signal.SIGINT)
+        master.wait(timeout=20)
+    finally:
+        procs.stop(master)
+    logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
+    return (tmp_path / "master.log").read_text(), logs
+
+
+def _tracks_near(out: str, y: float) -> list[dict]:
+    """Every published track (of every /tracks_named message the collector printed) within 1 m of the line y."""
+    messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    return [t for m in messages for t in m["tracks"] if abs(t["y"] - y) < 1.0]
+
+
 def test_leave_and_return_same_face_id_and_name(ros_domain_id: int, tmp_path: Path, embeddings: Path) -> None:
     emb = dict(np.load(embeddings))
     gallery = tmp_path / "gallery.npz"
@@ -164,21 +181,12 @@ def test_cameras_of_two_embedders_never_mix_their_faces(ros_domain_id: int, tmp_
     db = tmp_path / "faces.db"
     out, master = _run_network(tmp_path, ros_domain_id, [f"db_path:={db}", "embedding_space:=dlib_resnet_v1"],
                                [("cam_dlib", plan_d), ("cam_sface", plan_s)])
-    try:
-        master.send_signal(signal.SIGINT)
-        master.wait(timeout=20)
-    finally:
-        procs.stop(master)
-    log = (tmp_path / "master.log").read_text()
-    logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
+    log, logs = _interrupt(master, tmp_path)
     notices = [line for line in log.splitlines() if "'cam_sface'" in line and "not used for identity" in line]
     assert len(notices) == 1, logs
     assert "'sface_2021dec'" in notices[0] and "'dlib_resnet_v1'" in notices[0]
     assert "cam_dlib" not in "".join(line for line in log.splitlines() if "not used for identity" in line)
-    messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
-    tracks = [t for m in messages for t in m["tracks"]]
-    tony_tracks = [t for t in tracks if abs(t["y"]) < 1.0]
-    colin_tracks = [t for t in tracks if abs(t["y"] - 3.0) < 1.0]
+    tony_tracks, colin_tracks = _tracks_near(out, 0.0), _tracks_near(out, 3.0)
     assert tony_tracks and colin_tracks, logs
     assert {t["face_id"] for t in tony_tracks} - {0}, "Tony's dlib face was never learned"
     assert all(t["face_id"] == 0 for t in colin_tracks), colin_tracks[-1]  # never identified
@@ -205,17 +213,8 @@ def test_cameras_with_and_without_body_fields_both_feed_the_master(ros_domain_id
                                                          "embedding_space:=dlib_resnet_v1", "stats_log_period_s:=0.5"],
                                [("cam_new", plan_new), ("cam_old", plan_old)])
     time.sleep(1.0)  # one more stats line after the last frame
-    try:
-        master.send_signal(signal.SIGINT)
-        master.wait(timeout=20)
-    finally:
-        procs.stop(master)
-    log = (tmp_path / "master.log").read_text()
-    logs = "\n".join(f"{p.name}: {p.read_text()}" for p in tmp_path.glob("*.log"))
-    messages = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
-    tracks = [t for m in messages for t in m["tracks"]]
-    tony_tracks = [t for t in tracks if abs(t["y"]) < 1.0]
-    colin_tracks = [t for t in tracks if abs(t["y"] - 3.0) < 1.0]
+    log, logs = _interrupt(master, tmp_path)
+    tony_tracks, colin_tracks = _tracks_near(out, 0.0), _tracks_near(out, 3.0)
     assert {t["face_id"] for t in tony_tracks} - {0} and {t["face_id"] for t in colin_tracks} - {0}, logs
     stats = [line for line in log.splitlines() if "stats: {" in line]
     assert stats, logs
