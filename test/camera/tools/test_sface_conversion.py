@@ -55,6 +55,17 @@ def _as_input(chips_bgr: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(chips_bgr[..., ::-1].transpose(0, 3, 1, 2), dtype=np.float32)
 
 
+def _without_dangling_inputs(source_path: Path) -> onnx.ModelProto:
+    """The shipped int8 graph with only its 29 dangling graph inputs (initializers listed as inputs) removed."""
+    original = onnx.load(str(source_path))
+    read = {name for node in original.graph.node for name in node.input}
+    kept = [vi for vi in original.graph.input if vi.name in read]
+    assert len(original.graph.input) - len(kept) == 29
+    del original.graph.input[:]
+    original.graph.input.extend(kept)
+    return original
+
+
 @pytest.fixture(scope="module")
 def source_path() -> Path:
     return find_default_source()
@@ -113,13 +124,7 @@ def test_onnx_interface() -> None:
 
 def test_matches_original_int8_model(source_path: Path, chips_bgr: np.ndarray, embeddings: np.ndarray) -> None:
     """The shipped int8 graph, with only its dangling inputs removed (in memory), gives the same outputs."""
-    original = onnx.load(str(source_path))
-    read = {name for node in original.graph.node for name in node.input}
-    kept = [vi for vi in original.graph.input if vi.name in read]
-    assert len(original.graph.input) - len(kept) == 29
-    del original.graph.input[:]
-    original.graph.input.extend(kept)
-    session = _session(original.SerializeToString())
+    session = _session(_without_dangling_inputs(source_path).SerializeToString())
     blob = _as_input(chips_bgr)
     reference = np.concatenate([session.run(["fc1"], {"data": blob[i : i + 1]})[0] for i in range(len(blob))])
     assert embeddings.shape == reference.shape == (N_FACES, 128)
@@ -133,12 +138,17 @@ def test_matches_original_int8_model(source_path: Path, chips_bgr: np.ndarray, e
 def test_matches_opencv_face_recognizer_sf(
     source_path: Path, chips_bgr: np.ndarray, embeddings: np.ndarray, tmp_path: Path
 ) -> None:
-    """cv2.FaceRecognizerSF.feature on the unmodified source file, in a child process.
+    """cv2.FaceRecognizerSF.feature on the source file, in a child process.
 
-    OpenCV 5's default DNN engine refuses the file (its dangling inputs make the one-input setInput ambiguous);
-    the classic engine, the one OpenCV 4 has, loads it as shipped. The engine is chosen once per process by
-    OPENCV_FORCE_DNN_ENGINE, hence the child.
+    OpenCV 5's default DNN engine refuses the file as shipped (its dangling inputs make the one-input setInput
+    ambiguous). OpenCV 4 and 5.0 have the classic engine, which loads it unmodified (chosen once per process by
+    OPENCV_FORCE_DNN_ENGINE, hence the child); from 5.1 there is no classic engine, so the new one gets the same
+    graph with only its dangling inputs removed.
     """
+    model = source_path
+    if not hasattr(cv2.dnn, "ENGINE_CLASSIC") and hasattr(cv2.dnn, "ENGINE_OPENCV"):
+        model = tmp_path / "sface_int8_no_dangling_inputs.onnx"
+        onnx.save(_without_dangling_inputs(source_path), str(model))
     np.save(tmp_path / "chips.npy", chips_bgr)
     script = (
         "import sys, cv2, numpy as np\n"
@@ -149,7 +159,7 @@ def test_matches_opencv_face_recognizer_sf(
     out = tmp_path / "features.npy"
     env = {**os.environ, "OPENCV_FORCE_DNN_ENGINE": "1"}  # cv2.dnn.ENGINE_CLASSIC
     child = subprocess.run(
-        [sys.executable, "-c", script, str(source_path), str(tmp_path / "chips.npy"), str(out)],
+        [sys.executable, "-c", script, str(model), str(tmp_path / "chips.npy"), str(out)],
         env=env, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert child.returncode == 0, child.stderr
