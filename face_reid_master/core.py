@@ -33,6 +33,7 @@ from face_reid_camera.common.embedding_spaces import (
     space_dim,
 )
 from face_reid_camera.common.param_table import param, validate_fields
+from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
@@ -121,6 +122,10 @@ class MasterConfig:
         0.0, "A face gets a predefined name below this L2 distance (0 = the value derived for embedding_space, "
         "in its likelihood file).", low=0.0, high=4.0)
     min_face_features_for_name: int = param(5, "Embeddings a face needs before naming.", low=1, high=10000)
+    # bodies
+    body_appearance_tracking: bool = param(
+        True, "Associate detections to tracks by body appearance too (the body metric's space; cameras without "
+        "bodies are tracked by position alone, as before).")
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
@@ -152,6 +157,7 @@ class MasterStats:
     embeddings_skipped_quality: int = 0
     bodies_received: int = 0  # detections with well-formed body fields (not used for identity yet)
     bodies_rejected_malformed: int = 0  # body fields with NaN / Inf appearance or out-of-range visibility
+    bodies_rejected_space: int = 0  # descriptors of another projection than the body metric's
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
@@ -200,10 +206,15 @@ class MasterCore:
         likelihood: LikelihoodModel | FaceLikelihood | None = None,
         store: Any | None = None,
         gallery: Mapping[str, NDArray[np.floating]] | None = None,
+        body_metric: BodyMetricModel | None = None,
     ) -> None:
         self.config = config or MasterConfig()
         cfg = self.config
         self.tracker = Tracker(cfg.tracker)
+        if body_metric is None and cfg.body_appearance_tracking:
+            body_metric = default_body_metric()
+        self.body_metric = body_metric if cfg.body_appearance_tracking else None
+        self._body_space_noticed: dict[str, str] = {}  # camera id -> the unusable body space it was logged for
         model = likelihood or default_face_likelihood(cfg.embedding_space)
         if isinstance(model, LikelihoodModel):
             model = FaceLikelihood(model, cfg.embedding_space)
@@ -283,8 +294,8 @@ class MasterCore:
                 return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)",
                                     "future_stamp")
 
-        positions, stds, heights, embeddings, person_index = self._detections(frame)
-        result = self.tracker.update_arrays(positions, stds, heights, stamp, frame.camera_id)
+        positions, stds, heights, appearance, embeddings, person_index = self._detections(frame)
+        result = self.tracker.update_arrays(positions, stds, heights, stamp, frame.camera_id, appearance)
         if result.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             st.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})", "tracker_late")
@@ -326,12 +337,13 @@ class MasterCore:
     def _detections(
         self, frame: CameraFrameRecord
     ) -> tuple[
-        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float32] | None,
         dict[int, tuple[NDArray[np.float32], NDArray[np.float64]]], list[int]
     ]:
-        """The frame's valid detections as tracker input (positions (N, 2), stds (N,), heights (N,)),
-        their usable embeddings (with the face's eye distance, px; 0 = unknown) by detection index, and
-        detection -> person index.
+        """The frame's valid detections as tracker input (positions (N, 2), stds (N,), heights (N,), body
+        appearance embeddings (N, r) with NaN rows for undescribed bodies, or None), their usable face
+        embeddings (with the face's eye distance, px; 0 = unknown) by detection index, and detection ->
+        person index.
 
         This is the one place a frame's people are validated (the tracker and the face table are handed
         checked values), in one vectorised pass: it runs for every person of every camera frame.
@@ -341,7 +353,7 @@ class MasterCore:
         n = len(people)
         st.detections_received += n
         if n == 0:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0), {}, []
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0), None, {}, []
         xy = np.full((n, 2), np.nan)
         std = np.full(n, np.nan)
         for i, person in enumerate(people):
@@ -356,8 +368,8 @@ class MasterCore:
             xy[valid],
             std[valid],
             np.array([float(people[i].height_m) for i in person_index], dtype=np.float64),
+            self._appearance([people[i].body for i in person_index], frame.camera_id),
         )
-        self._count_bodies([people[i].body for i in person_index])
         with_face = [
             (k, i) for k, i in enumerate(person_index)
             if people[i].embedding is not None and np.size(people[i].embedding) > 0
@@ -383,19 +395,41 @@ class MasterCore:
             embeddings[good_len[row][0]] = (stacked[row], np.array([eye if math.isfinite(eye) and eye > 0 else 0.0]))
         return *tracker_input, embeddings, person_index
 
-    def _count_bodies(self, bodies: list[Any]) -> None:
-        """Count the detections' body fields, well-formed or not (cameras without bodies send none)."""
-        for body in bodies:
+    def _appearance(self, bodies: list[Any], camera_id: str) -> NDArray[np.float32] | None:
+        """Count the detections' body fields (cameras without bodies send none) and embed the well-formed
+        descriptors of the body metric's space for the tracker: (N, r), NaN rows for the others; None when
+        none is usable (or appearance tracking is off)."""
+        st, metric = self.stats, self.body_metric
+        usable: list[tuple[int, NDArray[np.float32]]] = []
+        for k, body in enumerate(bodies):
             if body is None:
                 continue
             descriptor = np.asarray(body.descriptor, dtype=np.float32)
             visible = body.visible_fraction
-            ok = descriptor.ndim == 1 and bool(np.isfinite(descriptor).all()) and is_finite_number(visible) \
-                and 0.0 <= float(visible) <= 1.0
-            if ok:
-                self.stats.bodies_received += 1
-            else:
-                self.stats.bodies_rejected_malformed += 1
+            if not (descriptor.ndim == 1 and bool(np.isfinite(descriptor).all()) and is_finite_number(visible)
+                    and 0.0 <= float(visible) <= 1.0):
+                st.bodies_rejected_malformed += 1
+                continue
+            st.bodies_received += 1
+            if metric is None or descriptor.size == 0:
+                continue
+            if body.space != metric.space or descriptor.size != metric.length:
+                st.bodies_rejected_space += 1
+                space = str(body.space)[:64]
+                if self._body_space_noticed.get(camera_id) != space:
+                    self._body_space_noticed[camera_id] = space
+                    self._notices.append(f"camera {camera_id!r} sends body descriptors of space {space!r}, the body "
+                                         f"metric compares {metric.space!r}: its bodies are not used for tracking "
+                                         "(see the cameras' body_projection_path and face-reid-fit-body)")
+                continue
+            usable.append((k, descriptor))
+        if not usable:
+            return None
+        feature = metric.features["fused"]
+        embedded = feature.embed(np.stack([d for _, d in usable]))
+        out = np.full((len(bodies), embedded.shape[1]), np.nan, dtype=np.float32)
+        out[[k for k, _ in usable]] = embedded
+        return out
 
     def _in_space(self, person: Any, camera_id: str) -> NDArray[np.float32] | None:
         """The person's embedding in the master's space (part of a joint one is fine); None: another space.

@@ -20,6 +20,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,8 @@ from face_reid_master.body.features import METRIC_FEATURES, feature_blocks, feat
 from face_reid_master.body.linear_metric import LinearMetric
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
 
-__all__ = ["BODY_METRIC_FILE", "BodyFeatureMetric", "BodyMetricModel", "load_body_metric", "save_body_metric"]
+__all__ = ["BODY_METRIC_FILE", "BodyFeatureMetric", "BodyMetricModel", "default_body_metric", "load_body_metric",
+           "save_body_metric"]
 
 FORMAT_NAME = "face-reid-body-metric"
 FORMAT_VERSION = 1
@@ -70,6 +72,19 @@ class BodyFeatureMetric:
         """(na, nb) distances between wire vectors (rows of ``a`` and ``b``)."""
         x, y = np.atleast_2d(np.asarray(a, dtype=np.float64)), np.atleast_2d(np.asarray(b, dtype=np.float64))
         return self.metric.distances(x[:, self.columns], y[:, self.columns])
+
+    @cached_property
+    def _embedding_matrix(self) -> npt.NDArray[np.float64]:
+        """(input, r) matrix E with ||E^T (x - y)|| = the metric distance: W L, where M = L L^T (M's negative
+        eigenvalues, rounding noise of a positive semi-definite matrix, clipped to 0)."""
+        values, vectors = np.linalg.eigh(self.metric.metric)
+        return self.metric.projection @ (vectors * np.sqrt(np.maximum(values, 0.0)))
+
+    def embed(self, wire: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """(n, r) embeddings of wire vectors whose Euclidean distances are this metric's distances (compare
+        many pairs with one GEMM, or keep a track's appearance small)."""
+        x = np.atleast_2d(np.asarray(wire, dtype=np.float64))
+        return (x[:, self.columns] @ self._embedding_matrix).astype(np.float32)
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,3 +215,10 @@ def load_body_metric(path: str | Path) -> BodyMetricModel:
         return BodyMetricModel(str(doc["space"]), int(doc["length"]), blocks, features, doc.get("metadata", {}))
     except (OSError, ValueError, KeyError, TypeError) as exc:  # JSONDecodeError is a ValueError
         raise ModelLoadError(f"body metric file {src} is unusable: {exc}") from exc
+
+
+def default_body_metric() -> BodyMetricModel:
+    """The shipped body metric (``models/body_metric.json``)."""
+    from face_reid_camera.common.resources import model_path
+
+    return load_body_metric(model_path(BODY_METRIC_FILE))

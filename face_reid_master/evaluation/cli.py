@@ -67,6 +67,9 @@ def _parser() -> argparse.ArgumentParser:
                         "both embedders serves dlib_resnet_v1, sface_2021dec and dlib_resnet_v1+sface_2021dec")
     p.add_argument("--pooled-likelihood", action="store_true",
                    help="judge every face by the pooled likelihood, ignoring the face-size buckets")
+    p.add_argument("--evidence", choices=("face", "fused"), default="fused",
+                   help="fused (default): bodies (where the scenario has them) also steer the tracker's association "
+                        "(body_appearance_tracking); face: positions and faces only, as before bodies")
     p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
     p.add_argument("--live", action="store_true",
                    help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
@@ -111,6 +114,8 @@ def _scenario_json(scenario: Any, likelihood: FaceLikelihood) -> dict[str, Any]:
         "gt_visible_segments": summary.get("visible_segments"),
         "faces_dir": doc.get("faces_dir"),
         "embedding_space": doc.get("embedding_space", "dlib_resnet_v1"),
+        "bodies": doc.get("body_space") is not None,
+        "body_space": doc.get("body_space"),
         "identities_in_likelihood_fit": _identities_in_likelihood_fit(names, likelihood),
     }
 
@@ -123,6 +128,8 @@ def _parameters(config: MasterConfig, likelihood: FaceLikelihood, tick_period_s:
         out["threshold_distance"] = config.threshold_distance or likelihood.threshold_distance
     out["likelihood_size_buckets"] = list(likelihood.eye_px_edges) if likelihood.conditioned else "pooled"
     out["tick_period_s"] = tick_period_s
+    out["evidence"] = "fused" if config.body_appearance_tracking else "face"
+    out["body_appearance_tracking"] = config.body_appearance_tracking
     out["tracker"] = dataclasses.asdict(config.tracker)
     if config.method == "bayes":
         out["likelihood_data"] = likelihood.metadata.get("data", "")
@@ -200,7 +207,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             result[m] = res
         result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
     else:
-        config = MasterConfig(method=args.method, embedding_space=space)
+        config = MasterConfig(method=args.method, embedding_space=space,
+                              body_appearance_tracking=args.evidence != "face")
         if args.live:
             return _main_live(args, scenario, gallery, config, model, days, t0, log)
         result = _run_offline(args, args.method, scenario, gallery, days, log, model)[0]
@@ -214,7 +222,7 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
                  model: FaceLikelihood) -> tuple[dict[str, Any], RunLog]:
     """The master core with ``method`` (and ``model``: likelihoods, weights, thresholds) over the scenario;
     (the JSON-ready metrics, the run's log)."""
-    config = MasterConfig(method=method, embedding_space=model.space)
+    config = MasterConfig(method=method, embedding_space=model.space, body_appearance_tracking=args.evidence != "face")
     likelihood = model
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
@@ -283,7 +291,8 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     t1 = time.perf_counter()
     try:
         live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
-                        log=log, likelihood_path=args.likelihood, embedding_space=model.space)
+                        log=log, likelihood_path=args.likelihood, embedding_space=model.space,
+                        body_appearance_tracking=config.body_appearance_tracking)
     except LiveError as exc:
         print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
         return 1

@@ -99,7 +99,8 @@ def _segments_to_scene(segments: Sequence[tuple[float, float]]) -> Any:
 def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], gallery: Mapping[str, Any],
              method: str, domain_id: int, run_id: str, *, startup_timeout_s: float = 60.0,
              log: TextIO | None = None, keep_dir: Path | None = None,
-             likelihood_path: Path | None = None, embedding_space: str = "dlib_resnet_v1") -> LiveRun:
+             likelihood_path: Path | None = None, embedding_space: str = "dlib_resnet_v1",
+             body_appearance_tracking: bool = True) -> LiveRun:
     """Start the master node, publish ``frames`` in real time (stamps = now), collect /tracks_named.
 
     ``day_of_frame[i]``: the day of ``frames[i]`` (a pause between days, see the module doc). ``gallery``:
@@ -119,7 +120,8 @@ def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], g
     say(f"live: work folder {work} (face database, gallery, master log; deleted at the end)")
     master_args = ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={work / 'faces.db'}",
                    "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=5.0", "-p", f"method:={method}",
-                   "-p", f"embedding_space:={embedding_space}"]
+                   "-p", f"embedding_space:={embedding_space}",
+                   "-p", f"body_appearance_tracking:={'true' if body_appearance_tracking else 'false'}"]
     if gallery:
         save_gallery_npz(gallery, work / "gallery.npz")
         master_args += ["-p", f"gallery_path:={work / 'gallery.npz'}"]

@@ -66,7 +66,12 @@ class MasterNode(ManagedNode):
         self.values = values
         self.store = self._open_store() if values["persist_faces"] else None
         gallery = self._load_gallery(str(values["gallery_path"]))
-        self.core = MasterCore(config, likelihood, self.store, gallery)
+        body_metric = None
+        if config.body_appearance_tracking and values["body_metric_path"]:
+            from face_reid_master.body.metric_file import load_body_metric
+
+            body_metric = load_body_metric(str(values["body_metric_path"]))
+        self.core = MasterCore(config, likelihood, self.store, gallery, body_metric)
         self._regex = regex
         rate = float(values["max_publish_rate_hz"])
         self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
@@ -78,7 +83,8 @@ class MasterNode(ManagedNode):
         ]
         self.get_logger().info(
             f"master: method={config.method}, {len(self.core.identity.face_ids())} learned faces loaded, "
-            f"{len(self.core.people.names())} predefined people"
+            f"{len(self.core.people.names())} predefined people, body appearance "
+            f"{self.core.body_metric.space if self.core.body_metric else 'off'}"
         )
 
     def activate(self) -> None:

@@ -47,6 +47,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("retention_unnamed_s", 0.0, "Forget unnamed faces not seen for this long (s; 0 = keep forever).",
               low=0.0, high=1e9),
     ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
+    ParamSpec("body_metric_path", "", "Body metric JSON from face-reid-fit-body ('' = the installed "
+              "models/body_metric.json); used when body_appearance_tracking is on."),
     ParamSpec("no_input_warning_s", 5.0, "/diagnostics warns when no camera frame arrived for this long (s).",
               low=0.0, high=3600.0, low_open=True),
     ParamSpec("stats_log_period_s", 30.0, "Counters are logged this often (s).", low=0.1, high=86400.0),

@@ -11,6 +11,11 @@ probability ``1 - (1 - gate_probability)**2`` (= twice the d2 gate for 2 dof), o
 last measured position (``min_person_separation_m + max_speed_mps * elapsed``, at most
 ``max_gate_distance_m``): the constant-velocity gate alone loses people who turn or stop, and noise
 outliers.
+
+Body appearance (where a track and a detection both have an embedding, see
+:mod:`~face_reid_master.tracking.appearance`): a pair beyond ``appearance_gate`` is infeasible in every
+pass, ``appearance_weight`` x the distance is added to the pass-1 cost, and LOST tracks left over get a
+third pass: a detection within walking reach of their last one (no position gate) that looks like them.
 """
 
 from __future__ import annotations
@@ -77,6 +82,9 @@ class Associator:
         self._max_reach = max(config.max_gate_distance_m, config.min_person_separation_m)
         self._max_speed = config.max_speed_mps
         self._coast_after_s = config.coast_after_s
+        self._app_gate = config.appearance_gate
+        self._app_weight = config.appearance_weight
+        self._app_match = config.appearance_match_distance
 
     def __call__(
         self,
@@ -88,12 +96,14 @@ class Associator:
         z: FloatArray,
         r2: FloatArray,
         stamp: float,
+        appearance: FloatArray | None = None,
     ) -> Matches:
         """Associate detections ``z`` (M, 2) with variances ``r2`` (M,) at ``stamp`` to N tracks.
 
         ``x_pred`` (N, 4) / ``P_pred`` (N, 4, 4): the tracks predicted to ``stamp``; ``state`` (N,)
         their :class:`TrackState`; ``t_last`` (N,) / ``z_last`` (N, 2): stamp and position of each
         track's newest measurement at or before ``stamp`` (its first one if it was born later).
+        ``appearance`` (N, M): body-appearance distances (NaN = unknown; None = none known).
         """
         d2, log_det = mahalanobis_sq(x_pred[:, :2], P_pred[:, :2, :2], z, r2)
         dist2 = ((z[None, :, :] - x_pred[:, None, :2]) ** 2).sum(axis=2)
@@ -102,6 +112,13 @@ class Associator:
         in_metric_gate = dist2 <= self._gate_m2
         feasible = (d2 <= self._gate) & in_metric_gate
         nll = d2 + log_det
+        looks_alike = None
+        if appearance is not None:
+            known = np.isfinite(appearance)
+            other_person = known & (appearance > self._app_gate)  # NaN compares False: unknown stays possible
+            feasible &= ~other_person
+            nll = nll + self._app_weight * np.where(known, appearance, self._app_match)
+            looks_alike = known & (appearance < self._app_match)
         free_c = np.ones(d2.shape[1], dtype=bool)
         rows_l: list[IndexArray] = []
         cols_l: list[IndexArray] = []
@@ -130,11 +147,37 @@ class Associator:
             dist2_last = ((z[None, :, :] - z_last[left_r][:, None, :]) ** 2).sum(axis=2)
             near_pred = (close[left_r] | (d2[left_r] <= self._wide_gate)) & in_metric_gate[left_r]
             ok2 = (near_pred | (dist2_last < reach[:, None] ** 2)) & free_c[None, :]
+            if appearance is not None:
+                ok2 &= ~other_person[left_r]
             if ok2.any():
                 r_, c_ = gnn(np.minimum(dist2[left_r], dist2_last), ok2)
                 rows_l.append(left_r[r_])
                 cols_l.append(c_)
                 free_c[c_] = False
+        if looks_alike is not None and free_c.any():
+            self._reattach(looks_alike, appearance, state, t_last, z_last, z, stamp, free_c, rows_l, cols_l)
         rows = np.concatenate(rows_l) if rows_l else _EMPTY
         cols = np.concatenate(cols_l) if cols_l else _EMPTY
         return Matches(rows, cols, near)
+
+    def _reattach(
+        self, looks_alike: NDArray[np.bool_], appearance: FloatArray, state: NDArray[np.int8], t_last: FloatArray,
+        z_last: FloatArray, z: FloatArray, stamp: float, free_c: NDArray[np.bool_], rows_l: list[IndexArray],
+        cols_l: list[IndexArray],
+    ) -> None:
+        """Pass 3: LOST tracks still unmatched take a free detection that looks like them, within walking reach
+        of their last detection (no position gate: a hidden person reappears where the prediction is not)."""
+        taken = np.zeros(state.shape[0], dtype=bool)
+        for r_ in rows_l:
+            taken[r_] = True
+        lost = np.flatnonzero((state == _LOST) & ~taken)
+        if lost.shape[0] == 0:
+            return
+        reach = self._sep + self._max_speed * np.maximum(stamp - t_last[lost], 0.0)
+        dist2_last = ((z[None, :, :] - z_last[lost][:, None, :]) ** 2).sum(axis=2)
+        ok = looks_alike[lost] & (dist2_last < reach[:, None] ** 2) & free_c[None, :]
+        if ok.any():
+            r_, c_ = gnn(appearance[lost], ok)
+            rows_l.append(lost[r_])
+            cols_l.append(c_)
+            free_c[c_] = False

@@ -44,6 +44,13 @@ class TrackerConfig:
     detections only after the freshly detected tracks have had both association passes.
     ``camera_window_s``: a track's ``cameras`` are those that detected it within this window.
     ``max_tracks``: cap on live tracks (bounded latency under clutter); extra detections are dropped.
+    Appearance (used only where a track and a detection both carry a body-appearance embedding, in the
+    learned metric's units: 1 = the median distance between two different people): a pair farther apart
+    than ``appearance_gate`` is clearly two people and never associated, however close in position;
+    ``appearance_weight`` x the distance joins the association cost (``appearance_match_distance`` stands in
+    for an unknown one); a LOST track takes back a detection beyond its position gates, within walking reach
+    of its last detection, when they are nearer than ``appearance_match_distance``. A track keeps its newest
+    ``appearance_gallery_size`` embeddings.
     """
 
     accel_noise_mps2: float = param(
@@ -94,6 +101,17 @@ class TrackerConfig:
     max_tracks: int = param(
         200, "Cap on live tracks; extra detections are dropped and counted (count).",
         low=1, high=100000)
+    appearance_gate: float = param(
+        1.0, "Track and detection farther apart than this in body appearance are never associated (metric "
+        "units: 1 = median different-person distance; inf = off).", low=0.0, high=math.inf, low_open=True)
+    appearance_weight: float = param(
+        4.0, "Association cost per unit of body-appearance distance (0 = appearance only gates).",
+        low=0.0, high=1000.0)
+    appearance_match_distance: float = param(
+        0.7, "Body-appearance distance of one person: LOST tracks re-attach below it; the cost of an unknown "
+        "distance (metric units).", low=0.0, high=10.0)
+    appearance_gallery_size: int = param(
+        16, "Body-appearance embeddings kept per track (count).", low=1, high=1000)
 
     def __post_init__(self) -> None:
         validate_fields(self)

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import check_real, check_stamp
 from face_reid_master.tracking.admission import Clock
+from face_reid_master.tracking.appearance import AppearanceGallery, appearance_distances
 from face_reid_master.tracking.association import Associator, Matches
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.history import FilterStep, TrackHistory, insert_late, record_updates
@@ -92,6 +93,7 @@ class Tracker:
         self._t = np.zeros(0)  # stamp of each track's newest posterior (= newest measurement)
         self._zmeas = np.zeros((0, 2))  # position of each track's newest measurement
         self._hist: list[TrackHistory] = []
+        self._looks: list[AppearanceGallery] = []  # body-appearance embeddings per track
 
     # ------------------------------------------------------------------ read-only properties
     @property
@@ -126,13 +128,15 @@ class Tracker:
         return self.update_arrays(positions, stds, heights, stamp_s, camera_id)
 
     def update_arrays(
-        self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str
+        self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str,
+        appearance: NDArray[np.float32] | None = None,
     ) -> UpdateResult:
         """Fuse one camera frame seen by ``camera_id`` at ``stamp_s`` (seconds).
 
         ``positions`` (N, 2) world ground-plane positions, ``stds`` (N,) their isotropic stds,
-        ``heights`` (N,) head heights (nan = unknown), all validated by the caller.  Detection
-        indices in the result are rows of these arrays.  ValueError on a non-finite stamp.
+        ``heights`` (N,) head heights (nan = unknown), all validated by the caller; ``appearance`` (N, r):
+        body-appearance embeddings in the learned metric's space (NaN rows = not described; None = none).
+        Detection indices in the result are rows of these arrays.  ValueError on a non-finite stamp.
         """
         stamp = check_stamp(stamp_s)
         status, resync, deleted_by_reset = self._admit(stamp)
@@ -144,11 +148,15 @@ class Tracker:
         stats.detections_received += positions.shape[0]
         expired_ids = self._expire_before(stamp)  # timed-out tracks must not take this frame's detections
         r2 = stds**2
-        matched = self._match(positions, r2, stamp)
+        if appearance is not None and not np.isfinite(appearance).any():
+            appearance = None
+        matched = self._match(positions, r2, stamp, appearance)
         self._update_matched(matched, positions, r2, heights, stamp, camera_id)
         rows, cols = matched.matches.rows, matched.matches.cols
         associations = list(zip(self._ids[rows].tolist(), cols.tolist(), strict=True))
         created, created_cols, suppressed, dropped = self._initiate(matched, positions, r2, heights, stamp, camera_id)
+        if appearance is not None:
+            self._remember_looks(appearance, rows, cols, created, created_cols)
         associations.extend(zip(created, created_cols, strict=True))
         self._clock.follow(stamp)
         confirmed, lost, recovered, deleted = self._tick()
@@ -274,7 +282,8 @@ class Tracker:
             t_a[i], z_a[i], x_a[i], P_a[i] = step.stamp_s, step.z, step.x, step.P
         return x_a, P_a, t_a, z_a
 
-    def _match(self, z: FloatArray, r2: FloatArray, stamp: float) -> _Matched:
+    def _match(self, z: FloatArray, r2: FloatArray, stamp: float, appearance: NDArray[np.float32] | None
+               ) -> _Matched:
         """Predict the tracks to ``stamp`` and associate the detections (association.Associator)."""
         m = z.shape[0]
         if m == 0 or self._ids.shape[0] == 0:
@@ -282,8 +291,19 @@ class Tracker:
         late = self._t > stamp
         x_a, P_a, t_a, z_a = self._anchors(stamp, late)
         x_pred, P_pred = self._model.predict(x_a, P_a, stamp - t_a)
-        matches = self._associate(x_pred, P_pred, self._state, t_a, z_a, z, r2, stamp)
+        looks = None if appearance is None else appearance_distances(self._looks, appearance)
+        matches = self._associate(x_pred, P_pred, self._state, t_a, z_a, z, r2, stamp, looks)
         return _Matched(matches, x_pred, P_pred, late)
+
+    def _remember_looks(self, appearance: NDArray[np.float32], rows: IndexArray, cols: IndexArray,
+                        created: list[int], created_cols: list[int]) -> None:
+        """Add each described detection's embedding to the gallery of the track it joined or started."""
+        index = {int(tid): i for i, tid in enumerate(self._ids.tolist())}
+        pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
+        pairs += [(index[tid], col) for tid, col in zip(created, created_cols, strict=True)]
+        for i, col in pairs:
+            if np.isfinite(appearance[col]).all():
+                self._looks[i].add(appearance[col])
 
     def _update_matched(
         self,
@@ -393,6 +413,7 @@ class Tracker:
         self._t = np.concatenate([self._t, np.full(k, stamp)])
         self._zmeas = np.concatenate([self._zmeas, z])
         for j, (h, r2_j) in enumerate(zip(heights.tolist(), r2.tolist(), strict=True)):
+            self._looks.append(AppearanceGallery(self._cfg.appearance_gallery_size))
             self._hist.append(
                 TrackHistory(
                     steps=[FilterStep(stamp, z[j], r2_j, x0[j], P0[j])],
@@ -436,6 +457,7 @@ class Tracker:
         self._t = self._t[keep]
         self._zmeas = self._zmeas[keep]
         self._hist = [h for h, k in zip(self._hist, keep.tolist(), strict=True) if k]
+        self._looks = [g for g, k in zip(self._looks, keep.tolist(), strict=True) if k]
         return deleted_ids
 
 

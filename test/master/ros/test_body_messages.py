@@ -65,7 +65,7 @@ def test_frames_of_cameras_without_bodies_have_none_and_replays_keep_bodies() ->
     assert back is not None and back.descriptor.size == 0 and back.visible_fraction == pytest.approx(0.4)
 
 
-def test_the_master_core_counts_bodies_and_rejects_malformed_ones() -> None:
+def test_the_master_core_counts_bodies_and_rejects_malformed_ones_and_other_spaces() -> None:
     from face_reid_master.core import MasterConfig, MasterCore
 
     core = MasterCore(MasterConfig(embedding_space="dlib_resnet_v1"))
@@ -77,3 +77,8 @@ def test_the_master_core_counts_bodies_and_rejects_malformed_ones() -> None:
     outcome = core.process_frame(CameraFrameRecord("c", 1.0, people), now_s=1.0)
     assert outcome.accepted and len(outcome.track_of_person) == 4  # every person tracked, bodies or not
     assert core.stats.bodies_received == 1 and core.stats.bodies_rejected_malformed == 2
+    # the good body is of another projection than the shipped metric's: counted, said once, not used
+    assert core.stats.bodies_rejected_space == 1
+    assert len(outcome.notices) == 1 and "'c'" in outcome.notices[0] and "'s'" in outcome.notices[0]
+    again = core.process_frame(CameraFrameRecord("c", 1.1, people), now_s=1.1)
+    assert core.stats.bodies_rejected_space == 2 and not again.notices

@@ -202,8 +202,11 @@ def test_cameras_with_and_without_body_fields_both_feed_the_master(ros_domain_id
                                                                    embeddings: Path) -> None:
     """A camera that describes bodies (Tony: face + body fields) and an older one that sends none (Colin: face
     only) feed one master: both are tracked and identified by face, every body is counted as received and none
-    as malformed, on /diagnostics' source (the stats) and in the log."""
-    body = {"descriptor": np.linspace(-1.0, 1.0, 48).round(4).tolist(), "space": "body_pca_hsv32_siltp16_0123abcd",
+    as malformed or of another projection space, in the master's stats log (what /diagnostics shows)."""
+    from face_reid_camera.body.projection import load_body_projection
+
+    projection = load_body_projection()  # the cameras' shipped projection: the master's metric compares it
+    body = {"descriptor": np.linspace(-1.0, 1.0, projection.length).round(4).tolist(), "space": projection.space,
             "visible": 0.9}
     tony = {"x": 0.0, "y": 0.0, "vx": 0.3, "identity": "tony", "photos": [0, 1, 2, 3, 4], "body": body}
     colin = {"x": 0.0, "y": 3.0, "vx": 0.3, "identity": "colin", "photos": [0, 1, 2, 3, 4]}
