@@ -15,7 +15,8 @@ outliers.
 Body appearance (where a track and a detection both have an embedding, see
 :mod:`~face_reid_master.tracking.appearance`): a pair beyond ``appearance_gate`` is infeasible in every
 pass, ``appearance_weight`` x the distance is added to the pass-1 cost, and LOST tracks left over get a
-third pass: a detection within walking reach of their last one (no position gate) that looks like them.
+third pass: a detection within walking reach of their last one (no position gate) that looks like them and
+like no other track.
 """
 
 from __future__ import annotations
@@ -165,8 +166,9 @@ class Associator:
         z_last: FloatArray, z: FloatArray, stamp: float, free_c: NDArray[np.bool_], rows_l: list[IndexArray],
         cols_l: list[IndexArray],
     ) -> None:
-        """Pass 3: LOST tracks still unmatched take a free detection that looks like them, within walking reach
-        of their last detection (no position gate: a hidden person reappears where the prediction is not)."""
+        """Pass 3: LOST tracks still unmatched take a free detection that looks like them and like no other
+        track, within walking reach of their last detection (no position gate: a hidden person reappears
+        where the prediction is not)."""
         taken = np.zeros(state.shape[0], dtype=bool)
         for r_ in rows_l:
             taken[r_] = True
@@ -175,7 +177,8 @@ class Associator:
             return
         reach = self._sep + self._max_speed * np.maximum(stamp - t_last[lost], 0.0)
         dist2_last = ((z[None, :, :] - z_last[lost][:, None, :]) ** 2).sum(axis=2)
-        ok = looks_alike[lost] & (dist2_last < reach[:, None] ** 2) & free_c[None, :]
+        unique = looks_alike.sum(axis=0) == 1  # no other track looks like the detection too
+        ok = looks_alike[lost] & unique[None, :] & (dist2_last < reach[:, None] ** 2) & free_c[None, :]
         if ok.any():
             r_, c_ = gnn(appearance[lost], ok)
             rows_l.append(lost[r_])

@@ -86,3 +86,18 @@ def test_a_lost_track_takes_back_its_person_beyond_the_position_gate(appearance:
         assert back.track_of_detection() == {0: track} and not back.created
     else:
         assert back.created and back.track_of_detection()[0] != track
+
+
+def test_a_lost_track_does_not_take_a_detection_that_also_looks_like_another_track() -> None:
+    tracker = Tracker(TrackerConfig(lost_after_s=0.5, delete_after_s=5.0))
+    twin = np.stack([LOOK[0]])
+    for k in range(10):  # the first person, then hidden
+        tracker.update_arrays(np.array([[0.05 * k, 0.0]]), np.array([0.05]), np.array([np.nan]), 0.1 * k, "c", twin)
+    for k in range(25):  # someone dressed alike walks far off, in view
+        tracker.update_arrays(np.array([[3.0, 2.0 + 0.02 * k]]), np.array([0.05]), np.array([np.nan]),
+                              1.0 + 0.08 * k, "c", twin)
+    lost, other = tracker.track_ids()
+    back = tracker.update_arrays(np.array([[0.2, 0.6], [3.0, 2.5]]), np.full(2, 0.05), np.full(2, np.nan), 3.0, "c",
+                                 np.stack([LOOK[0], LOOK[0]]))
+    assert back.track_of_detection()[1] == other
+    assert back.track_of_detection()[0] != lost  # it looks like both tracks: not proof enough
