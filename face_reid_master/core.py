@@ -398,38 +398,52 @@ class MasterCore:
     def _appearance(self, bodies: list[Any], camera_id: str) -> NDArray[np.float32] | None:
         """Count the detections' body fields (cameras without bodies send none) and embed the well-formed
         descriptors of the body metric's space for the tracker: (N, r), NaN rows for the others; None when
-        none is usable (or appearance tracking is off)."""
+        none is usable (or appearance tracking is off). One pass over the frame's bodies, one GEMM."""
         st, metric = self.stats, self.body_metric
-        usable: list[tuple[int, NDArray[np.float32]]] = []
-        for k, body in enumerate(bodies):
-            if body is None:
-                continue
+        present = [(k, b) for k, b in enumerate(bodies) if b is not None]
+        if not present:
+            return None
+        usable: list[int] = []  # of the metric's space: checked for NaN / Inf together below
+        rows: list[NDArray[np.float32]] = []
+        for k, body in present:
             descriptor = np.asarray(body.descriptor, dtype=np.float32)
             visible = body.visible_fraction
-            if not (descriptor.ndim == 1 and bool(np.isfinite(descriptor).all()) and is_finite_number(visible)
-                    and 0.0 <= float(visible) <= 1.0):
+            if descriptor.ndim != 1 or not is_finite_number(visible) or not 0.0 <= float(visible) <= 1.0:
                 st.bodies_rejected_malformed += 1
-                continue
-            st.bodies_received += 1
-            if metric is None or descriptor.size == 0:
-                continue
-            if body.space != metric.space or descriptor.size != metric.length:
-                st.bodies_rejected_space += 1
-                space = str(body.space)[:64]
-                if self._body_space_noticed.get(camera_id) != space:
-                    self._body_space_noticed[camera_id] = space
-                    self._notices.append(f"camera {camera_id!r} sends body descriptors of space {space!r}, the body "
-                                         f"metric compares {metric.space!r}: its bodies are not used for tracking "
-                                         "(see the cameras' body_projection_path and face-reid-fit-body)")
-                continue
-            usable.append((k, descriptor))
-        if not usable:
+            elif metric is not None and descriptor.size and body.space == metric.space \
+                    and descriptor.size == metric.length:
+                usable.append(k)
+                rows.append(descriptor)
+            elif not np.isfinite(descriptor).all():
+                st.bodies_rejected_malformed += 1
+            else:
+                st.bodies_received += 1
+                if metric is not None and descriptor.size:
+                    self._other_body_space(camera_id, str(body.space))
+        if not rows:
             return None
-        feature = metric.features["fused"]
-        embedded = feature.embed(np.stack([d for _, d in usable]))
+        stacked = np.stack(rows)
+        finite = np.isfinite(stacked).all(axis=1)
+        st.bodies_received += int(np.count_nonzero(finite))
+        st.bodies_rejected_malformed += int(np.count_nonzero(~finite))
+        if not finite.any():
+            return None
+        assert metric is not None
+        embedded = metric.features["fused"].embed(stacked[finite])
         out = np.full((len(bodies), embedded.shape[1]), np.nan, dtype=np.float32)
-        out[[k for k, _ in usable]] = embedded
+        out[np.asarray(usable)[finite]] = embedded
         return out
+
+    def _other_body_space(self, camera_id: str, space: str) -> None:
+        """Count a descriptor of another projection than the body metric's; say it once per camera and space."""
+        assert self.body_metric is not None
+        self.stats.bodies_rejected_space += 1
+        space = space[:64]
+        if self._body_space_noticed.get(camera_id) != space:
+            self._body_space_noticed[camera_id] = space
+            self._notices.append(f"camera {camera_id!r} sends body descriptors of space {space!r}, the body metric "
+                                 f"compares {self.body_metric.space!r}: its bodies are not used for tracking (see the "
+                                 "cameras' body_projection_path and face-reid-fit-body)")
 
     def _in_space(self, person: Any, camera_id: str) -> NDArray[np.float32] | None:
         """The person's embedding in the master's space (part of a joint one is fine); None: another space.

@@ -298,12 +298,13 @@ class Tracker:
     def _remember_looks(self, appearance: NDArray[np.float32], rows: IndexArray, cols: IndexArray,
                         created: list[int], created_cols: list[int]) -> None:
         """Add each described detection's embedding to the gallery of the track it joined or started."""
-        index = {int(tid): i for i, tid in enumerate(self._ids.tolist())}
-        pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
-        pairs += [(index[tid], col) for tid, col in zip(created, created_cols, strict=True)]
+        described = np.isfinite(appearance).all(axis=1)
+        pairs = [(i, col) for i, col in zip(rows.tolist(), cols.tolist(), strict=True) if described[col]]
+        if created:  # new tracks were appended: their rows are the last ones
+            first = self._ids.shape[0] - len(created)
+            pairs += [(first + k, col) for k, col in enumerate(created_cols) if described[col]]
         for i, col in pairs:
-            if np.isfinite(appearance[col]).all():
-                self._looks[i].add(appearance[col])
+            self._looks[i].add(appearance[col])
 
     def _update_matched(
         self,
