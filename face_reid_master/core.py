@@ -35,6 +35,7 @@ from face_reid_camera.common.embedding_spaces import (
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
+from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
@@ -126,6 +127,17 @@ class MasterConfig:
     body_appearance_tracking: bool = param(
         True, "Associate detections to tracks by body appearance too (the body metric's space; cameras without "
         "bodies are tracked by position alone, as before).")
+    body_identity: bool = param(
+        True, "A track that shows no face may be identified by its body: matched to the recent bodies of the "
+        "learned faces (needs body_appearance_tracking; bayes method only).")
+    body_window_s: float = param(
+        3600.0, "A face's body evidence expires after this (s): clothes change, faces do not.", low=0.0,
+        high=1e7, low_open=True)
+    body_posterior_threshold: float = param(
+        0.99, "A faceless track gets a face when its body posterior exceeds this (0.5..1).", low=0.5, high=1.0,
+        low_open=True, high_open=True)
+    body_min_observations: int = param(
+        10, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
@@ -228,6 +240,11 @@ class MasterCore:
         # naming needs a threshold only once there are predefined people (add_person checks it too)
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
+        body_evidence = None
+        if self.body_metric is not None and cfg.body_identity and cfg.method == "bayes":
+            body_evidence = BodyEvidence(self.body_metric.features["fused"].likelihood, window_s=cfg.body_window_s,
+                                         posterior_threshold=cfg.body_posterior_threshold,
+                                         min_observations=cfg.body_min_observations)
         if cfg.method == "bayes":
             if cfg.new_person_scale_c != model.new_person_scale_c:
                 model = model.with_new_person_scale(cfg.new_person_scale_c)
@@ -237,7 +254,7 @@ class MasterCore:
                 glance_gap_s=cfg.glance_gap_s, glance_correlation=cfg.glance_correlation,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
-                release_after_inconsistent=cfg.release_after_inconsistent,
+                release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
             )
         else:
             self.identity = make_identity_manager(
@@ -314,6 +331,11 @@ class MasterCore:
                 self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
                 touched_tracks.add(track_id)
                 st.embeddings_used += 1
+        if appearance is not None and self.identity.body_evidence is not None:
+            for track_id, det_index in result.associations:
+                row = appearance[det_index]
+                if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
+                    self.identity.add_body_observations(track_id, row[None, :], stamp, frame.camera_id)
         events = self._identity_step(result.deleted, stamp)
         for track_id in touched_tracks:
             fid = self.identity.face_id_of(track_id)
@@ -580,6 +602,7 @@ class MasterCore:
                     face_id=fid,
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=float(self.identity.confidence_of(snap.track_id)),
+                    identity_evidence=self.identity.evidence_of(snap.track_id),
                     face_observations=self._face_obs.get(snap.track_id, 0),
                     position_xy=snap.position_xy,
                     velocity_xy=snap.velocity_xy,

@@ -75,3 +75,4 @@ class NamedTrackRecord:
     first_seen_s: float
     last_seen_s: float
     cameras: tuple[str, ...] = field(default_factory=tuple)
+    identity_evidence: str = ""  # what identified it: "face", "body", "both" ("" = undecided)

@@ -81,9 +81,8 @@ def summarize(scenario: DemoScenario, messages: Sequence[TrackMessage], method: 
 
 
 def _who(tr: NamedTrackRecord) -> str:
-    if tr.name:
-        return tr.name
-    return f"face {tr.face_id}" if tr.face_id else "?"
+    who = tr.name or (f"face {tr.face_id}" if tr.face_id else "?")
+    return f"{who} (by body)" if tr.identity_evidence == "body" else who
 
 
 _STATES = {0: "tentative", STATE_CONFIRMED: "confirmed", STATE_LOST: "lost"}

@@ -48,6 +48,7 @@ class TrackOutcome:
     decided_s: float | None
     cross_day: bool  # re-identification case whose person's previous track was on an earlier day
     face_busy: bool = False  # new id while every learned face of the person was held by another live track
+    evidence: str = ""  # what decided it: "face" or "body" ("" = undecided)
 
 
 def _day_of(stamp: float, days: Sequence[tuple[int, float, float, tuple[int, ...]]]) -> int:
@@ -109,7 +110,9 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
         else:
             verdict, why = "success", ""
         busy = why == "new_id" and all_faces_busy(p, stamp, t.track_id)
-        out.append(TrackOutcome(t.track_id, p, t.birth_s, reid, verdict, why, fid, stamp, cross_day, busy))
+        evidence = t.evidence[0] if t.evidence else "face"
+        out.append(TrackOutcome(t.track_id, p, t.birth_s, reid, verdict, why, fid, stamp, cross_day, busy,
+                                evidence))
     return out
 
 
@@ -256,7 +259,11 @@ def evaluate_run(
             "success": sum(o.outcome == "success" for o in cross),
             "failure": sum(o.outcome == "failure" for o in cross),
             "none": sum(o.outcome == "none" for o in cross),
+            "decided_by_body": sum(o.evidence == "body" for o in cross),
         },
+        "by_evidence": {e: {"success": sum(o.outcome == "success" and o.evidence == e for o in reid),
+                            "failure": sum(o.outcome == "failure" and o.evidence == e for o in reid)}
+                        for e in ("face", "body")},
     }
     first_appearance = {
         "tracks": len(first),

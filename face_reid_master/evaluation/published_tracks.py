@@ -47,7 +47,7 @@ def track_from_msg(t: Any, to_scene: Callable[[float], float]) -> NamedTrackReco
         int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence), int(t.face_observations),
         np.array([t.position.x, t.position.y]), np.array([t.velocity.x, t.velocity.y]),
         np.asarray(t.covariance, dtype=np.float64).reshape(4, 4), float(t.height_m), int(t.state),
-        secs(t.first_seen), secs(t.last_seen), tuple(t.cameras),
+        secs(t.first_seen), secs(t.last_seen), tuple(t.cameras), str(t.identity_evidence),
     )
 
 

@@ -57,6 +57,7 @@ class TrackLog:
     path: list[tuple[float, float, float]] = field(default_factory=list)
     face_gt: list[tuple[float, int]] = field(default_factory=list)  # (stamp, true person) of face detections
     releases: list[float] = field(default_factory=list)  # swaps: stamp of the first face not its face's
+    evidence: list[str] = field(default_factory=list)  # per assignment: "face" or "body" (what decided it)
 
     @property
     def detections(self) -> int:
@@ -207,6 +208,7 @@ def run_master(
             if log is None:  # identity of a track never seen in an association (cannot happen in the core)
                 log = tracks[tid] = TrackLog(tid, stamp, stamp)
             log.assignments.append((stamp, fid, kind))
+            log.evidence.append(core.identity.evidence_of(tid) or "face")
             log.released_s = None  # holding a face again (after a swap released the previous one)
         for tid in prev_assigned.keys() - assigned.keys():
             if tid in tracks:

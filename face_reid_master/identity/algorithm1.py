@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
+from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats, LearnedFace
 
@@ -78,6 +79,7 @@ class TrackEntry:
     confidence: float = 0.0
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
+    evidence: str = ""  # identified: "face", "body" (no face seen yet) or "both" (body, then its face agreed)
 
 
 def _rows(chunks: list[Chunk]) -> F32Array:
@@ -130,8 +132,13 @@ class IdentityManagerBase:
         shortlist_faces: int = 32,
         feature_gate_distance: float | None = None,
         release_after_inconsistent: int = 0,
+        body_evidence: BodyEvidence | None = None,
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
+        if body_evidence is not None and not isinstance(body_evidence, BodyEvidence):
+            raise ValueError(f"body_evidence must be a BodyEvidence or None, got {type(body_evidence).__name__}")
+        self.body_evidence = body_evidence
+        self._pending_bodies: dict[int, list[tuple[F32Array, float, str]]] = {}
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
                 "feature_gate_distance", feature_gate_distance, 0.0, math.inf, low_open=True, high_open=True
@@ -207,6 +214,16 @@ class IdentityManagerBase:
             self._tracks[tid] = TrackEntry(tid, first_seen_s=stamp, last_seen_s=stamp)
         return True
 
+    def add_body_observations(self, track_id: int, embeddings: F32Array, stamp_s: float, source: str = "") -> None:
+        """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) seen by camera
+        ``source`` for the next :meth:`step`; ignored without body evidence or for a deleted track."""
+        if self.body_evidence is None or track_id in self._dead or track_id in self._pending_deleted:
+            return
+        self._pending_bodies.setdefault(track_id, []).append((embeddings, stamp_s, source))
+        self.stats.body_observations += embeddings.shape[0]
+        if track_id not in self._tracks:
+            self._tracks[track_id] = TrackEntry(track_id, first_seen_s=stamp_s, last_seen_s=stamp_s)
+
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
         tid = check_int("track_id", track_id, -(2**63))
@@ -258,6 +275,8 @@ class IdentityManagerBase:
                         track.n_observations = obs.shape[0]
                     elif obs.shape[0] == 0:
                         continue
+                if track.evidence == "body" and track.face_id is not None and obs.shape[0]:
+                    track.evidence = "both"  # its own face agrees with the body decision
             if track.face_id is None:
                 slot = track.slot
                 if slot is None:
@@ -278,12 +297,62 @@ class IdentityManagerBase:
             self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye, unassigned_chunks)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
+        if self.body_evidence is not None:
+            events.extend(self._body_step(stamp))
         for tid in list(self._pending_deleted):
             ev = self._remove_track(tid, self._pending_deleted[tid])
             if ev is not None:
                 events.append(ev)
         self._pending_deleted.clear()
         return events
+
+    def _body_step(self, stamp: float) -> list[IdentityEvent]:
+        """Bodies of identified tracks join their face's gallery; faceless tracks gather body evidence against
+        every learned face and are given one of face_list when that evidence is strong enough (their own face,
+        once seen, overrules it)."""
+        body = self.body_evidence
+        assert body is not None
+        pending, self._pending_bodies = self._pending_bodies, {}
+        for tid, parts in pending.items():
+            track = self._tracks.get(tid)
+            if track is None:
+                continue
+            for emb, t, source in parts:
+                if track.face_id is not None:
+                    body.add_face_bodies(track.face_id, emb, t)
+                else:  # faceless tracks are compared; the others only keep their bodies for their face
+                    body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source)
+        events = []
+        for tid, fid, p in body.decide(self._available, stamp):
+            track = self._tracks.get(tid)
+            if track is not None and track.face_id is None and track.slot is None and fid in self._available:
+                events.append(self._apply_body_decision(track, fid, p, stamp))
+        return events
+
+    def _apply_body_decision(self, track: TrackEntry, fid: int, confidence: float, stamp: float) -> IdentityEvent:
+        """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
+        face = self._faces[fid]
+        self._make_unavailable([fid])
+        face.track_id = track.track_id
+        face.last_seen_s = max(face.last_seen_s, stamp)
+        self._on_track_identified(track.track_id)
+        track.face_id = fid
+        track.confidence = float(confidence)
+        track.evidence = "body"
+        self._move_track_bodies(track.track_id, fid)
+        self.stats.assigned_by_body += 1
+        return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
+                             evidence="body")
+
+    def _move_track_bodies(self, tid: int, fid: int) -> None:
+        """The bodies a track gathered before its decision join its face's gallery."""
+        body = self.body_evidence
+        if body is None:
+            return
+        emb, newest = body.track_bodies(tid)
+        if emb.shape[0]:
+            body.add_face_bodies(fid, emb, newest)
+        body.forget_track(tid)
 
     def _consistent(self, obs: F32Array, slot: int) -> npt.NDArray[np.bool_]:
         """Which observations lie within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
@@ -321,6 +390,12 @@ class IdentityManagerBase:
         return run
 
     # ------------------------------------------------------------------------------ queries
+    def evidence_of(self, track_id: int) -> str:
+        """What identified a live track: "face", "body", "both" (a body decision its face then confirmed), or
+        "" (unidentified / unknown track)."""
+        track = self._tracks.get(track_id)
+        return "" if track is None or track.face_id is None else track.evidence
+
     def face_id_of(self, track_id: int) -> int | None:
         """Face id assigned to a live track, or None while unidentified / unknown track."""
         track = self._tracks.get(track_id)
@@ -395,6 +470,8 @@ class IdentityManagerBase:
                 self._pending_obs.pop(track.track_id, None)
         self._bank.free_slot(face.slot)
         del self._faces[fid]
+        if self.body_evidence is not None:
+            self.body_evidence.forget_face(fid)
         self.stats.faces_forgotten += 1
         return True
 
@@ -495,6 +572,8 @@ class IdentityManagerBase:
         track.confidence = float(confidence)
         track.slot = None
         track.votes.clear()
+        track.evidence = "face"
+        self._move_track_bodies(tid, fid)
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
 
     def _release_swapped(self, track: TrackEntry, stamp: float, since: float) -> IdentityEvent:
@@ -514,6 +593,9 @@ class IdentityManagerBase:
         while len(self._dead) > self._DEAD_TRACK_MEMORY:
             self._dead.popitem(last=False)
         self._pending_obs.pop(tid, None)
+        self._pending_bodies.pop(tid, None)
+        if self.body_evidence is not None:
+            self.body_evidence.forget_track(tid)
         track = self._tracks.pop(tid, None)
         if track is None:
             return None

@@ -36,6 +36,7 @@ class IdentityEvent:
     stamp_s: float
     confidence: float  # posterior (Bayes) or vote fraction (threshold) when the decision was made
     since_s: float | None = None  # SWAPPED: stamp of the first observation that was not the face's person
+    evidence: str = "face"  # ASSIGNED_KNOWN / NEW_FACE: what decided it, "face" or "body"
 
 
 @dataclass
@@ -88,3 +89,5 @@ class IdentityStats:
     faces_forgotten: int = 0
     observations_not_learned_inconsistent: int = 0
     swaps_released: int = 0
+    body_observations: int = 0
+    assigned_by_body: int = 0

@@ -88,6 +88,7 @@ def tracks_to_msg(tracks: list[NamedTrackRecord], stamp_s: float, frame_id: str)
         m.track_id, m.face_id, m.name = int(tr.track_id), int(tr.face_id), tr.name
         m.identity_confidence = float(tr.identity_confidence)
         m.face_observations = int(tr.face_observations)
+        m.identity_evidence = tr.identity_evidence
         m.position.x, m.position.y = float(tr.position_xy[0]), float(tr.position_xy[1])
         m.velocity.x, m.velocity.y = float(tr.velocity_xy[0]), float(tr.velocity_xy[1])
         m.covariance = [float(v) for v in np.asarray(tr.covariance, dtype=np.float64).reshape(16)]

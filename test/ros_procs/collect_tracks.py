@@ -38,7 +38,8 @@ def main() -> int:
             "frame_id": msg.header.frame_id,
             "tracks": [
                 {"track_id": t.track_id, "face_id": t.face_id, "name": t.name, "state": t.state,
-                 "confidence": t.identity_confidence, "x": t.position.x, "y": t.position.y,
+                 "confidence": t.identity_confidence, "evidence": t.identity_evidence,
+                 "x": t.position.x, "y": t.position.y,
                  "cameras": list(t.cameras)}
                 for t in msg.tracks
             ],

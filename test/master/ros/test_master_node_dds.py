@@ -219,6 +219,9 @@ def test_cameras_with_and_without_body_fields_both_feed_the_master(ros_domain_id
     log, logs = _interrupt(master, tmp_path)
     tony_tracks, colin_tracks = _tracks_near(out, 0.0), _tracks_near(out, 3.0)
     assert {t["face_id"] for t in tony_tracks} - {0} and {t["face_id"] for t in colin_tracks} - {0}, logs
+    # /tracks_named says what identified them: their faces (undecided tracks: nothing)
+    assert {t["evidence"] for t in tony_tracks + colin_tracks if t["face_id"]} == {"face"}
+    assert all(t["evidence"] == "" for t in tony_tracks + colin_tracks if not t["face_id"])
     stats = [line for line in log.splitlines() if "stats: {" in line]
     assert stats, logs
     last = stats[-1]

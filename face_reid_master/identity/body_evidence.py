@@ -1,0 +1,193 @@
+"""Body evidence for identities: what each learned face's person wore lately, and who a faceless track is.
+
+Faces identify people only while they show them. Every learned face therefore also keeps the body
+appearance of its person's recent tracks (embeddings of the body metric, :meth:`~face_reid_master.body.
+metric_file.BodyFeatureMetric.embed`), each with its stamp: clothes change, so an embedding older than
+``window_s`` no longer counts (faces never expire). A live track that has shown no face accumulates, per
+face in face_list with recent bodies, the log-likelihood ratio of its body observations (N_p / N_n of the
+body distance, fitted with the metric); a face is decided when its posterior, against every other such face
+and "someone else" (a person without recent bodies here: new, or in other clothes), passes a strict
+threshold after enough observations. Body evidence never creates a face: only a face does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from face_reid_camera.common.checks import check_int, check_real
+from face_reid_master.identity.likelihood import LikelihoodModel
+
+__all__ = ["BodyEvidence"]
+
+F32 = npt.NDArray[np.float32]
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass
+class _Gallery:
+    """A face's recent body embeddings (a ring) and their stamps."""
+
+    rows: F32
+    stamps: FloatArray
+    count: int = 0
+    next: int = 0
+
+    def add(self, embeddings: F32, stamp: float) -> None:
+        for row in embeddings:
+            self.rows[self.next] = row
+            self.stamps[self.next] = stamp
+            self.next = (self.next + 1) % self.rows.shape[0]
+            self.count = min(self.count + 1, self.rows.shape[0])
+
+    def recent(self, since: float) -> F32:
+        kept = self.stamps[: self.count] >= since
+        return self.rows[: self.count][kept]
+
+
+@dataclass
+class _TrackBodies:
+    """A faceless track's body observations so far (bounded) and its evidence per face id."""
+
+    rows: list[F32] = field(default_factory=list)
+    stamps: list[float] = field(default_factory=list)
+    log_ratio: dict[int, float] = field(default_factory=dict)
+    counts: dict[int, int] = field(default_factory=dict)
+    distance_sum: dict[int, float] = field(default_factory=dict)
+    last_used: dict[str, float] = field(default_factory=dict)  # camera -> stamp of its last observation used
+
+
+class BodyEvidence:
+    """Body galleries of learned faces and body evidence of faceless tracks (see the module doc).
+
+    ``likelihood``: N_p / N_n of the body distance (the body metric's fused feature). ``window_s``: bodies
+    older than this do not count. ``gallery_size``: embeddings kept per face. ``posterior_threshold`` and
+    ``min_observations``: a faceless track is decided when one face's posterior exceeds the threshold after at
+    least that many observations compared with it. ``max_log_ratio``: bound of one observation's evidence
+    (frames of one glance are far from independent). ``other_log_odds``: log prior odds of "someone else".
+    ``min_interval_s``: one camera's observations of a track count as evidence at most this often (the
+    frames in between show nearly the same view; they are still kept for the face's gallery).
+    """
+
+    def __init__(self, likelihood: LikelihoodModel, *, window_s: float = 3600.0, gallery_size: int = 64,
+                 posterior_threshold: float = 0.99, min_observations: int = 10, max_log_ratio: float = 0.3,
+                 other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5) -> None:
+        if not isinstance(likelihood, LikelihoodModel):
+            raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
+        self.likelihood = likelihood
+        self.window_s = check_real("window_s", window_s, 0.0, math.inf, low_open=True)
+        self.gallery_size = check_int("gallery_size", gallery_size, 1)
+        self.posterior_threshold = check_real("posterior_threshold", posterior_threshold, 0.5, 1.0,
+                                              low_open=True, high_open=True)
+        self.min_observations = check_int("min_observations", min_observations, 1)
+        self.max_log_ratio = check_real("max_log_ratio", max_log_ratio, 0.0, math.inf, low_open=True)
+        self.other_log_odds = check_real("other_log_odds", other_log_odds)
+        self.track_buffer = check_int("track_buffer", track_buffer, 1)
+        self.min_interval_s = check_real("min_interval_s", min_interval_s, 0.0)
+        self._faces: dict[int, _Gallery] = {}
+        self._tracks: dict[int, _TrackBodies] = {}
+
+    # ------------------------------------------------------------------ faces
+    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float) -> None:
+        """What the person of ``face_id`` wears now (rows of the body metric's embedding)."""
+        if embeddings.shape[0] == 0:
+            return
+        gallery = self._faces.get(face_id)
+        if gallery is None or gallery.rows.shape[1] != embeddings.shape[1]:
+            gallery = self._faces[face_id] = _Gallery(np.empty((self.gallery_size, embeddings.shape[1]), np.float32),
+                                                      np.full(self.gallery_size, -math.inf))
+        gallery.add(embeddings, stamp_s)
+
+    def forget_face(self, face_id: int) -> None:
+        """Drop a face's bodies (the face was forgotten)."""
+        self._faces.pop(face_id, None)
+        for track in self._tracks.values():
+            track.log_ratio.pop(face_id, None)
+            track.counts.pop(face_id, None)
+
+    def has_recent_bodies(self, face_id: int, now_s: float) -> bool:
+        gallery = self._faces.get(face_id)
+        return gallery is not None and gallery.recent(now_s - self.window_s).shape[0] > 0
+
+    # ------------------------------------------------------------------ tracks
+    def observe(self, track_id: int, embeddings: F32, stamp_s: float, candidates: list[int],
+                source: str = "") -> None:
+        """Body observations of a track seen by camera ``source``: kept (for its face, once it has one) and,
+        at most every ``min_interval_s`` per camera, compared with the recent bodies of the ``candidates``."""
+        track = self._tracks.setdefault(track_id, _TrackBodies())
+        track.rows.extend(embeddings)
+        track.stamps.extend([stamp_s] * embeddings.shape[0])
+        if len(track.rows) > self.track_buffer:  # keep an even spread of the track's history
+            keep = np.linspace(0, len(track.rows) - 1, self.track_buffer).round().astype(int)
+            track.rows = [track.rows[i] for i in keep]
+            track.stamps = [track.stamps[i] for i in keep]
+        if not candidates or stamp_s < track.last_used.get(source, -math.inf) + self.min_interval_s:
+            return
+        track.last_used[source] = stamp_s
+        since = stamp_s - self.window_s
+        faces, galleries = [], []
+        for face_id in candidates:
+            gallery = self._faces.get(face_id)
+            recent = gallery.recent(since) if gallery is not None else None
+            if recent is not None and recent.shape[0] and recent.shape[1] == embeddings.shape[1]:
+                faces.append(face_id)
+                galleries.append(recent)
+        if not faces:
+            return
+        rows = np.concatenate(galleries)  # every candidate's recent bodies: one GEMM for all of them
+        d2 = (embeddings * embeddings).sum(axis=1)[:, None] + (rows * rows).sum(axis=1)[None, :] \
+            - 2.0 * embeddings @ rows.T
+        starts = np.concatenate([[0], np.cumsum([g.shape[0] for g in galleries])[:-1]])
+        d = np.sqrt(np.maximum(np.minimum.reduceat(d2, starts, axis=1), 0.0))  # (observations, faces)
+        lr = np.clip(self.likelihood.log_likelihood_ratio(d), -self.max_log_ratio, self.max_log_ratio).sum(axis=0)
+        for face_id, value, dsum in zip(faces, lr.tolist(), d.sum(axis=0).tolist(), strict=True):
+            track.log_ratio[face_id] = track.log_ratio.get(face_id, 0.0) + value
+            track.distance_sum[face_id] = track.distance_sum.get(face_id, 0.0) + dsum
+            track.counts[face_id] = track.counts.get(face_id, 0) + embeddings.shape[0]
+
+    def track_bodies(self, track_id: int) -> tuple[F32, float]:
+        """The track's kept body embeddings (k, r) and the stamp of its newest (for its face's gallery)."""
+        track = self._tracks.get(track_id)
+        if track is None or not track.rows:
+            return np.zeros((0, 0), np.float32), -math.inf
+        return np.stack(track.rows), max(track.stamps)
+
+    def forget_track(self, track_id: int) -> None:
+        self._tracks.pop(track_id, None)
+
+    def posterior(self, track_id: int, candidates: list[int], now_s: float) -> dict[int, float]:
+        """{face_id: posterior} over the candidates with recent bodies, plus 0 = someone else."""
+        recent = {f for f in candidates if self.has_recent_bodies(f, now_s)}
+        return self._posterior(self._tracks.get(track_id), recent)
+
+    def _posterior(self, track: _TrackBodies | None, recent: set[int]) -> dict[int, float]:
+        faces = [f for f in track.log_ratio if f in recent] if track is not None else []
+        logs = np.array([self.other_log_odds] + [track.log_ratio[f] for f in faces]) if track else np.zeros(1)
+        p = np.exp(logs - logs.max())
+        p /= p.sum()
+        return dict(zip([0, *faces], p.tolist(), strict=True))
+
+    def decide(self, available: list[int], now_s: float) -> list[tuple[int, int, float]]:
+        """(track id, face id, posterior) of the faceless tracks decided now: one face per track and one track
+        per face (the most confident first). The posterior is over every face with recent bodies (those held
+        by live tracks too: a track that looks most like someone already tracked is not decided), and only an
+        ``available`` face (in face_list) can be given."""
+        if not self._tracks:
+            return []
+        recent = {f for f in self._faces if self.has_recent_bodies(f, now_s)}
+        free = set(available)
+        wanted = []
+        for track_id, track in self._tracks.items():
+            post = self._posterior(track, recent)
+            face, p = max(post.items(), key=lambda kv: kv[1])
+            if face in free and p > self.posterior_threshold and track.counts.get(face, 0) >= self.min_observations:
+                wanted.append((p, track_id, face))
+        out, taken = [], set()
+        for p, track_id, face in sorted(wanted, reverse=True):
+            if face not in taken:
+                taken.add(face)
+                out.append((track_id, face, p))
+        return out

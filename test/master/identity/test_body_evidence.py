@@ -1,0 +1,109 @@
+"""Body evidence: face galleries that expire, faceless tracks decided by their body, never a new face by body."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from face_reid_master.identity.bayes_table import BayesIdentityManager
+from face_reid_master.identity.body_evidence import BodyEvidence
+from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
+from face_reid_master.identity.records import IdentityEventKind
+
+BODY_LIKELIHOOD = LikelihoodModel(SkewNormal(0.0, 0.4, 0.15), SkewNormal(0.0, 1.2, 0.25))  # N_p = N_n near 0.75
+DIM = 4
+RED, BLUE = np.array([[1.0, 0, 0, 0]], np.float32), np.array([[0, 1.0, 0, 0]], np.float32)  # 1.41 apart
+
+
+def _evidence(**kwargs) -> BodyEvidence:
+    return BodyEvidence(BODY_LIKELIHOOD, **{"window_s": 100.0, "min_observations": 3, "max_log_ratio": 3.0, **kwargs})
+
+
+def test_a_faceless_track_is_decided_for_the_face_whose_person_wears_the_same() -> None:
+    body = _evidence()
+    body.add_face_bodies(1, RED, 0.0)
+    body.add_face_bodies(2, BLUE, 0.0)
+    for k in range(2):
+        body.observe(7, RED + 0.05, 1.0 + k, [1, 2])
+    assert body.decide([1, 2], 2.0) == []  # 2 observations: fewer than min_observations
+    body.observe(7, RED + 0.05, 3.0, [1, 2])
+    ((track, face, p),) = body.decide([1, 2], 3.0)
+    assert (track, face) == (7, 1) and p > 0.99
+    post = body.posterior(7, [1, 2], 3.0)
+    assert post[1] > post[2] and post[1] > post[0]
+    assert body.decide([2], 3.0) == []  # face 1 is held by another track: not a candidate
+
+
+def test_bodies_expire_and_forgotten_faces_lose_theirs() -> None:
+    body = _evidence()
+    body.add_face_bodies(1, RED, 0.0)
+    for k in range(5):
+        body.observe(7, RED, 200.0 + k, [1])  # the person's clothes were seen 200 s ago: longer than the window
+    assert body.decide([1], 205.0) == [] and not body.has_recent_bodies(1, 205.0)
+    body.add_face_bodies(1, RED, 201.0)
+    body.observe(8, RED, 202.0, [1])
+    body.forget_face(1)
+    assert body.posterior(8, [1], 202.0) == {0: 1.0}
+
+
+def test_one_face_goes_to_one_track_the_most_confident_first() -> None:
+    body = _evidence()
+    body.add_face_bodies(1, RED, 0.0)
+    for k in range(4):
+        body.observe(7, RED, 1.0 + k, [1])
+        body.observe(8, RED + 0.3, 1.0 + k, [1])  # 0.6 away: weaker evidence
+    assert [(t, f) for t, f, _ in body.decide([1], 5.0)] == [(7, 1)]
+
+
+def _manager() -> BayesIdentityManager:
+    return BayesIdentityManager(BODY_LIKELIHOOD, embedding_dim=DIM, min_observations=2,
+                                body_evidence=_evidence())
+
+
+def _face(k: int) -> np.ndarray:
+    return np.eye(DIM, dtype=np.float32)[k][None, :] * 0.1  # faces 0.14 apart in the face space (of the test)
+
+
+def test_the_identity_layer_gives_a_faceless_track_its_face_by_body_and_its_face_can_confirm_it() -> None:
+    ids = _manager()
+    ids.add_observations(1, np.repeat(_face(0), 3, axis=0), 0.0)  # Alice shows her face, in red
+    ids.add_body_observations(1, RED, 0.0)
+    ids.step(0.0)
+    (alice,) = ids.face_ids()
+    assert ids.evidence_of(1) == "face"
+    ids.track_deleted(1, 1.0)  # she leaves; her red clothes stay with her face
+    ids.step(1.0)
+    events = []
+    for k in range(3):  # she comes back showing only her back: her body, no face
+        ids.add_body_observations(2, RED + 0.05, 2.0 + k)
+        events += ids.step(2.0 + k)
+    assert [(e.kind, e.track_id, e.face_id, e.evidence) for e in events] == \
+        [(IdentityEventKind.ASSIGNED_KNOWN, 2, alice, "body")]
+    assert ids.face_id_of(2) == alice and ids.evidence_of(2) == "body" and ids.stats.assigned_by_body == 1
+    ids.add_observations(2, _face(0), 6.0)  # then she turns round: her face agrees
+    ids.step(6.0)
+    assert ids.evidence_of(2) == "both"
+
+
+def test_body_evidence_never_creates_a_face_nor_decides_a_track_that_showed_a_face() -> None:
+    ids = _manager()
+    for k in range(5):  # a stranger's body, nobody learned yet
+        ids.add_body_observations(1, BLUE, float(k))
+        assert ids.step(float(k)) == []
+    assert ids.face_ids() == [] and ids.face_id_of(1) is None
+    ids.add_observations(2, np.repeat(_face(0), 3, axis=0), 10.0)
+    ids.add_body_observations(2, RED, 10.0)
+    ids.step(10.0)
+    ids.track_deleted(2, 11.0)
+    ids.step(11.0)
+    ids.add_observations(3, _face(1), 12.0)  # a track that showed a face (one: undecided) wears red
+    for k in range(4):
+        ids.add_body_observations(3, RED, 12.0 + k)
+        ids.step(12.0 + k)
+    assert ids.face_id_of(3) is None  # its face decides, not its body
+
+
+@pytest.mark.parametrize("bad", [{"window_s": 0.0}, {"posterior_threshold": 1.0}, {"min_observations": 0}])
+def test_arguments_are_checked(bad: dict) -> None:
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        BodyEvidence(BODY_LIKELIHOOD, **bad)
