@@ -175,12 +175,13 @@ class BodyEvidence:
         per face (the most confident first). The posterior is over every face with recent bodies (those held
         by live tracks too: a track that looks most like someone already tracked is not decided), and only an
         ``available`` face (in face_list) can be given."""
-        if not self._tracks:
+        compared = [(tid, t) for tid, t in self._tracks.items() if t.log_ratio]  # faceless tracks with evidence
+        if not compared:
             return []
         recent = {f for f in self._faces if self.has_recent_bodies(f, now_s)}
         free = set(available)
         wanted = []
-        for track_id, track in self._tracks.items():
+        for track_id, track in compared:
             post = self._posterior(track, recent)
             face, p = max(post.items(), key=lambda kv: kv[1])
             if face in free and p > self.posterior_threshold and track.counts.get(face, 0) >= self.min_observations:
