@@ -39,7 +39,12 @@ from face_reid_camera.camera_model import CameraIntrinsics, CameraPose  # noqa: 
 from face_reid_camera.faces.detector import YuNetDetector  # noqa: E402
 from face_reid_camera.faces.embedder import CombinedEmbedder, FaceEmbedder, load_embedder  # noqa: E402
 from face_reid_camera.pipeline import CameraPipeline, CameraPipelineConfig  # noqa: E402
-from face_reid_master.sim.renderer import SyntheticPerson, crop_face_for_rendering, render_scene  # noqa: E402
+from face_reid_master.sim.renderer import (  # noqa: E402
+    SyntheticPerson,
+    crop_face_for_rendering,
+    render_scene,
+    synthetic_clothes,
+)
 
 FACES = REPO / "test" / "data" / "faces"
 IDENTITIES = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez", "lfw_Jacques_Chirac", "lfw_Vladimir_Putin"]
@@ -132,24 +137,13 @@ def _budget_run(detector: YuNetDetector, embedder: FaceEmbedder | CombinedEmbedd
     }
 
 
-def _clothes(rng: np.random.Generator) -> np.ndarray:
-    """A person crop (256 x 96, head top to feet) in random clothes: striped or plain shirt, woven trousers."""
-    img = np.empty((256, 96, 3), np.uint8)
-    img[:40] = (60, 90, 140)
-    img[40:128] = rng.integers(20, 230, 3)
-    if rng.random() < 0.5:
-        img[44:128:16] = 235
-    img[128:] = rng.integers(20, 160, 3)
-    weave = (np.add.outer(np.arange(128), np.arange(96)) % 4 < 2)[:, :, None]
-    img[128:] = np.where(weave, img[128:], (img[128:] * 0.7).astype(np.uint8))
-    return np.clip(img + rng.normal(0.0, 4.0, img.shape), 0, 255).astype(np.uint8)
-
-
 def _body_run(intr: CameraIntrinsics, pose: CameraPose, frames: int) -> dict[str, Any]:
     """5 people, no faces: frames without and with bodies alternated; the body cost per person."""
     rng = np.random.default_rng(7)
-    people = [SyntheticPerson(x, y, float(rng.uniform(1.6, 1.9)), math.atan2(-y, -x), body_texture_bgr=_clothes(rng))
-              for x, y in SPOTS]
+    people = []
+    for x, y in SPOTS:  # random clothes: a striped or plain shirt
+        clothes = synthetic_clothes(rng.integers(20, 230, 3), rng.integers(20, 160, 3), rng.random() < 0.5, rng)
+        people.append(SyntheticPerson(x, y, float(rng.uniform(1.6, 1.9)), math.atan2(-y, -x), body_texture_bgr=clothes))
     rendered = [render_scene(people, intr, pose, rng=np.random.default_rng(k)) for k in range(4)]
     inputs = [(r.rgb_bgr, np.where(r.depth_mm > 0, r.depth_mm * np.float32(0.001), np.nan).astype(np.float32))
               for r in rendered]

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.body.observation import BodyObservation
+from face_reid_camera.body.observation import GEOMETRY_FIELDS, BodyObservation
 from face_reid_camera.body.person_body import BodyConfig, describe_body
 from face_reid_camera.body.projection import BodyProjection
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
@@ -125,9 +125,8 @@ class PersonObservation:
                 "visible_fraction": round(self.body.visible_fraction, 3),
                 "part_visible": [round(v, 3) for v in self.body.part_visible],
                 "descriptor_length": int(self.body.descriptor.size),
-                "geometry_m": {name: (round(float(v), 3) if math.isfinite(v) else None)
-                               for name, v in zip(("height", "head_height", "shoulder_width", "torso_width",
-                                                   "torso_depth", "hip_width"), g.vector().tolist(), strict=True)},
+                "geometry_m": {name.removesuffix("_m"): (round(v, 3) if math.isfinite(v) else None)
+                               for name, v in zip(GEOMETRY_FIELDS, g.vector().tolist(), strict=True)},
             }
         return out
 

@@ -23,7 +23,7 @@ class BodyRecord:
 
     ``descriptor``: projected appearance (float32, empty = none) in space ``space`` (the camera's
     projection); ``geometry``: ``GEOMETRY_FIELDS`` values (m, NaN = not measured); ``visible_fraction`` and
-    ``part_visible`` 0..1.
+    ``part_visible`` 0..1 and ``part_widths_m`` (m) per descriptor part (empty: not sent).
     """
 
     descriptor: NDArray[np.float32]
@@ -31,6 +31,7 @@ class BodyRecord:
     visible_fraction: float
     geometry: NDArray[np.float32]
     part_visible: NDArray[np.float32] = field(default_factory=lambda: np.zeros(0, np.float32))
+    part_widths_m: NDArray[np.float32] = field(default_factory=lambda: np.zeros(0, np.float32))
 
 
 @dataclass(frozen=True)

@@ -11,11 +11,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["GEOMETRY_FIELDS", "BodyGeometry", "BodyObservation"]
+__all__ = ["GEOMETRY_FIELDS", "GEOMETRY_MSG_FIELDS", "BodyGeometry", "BodyObservation"]
 
 # The geometric features in vector order (metres; NaN = not measured, e.g. that part is hidden).
 GEOMETRY_FIELDS = ("height_m", "head_height_m", "shoulder_width_m", "torso_width_m", "torso_depth_m",
                    "hip_width_m")
+# The face_reid_msgs/PersonObservation field of each of them (the height is the detection's own height_m).
+GEOMETRY_MSG_FIELDS = tuple(name if name == "height_m" else f"body_{name}" for name in GEOMETRY_FIELDS)
 
 
 @dataclass(frozen=True)

@@ -26,14 +26,16 @@ from face_reid_camera.camera_model import CameraIntrinsics
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.people.ground_plane import GroundPlane
 
-__all__ = ["BodyConfig", "BodyGrid", "body_grid", "describe_body", "measure_geometry", "part_visibility"]
+__all__ = ["GEOMETRY_BANDS", "BodyConfig", "BodyGrid", "body_grid", "describe_body", "measure_geometry",
+           "part_visibility"]
 
 FloatArray = NDArray[np.float64]
 
-# Height bands (fractions of the person's height above the floor) of the geometric measures.
-_SHOULDER_BAND = (0.79, 0.85)
-_CHEST_BAND = (0.66, 0.76)
-_HIP_BAND = (0.48, 0.56)
+# The height band (fractions of the person's height above the floor) each width / depth is measured in.
+GEOMETRY_BANDS: dict[str, tuple[float, float]] = {
+    "shoulder_width_m": (0.79, 0.85), "torso_width_m": (0.66, 0.76), "torso_depth_m": (0.66, 0.76),
+    "hip_width_m": (0.48, 0.56),
+}
 _MIN_BAND_POINTS = 6  # a width needs at least this many points of its band
 _HEAD_SLICE_M = 0.03  # slices of the width profile below the head top
 _HEAD_TOP_M = 0.12  # the head's width is the median slice width within this of the top
@@ -225,7 +227,6 @@ def measure_geometry(grid: BodyGrid, part_edges: tuple[float, ...]) -> BodyGeome
     def band(lo: float, hi: float) -> NDArray[np.bool_]:
         return (frac >= lo) & (frac < hi)
 
-    chest = band(*_CHEST_BAND)
     part_widths = tuple(_extent(lat[band(1.0 - part_edges[p + 1], 1.0 - part_edges[p])])
                         for p in range(len(part_edges) - 1))
     # head height: the width profile in thin slices below the top; the shoulders start where it jumps
@@ -247,12 +248,9 @@ def measure_geometry(grid: BodyGrid, part_edges: tuple[float, ...]) -> BodyGeome
             wide = wide[wide >= len(top_slices)]
             if wide.size:
                 head_height = float(wide[0] * _HEAD_SLICE_M)
-    return BodyGeometry(
-        height_m=h_total, head_height_m=head_height, shoulder_width_m=_extent(lat[band(*_SHOULDER_BAND)]),
-        torso_width_m=_extent(lat[chest]), torso_depth_m=_extent(alo[chest]),
-        hip_width_m=_extent(lat[band(*_HIP_BAND)]),
-        part_widths_m=part_widths,
-    )
+    extents = {name: _extent((alo if name == "torso_depth_m" else lat)[band(*span)])  # depth: along the sight
+               for name, span in GEOMETRY_BANDS.items()}
+    return BodyGeometry(height_m=h_total, head_height_m=head_height, part_widths_m=part_widths, **extents)
 
 
 def describe_body(

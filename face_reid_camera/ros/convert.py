@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from face_reid_camera.body.observation import GEOMETRY_MSG_FIELDS
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.pipeline import FrameResult, PersonObservation
@@ -58,12 +59,10 @@ def person_to_msg(person_cls: type, person: PersonObservation) -> Any:
             m.body_descriptor_space = body.space
         m.body_visible_fraction = float(body.visible_fraction)
         m.body_part_visible = [float(v) for v in body.part_visible]
-        g = body.geometry
-        m.body_head_height_m = float(g.head_height_m)
-        m.body_shoulder_width_m = float(g.shoulder_width_m)
-        m.body_torso_width_m = float(g.torso_width_m)
-        m.body_hip_width_m = float(g.hip_width_m)
-        m.body_torso_depth_m = float(g.torso_depth_m)
+        m.body_part_widths_m = [float(v) for v in body.geometry.part_widths_m]
+        for name, value in zip(GEOMETRY_MSG_FIELDS, body.geometry.vector().tolist(), strict=True):
+            if name != "height_m":  # the detection's own height, set above
+                setattr(m, name, value)
     return m
 
 

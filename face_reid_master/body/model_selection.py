@@ -69,6 +69,12 @@ class SearchGrid:
         object.__setattr__(self, "regularisations", regs)
         object.__setattr__(self, "subspace_dims", caps)
 
+    def capped(self, n_samples: int) -> SearchGrid:
+        """This grid with at most the ``n_samples - 1`` components a PCA of ``n_samples`` crops gives."""
+        n = check_int("n_samples", n_samples, 2)
+        pairs = tuple(dict.fromkeys(tuple(min(d, n - 1) for d in p) for p in self.pca_dims))
+        return SearchGrid(pairs, self.regularisations, self.subspace_dims)
+
     def max_dims(self) -> dict[str, int]:
         """The most components of each block any candidate uses."""
         return {b: max(pair[i] for pair in self.pca_dims) for i, b in enumerate(FEATURES)}

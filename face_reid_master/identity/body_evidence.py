@@ -56,7 +56,6 @@ class _TrackBodies:
     stamps: list[float] = field(default_factory=list)
     log_ratio: dict[int, float] = field(default_factory=dict)
     counts: dict[int, int] = field(default_factory=dict)
-    distance_sum: dict[int, float] = field(default_factory=dict)
     last_used: dict[str, float] = field(default_factory=dict)  # camera -> stamp of its last observation used
 
 
@@ -143,9 +142,8 @@ class BodyEvidence:
         starts = np.concatenate([[0], np.cumsum([g.shape[0] for g in galleries])[:-1]])
         d = np.sqrt(np.maximum(np.minimum.reduceat(d2, starts, axis=1), 0.0))  # (observations, faces)
         lr = np.clip(self.likelihood.log_likelihood_ratio(d), -self.max_log_ratio, self.max_log_ratio).sum(axis=0)
-        for face_id, value, dsum in zip(faces, lr.tolist(), d.sum(axis=0).tolist(), strict=True):
+        for face_id, value in zip(faces, lr.tolist(), strict=True):
             track.log_ratio[face_id] = track.log_ratio.get(face_id, 0.0) + value
-            track.distance_sum[face_id] = track.distance_sum.get(face_id, 0.0) + dsum
             track.counts[face_id] = track.counts.get(face_id, 0) + embeddings.shape[0]
 
     def track_bodies(self, track_id: int) -> tuple[F32, float]:

@@ -7,13 +7,10 @@ from typing import Any
 
 import numpy as np
 
-from face_reid_camera.body.observation import GEOMETRY_FIELDS
+from face_reid_camera.body.observation import GEOMETRY_MSG_FIELDS
 from face_reid_camera.common.embedding_spaces import DLIB_SPACE as LEGACY_EMBEDDING_SPACE
 from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
 from face_reid_master.records import STATE_LOST, BodyRecord, CameraFrameRecord, NamedTrackRecord, PersonRecord
-
-# PersonObservation field of each GEOMETRY_FIELDS value (the height is the detection's own height_m)
-_GEOMETRY_MSG_FIELDS = tuple(name if name == "height_m" else f"body_{name}" for name in GEOMETRY_FIELDS)
 
 
 def _body_from_msg(p: Any) -> BodyRecord | None:
@@ -21,9 +18,10 @@ def _body_from_msg(p: Any) -> BodyRecord | None:
     descriptor = np.asarray(p.body_descriptor, dtype=np.float32)
     if not descriptor.size and not p.body_visible_fraction:
         return None
-    geometry = np.array([getattr(p, name) for name in _GEOMETRY_MSG_FIELDS], dtype=np.float32)
+    geometry = np.array([getattr(p, name) for name in GEOMETRY_MSG_FIELDS], dtype=np.float32)
     return BodyRecord(descriptor, str(p.body_descriptor_space), float(p.body_visible_fraction), geometry,
-                      np.asarray(p.body_part_visible, dtype=np.float32))
+                      np.asarray(p.body_part_visible, dtype=np.float32),
+                      np.asarray(p.body_part_widths_m, dtype=np.float32))
 
 
 def frame_from_msg(msg: Any) -> CameraFrameRecord:
@@ -69,7 +67,8 @@ def frame_record_to_msg(frame: CameraFrameRecord, stamp_s: float) -> Any:
             m.body_descriptor_space = body.space if body.descriptor.size else ""
             m.body_visible_fraction = float(body.visible_fraction)
             m.body_part_visible = np.asarray(body.part_visible, dtype=np.float32).tolist()
-            for name, value in zip(_GEOMETRY_MSG_FIELDS, np.asarray(body.geometry, dtype=np.float32), strict=True):
+            m.body_part_widths_m = np.asarray(body.part_widths_m, dtype=np.float32).tolist()
+            for name, value in zip(GEOMETRY_MSG_FIELDS, np.asarray(body.geometry, dtype=np.float32), strict=True):
                 if name != "height_m":  # the detection's own height
                     setattr(m, name, float(value))
         msg.people.append(m)

@@ -48,8 +48,10 @@ from numpy.typing import NDArray
 
 from face_reid_camera.body.descriptor import body_descriptor
 from face_reid_camera.body.observation import GEOMETRY_FIELDS
+from face_reid_camera.body.person_body import GEOMETRY_BANDS
 from face_reid_camera.body.projection import BodyProjection
 from face_reid_camera.common.checks import check_int, check_real
+from face_reid_camera.faces.photos import PhotoError, read_photo
 from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, crop_person_mask
 from face_reid_master.body.crops import Crop, list_crops
 from face_reid_master.sim.frame_table import BodyRows
@@ -111,9 +113,9 @@ class BodySimConfig:
     light_gain_range: tuple[float, float] = (0.75, 1.25)  # a camera's overall gain on the crops' colours
     light_cast: float = 0.08  # +- per-channel gain of a camera (colour cast)
     glance_light_step: float = 0.06  # a glance's light: the camera's x (1 + step x level), level in {-1, 0, 1}
-    # Per-frame Gaussian noise per value, relative to the vector's rms. With the frame changes it gives a
-    # within-glance median pairwise distance of 0.30 where the pixel level gives 0.36 (same clothes in other
-    # glances 0.88 / 0.81, other clothes 1.12 / 1.03; 6 people, 3 cameras, seed 1, development projection).
+    # Per-frame Gaussian noise per value, relative to the vector's rms. Matched, with the frame changes, to the
+    # pixel level's within-glance spread with an earlier 64 + 32 projection (median pairwise distance 0.30 vs
+    # 0.36); with the shipped 32 + 96 projection 0.31 vs 0.47 (README, "Bodies in the simulator").
     descriptor_noise: float = 0.2
     bands: int = 8  # horizontal bands of the body tested for visibility (band 0 at the head top)
     min_visible_fraction: float = 0.25  # below: no appearance descriptor (the camera's default)
@@ -209,7 +211,10 @@ class BodyBank:
         """Read one crop identity (None: no readable crop); its crops join :attr:`crops`."""
         indices: list[int] = []
         for crop in self._by_identity[name]:
-            image = cv2.imread(str(crop.path), cv2.IMREAD_COLOR)
+            try:
+                image = read_photo(crop.path)
+            except PhotoError:
+                image = None
             if image is None or image.shape[0] < 16 or image.shape[1] < 4:
                 self.skipped_unreadable.append(crop.path.relative_to(self.bodies_dir).as_posix())
                 continue
@@ -448,9 +453,9 @@ def feature_bodies(
                     view[f_idx, p_idx].astype(np.float32), glance[f_idx, p_idx])
 
 
-# the span of the body (fractions of the height below the head top) a measure needs seen
-_NEEDS = {"head_height_m": (0.0, 0.25), "shoulder_width_m": (0.15, 0.21), "torso_width_m": (0.24, 0.34),
-          "torso_depth_m": (0.24, 0.34), "hip_width_m": (0.44, 0.52)}
+# the span of the body (fractions of the height below the head top) a measure needs seen: the camera's bands
+_NEEDS = {"head_height_m": (0.0, 0.25),
+          **{name: (round(1.0 - hi, 6), round(1.0 - lo, 6)) for name, (lo, hi) in GEOMETRY_BANDS.items()}}
 
 
 def measured_geometry(measures: NDArray[np.float64], view_deg: NDArray[np.float64], height: NDArray[np.float64],

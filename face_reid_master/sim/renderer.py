@@ -718,3 +718,20 @@ def crop_face_for_rendering(
     pad = max(0, -x0, -y0, x0 + side - pw, y0 + side - ph)
     src = cv2.copyMakeBorder(photo_bgr, pad, pad, pad, pad, cv2.BORDER_REPLICATE) if pad else photo_bgr
     return np.ascontiguousarray(src[y0 + pad: y0 + pad + side, x0 + pad: x0 + pad + side])
+
+
+def synthetic_clothes(shirt_bgr: Sequence[int], trousers_bgr: Sequence[int], stripes: bool,
+                      rng: np.random.Generator) -> NDArray[np.uint8]:
+    """A made-up person crop (256 x 96, head top to feet) for :attr:`SyntheticPerson.body_texture_bgr`: skin
+    head, a shirt (white stripes or plain), trousers with a fine weave, a little sensor noise (``rng``)."""
+    img = np.empty((256, 96, 3), np.uint8)
+    img[:40] = (60, 90, 140)
+    img[40:128] = np.asarray(shirt_bgr, dtype=np.uint8)
+    if stripes:
+        for row in range(44, 128, 16):
+            img[row: row + 6] = (235, 235, 235)
+    img[128:] = np.asarray(trousers_bgr, dtype=np.uint8)
+    weave = (np.add.outer(np.arange(128), np.arange(96)) % 4 < 2)[:, :, None]
+    img[128:] = np.where(weave, img[128:], (img[128:] * 0.7).astype(np.uint8))
+    return np.clip(img + rng.normal(0.0, 4.0, img.shape), 0, 255).astype(np.uint8)
+

@@ -51,12 +51,6 @@ RANKS = (1, 5, 10, 20)
 METHODS = ("euclidean_raw", "euclidean_pca", "kissme", "xqda")
 
 
-def _fit_grid(grid: SearchGrid, n_train: int) -> SearchGrid:
-    """``grid`` with at most the ``n_train - 1`` components a PCA of ``n_train`` crops gives."""
-    pairs = tuple(dict.fromkeys(tuple(min(d, n_train - 1) for d in p) for p in grid.pca_dims))
-    return SearchGrid(pairs, grid.regularisations, grid.subspace_dims)
-
-
 def _split_scores(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArray[Any], cameras: list[str],
                   train: npt.NDArray[np.intp], grid: SearchGrid, folds: int, rng: np.random.Generator
                   ) -> tuple[dict[str, dict[str, Callable[[npt.NDArray[np.intp], npt.NDArray[np.intp]], Any]]],
@@ -64,7 +58,7 @@ def _split_scores(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.
     """Per feature and method a distance function (probe rows, gallery rows) fitted on the ``train`` rows, the
     parameters chosen on them and each feature's XQDA subspace dimension r."""
     train_features = {b: features[b][train] for b in FEATURES}
-    grid = _fit_grid(grid, train.size)
+    grid = grid.capped(train.size)
     widest = fit_projection(train_features, grid.max_dims())
     scores = widest.project_many(train_features)
     selection = select_parameters({b: scores[:, s] for b, s in widest.slices().items()}, labels[train],

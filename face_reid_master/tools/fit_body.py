@@ -136,6 +136,8 @@ def _command(args: argparse.Namespace) -> str:
         parts.append("--pca-dims " + ",".join(f"{b}={args.pca_dims[b]}" for b in FEATURES))
     elif args.projection is None and args.max_length != DEFAULT_MAX_LENGTH:
         parts.append(f"--max-length {args.max_length}")
+    if args.silhouette != CROP_SILHOUETTE:
+        parts.append(f"--silhouette {args.silhouette}")
     parts += [f"--folds {args.folds}", f"--max-negative-pairs {args.max_negative_pairs}", f"--seed {args.seed}"]
     return "face-reid-fit-body " + " ".join(parts)
 
@@ -145,10 +147,6 @@ def _fitted_utc() -> str:
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
     when = _dt.datetime.fromtimestamp(int(epoch), _dt.timezone.utc) if epoch else _dt.datetime.now(_dt.timezone.utc)
     return when.isoformat(timespec="seconds")
-
-
-def _sha256_file(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _crops_digest(crops: Sequence[Crop], root: Path) -> str:
@@ -255,7 +253,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(f"{n_ids} identities: {args.folds} folds need >= {2 * args.folds}")
     print(f"described {labels.size} crops of {n_ids} identities in {time.perf_counter() - t0:.1f} s "
           f"({len(described.skipped)} unreadable skipped, {len(excluded)} scenario crop identities excluded)")
-    from face_reid_master.tools.fit_likelihood import identity_source
+    from face_reid_master.tools.fit_likelihood import file_sha256, identity_source
 
     groups = np.array([identity_source(n) for n in labels.tolist()])
     try:
@@ -265,7 +263,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             pairs = ((tuple(args.pca_dims[b] for b in FEATURES),) if args.pca_dims
                      else dims_candidates(max_length=args.max_length))
-            grid = SearchGrid(tuple(dict.fromkeys(tuple(min(d, labels.size - 1) for d in p) for p in pairs)))
+            grid = SearchGrid(pairs).capped(labels.size)
             widest = fit_projection(described.features, grid.max_dims(), described.config)
         if tuple(b.name for b in widest.blocks) != FEATURES:
             raise ValueError(f"the projection must have the blocks {FEATURES}, got {[b.name for b in widest.blocks]}")
@@ -280,7 +278,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         data = _data_metadata(args, described, excluded)
         if kept_projection is not None:
             projection = kept_projection
-            projection_info = {"file": args.projection.as_posix(), "sha256": _sha256_file(args.projection),
+            projection_info = {"file": args.projection.as_posix(), "sha256": file_sha256(args.projection),
                                "kept": "given by --projection, not refitted"}
         else:
             projection = fit_projection(described.features, selection.pca_dims, described.config)

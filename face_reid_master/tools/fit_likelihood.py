@@ -45,6 +45,7 @@ __all__ = [
     "build_pair_distances",
     "camera_view_draws",
     "excluded_from_fit",
+    "file_sha256",
     "identity_source",
     "main",
     "plot_fit",
@@ -378,7 +379,8 @@ def plot_fit(
         plt.close(fig)
 
 
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """sha256 (hex) of a file, read in chunks."""
     h = hashlib.sha256()
     with path.open("rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
@@ -597,7 +599,7 @@ def _embedder_text(photo_embedder: Any, space: str) -> str:
     parts = photo_embedder.embedder.embedders if hasattr(photo_embedder.embedder, "embedders") \
         else (photo_embedder.embedder,)
     nets = "; ".join(f"{SPACES[e.space].description} run as models/{e.model_path.name} (sha256 "
-                     f"{_sha256(e.model_path)}), aligned to its {e.spec.chip_size_px}x{e.spec.chip_size_px} chip "
+                     f"{file_sha256(e.model_path)}), aligned to its {e.spec.chip_size_px}x{e.spec.chip_size_px} chip "
                      "template" for e in parts if e.space in {c.space_id for c in parse_space(space)})
     return (
         f"space {space}: {nets}; face detection: YuNet 2023mar (face_reid_camera.faces.detector, on photos shrunk "

@@ -17,7 +17,7 @@ import pytest
 from conftest import FACES_DIR
 
 from face_reid_camera.body.descriptor import body_descriptor
-from face_reid_camera.body.projection import BodyProjection, fit_pca_block, save_body_projection
+from face_reid_camera.body.projection import BodyProjection, fit_pca_block, load_body_projection, save_body_projection
 from face_reid_master.records import BodyRecord
 from face_reid_master.sim.bodies import (
     PKU_VIEW_DEG,
@@ -338,15 +338,9 @@ def test_cli_body_errors(faces: Path, cache: Path, crops_dir: Path, projection_f
     assert json.loads((tmp_path / "o4" / "scenario.json").read_text())["body_space"] == \
         json.loads(np.load(projection_file)["meta"].item())["space"]
     with pytest.raises(InsufficientBodiesError, match="does not exist"):
-        BodyBank(tmp_path / "nope", load_projection(projection_file))
+        BodyBank(tmp_path / "nope", load_body_projection(projection_file))
     with pytest.raises(ValueError, match="go together"):
         simulate(faces, _config(), cache_path=cache)
-
-
-def load_projection(path: Path) -> BodyProjection:
-    from face_reid_camera.body.projection import load_body_projection
-
-    return load_body_projection(path)
 
 
 def test_crop_descriptor_ignores_background_and_hidden_bands(tmp_path: Path, projection: BodyProjection) -> None:

@@ -139,3 +139,9 @@ def test_bad_arguments_name_themselves() -> None:
     ):
         with pytest.raises(ValueError, match=why):
             call()
+
+
+def test_a_mask_that_selects_nothing_gives_empty_histograms() -> None:
+    d = body_descriptor(np.full((16, 8, 3), 90, np.uint8), np.zeros((16, 8), bool),
+                        BodyDescriptorConfig(siltp_height=None))
+    assert not d.hsv.any() and not d.siltp.any() and d.visible_fraction == 0.0

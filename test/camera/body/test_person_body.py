@@ -14,7 +14,7 @@ from face_reid_camera.body.person_body import BodyConfig, body_grid, describe_bo
 from face_reid_camera.body.projection import BodyProjection, fit_pca_block
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.people.detector import PersonDetector
-from face_reid_master.sim.renderer import SyntheticPerson, render_scene
+from face_reid_master.sim.renderer import SyntheticPerson, render_scene, synthetic_clothes
 
 INTR = CameraIntrinsics.kinect_default()
 POSE = CameraPose.from_xyz_rpy(0.0, 0.0, 2.5, 0.0, 0.35, 0.0)
@@ -53,19 +53,7 @@ def _person(x: float, y: float, shirt=RED, trousers=BLUE, facing: float = math.p
 
 
 def _clothes(shirt, trousers, stripes: bool, seed: int) -> np.ndarray:
-    """A person crop (256 x 96, head top to feet) to texture a rendered body: head, a shirt (white stripes or
-    plain), trousers with a fine weave, a little sensor noise."""
-    rng = np.random.default_rng(seed)
-    img = np.empty((256, 96, 3), np.uint8)
-    img[:40] = (60, 90, 140)
-    img[40:128] = shirt
-    if stripes:
-        for row in range(44, 128, 16):
-            img[row: row + 6] = (235, 235, 235)
-    img[128:] = trousers
-    weave = (np.add.outer(np.arange(128), np.arange(96)) % 4 < 2)[:, :, None]
-    img[128:] = np.where(weave, img[128:], (img[128:] * 0.7).astype(np.uint8))
-    return np.clip(img + rng.normal(0.0, 4.0, img.shape), 0, 255).astype(np.uint8)
+    return synthetic_clothes(shirt, trousers, stripes, np.random.default_rng(seed))
 
 
 def test_the_mask_is_the_person_not_the_floor_nor_the_person_behind() -> None:

@@ -41,6 +41,7 @@ def test_a_camera_body_arrives_as_a_master_record() -> None:
     expected = geometry.vector()
     assert GEOMETRY_FIELDS[0] == "height_m" and got.geometry.shape == (len(GEOMETRY_FIELDS),)
     assert np.allclose(got.geometry[:5], expected[:5]) and math.isnan(got.geometry[5])
+    assert np.allclose(got.part_widths_m, geometry.part_widths_m)
     assert record.people[1].body is None  # a person the camera did not describe
 
 
@@ -51,12 +52,14 @@ def test_frames_of_cameras_without_bodies_have_none_and_replays_keep_bodies() ->
     assert list(old.people[0].body_descriptor) == [] and old.people[0].body_visible_fraction == 0.0
     assert frame_from_msg(old).people[0].body is None
     body = BodyRecord(np.full(6, 0.5, np.float32), "body_pca_hsv4_siltp2_00000000", 0.6,
-                      np.array([1.8, 0.25, 0.42, 0.4, 0.12, 0.36], np.float32), np.array([1, 1, 0.5, 0], np.float32))
+                      np.array([1.8, 0.25, 0.42, 0.4, 0.12, 0.36], np.float32), np.array([1, 1, 0.5, 0], np.float32),
+                      np.array([0.4, 0.38, 0.3, np.nan], np.float32))
     new = frame_record_to_msg(CameraFrameRecord("c", 5.0, (PersonRecord(np.array([0.0, 1.0, 0.0]), height_m=1.8,
                                                                         body=body),)), 5.0)
     back = frame_from_msg(new).people[0].body
     assert back is not None and np.array_equal(back.descriptor, body.descriptor) and back.space == body.space
     assert np.allclose(back.geometry, body.geometry) and np.allclose(back.part_visible, body.part_visible)
+    assert np.allclose(back.part_widths_m, body.part_widths_m, equal_nan=True)
     # geometry only (no descriptor): still a body, with no space
     geometry_only = BodyRecord(np.zeros(0, np.float32), "", 0.4, body.geometry)
     msg = frame_record_to_msg(CameraFrameRecord("c", 5.0, (PersonRecord(np.array([0.0, 1.0, 0.0]), height_m=1.8,
