@@ -2,8 +2,9 @@
 
 Processes (:mod:`face_reid_master.demo.children`: each in its own process group, all on a private ROS domain
 with discovery limited to loopback): per camera an RGB-D *player* (:mod:`face_reid_master.sim.rgbd_player`,
-the camera's sensor: renders the camera's frames in real time with licensed face photos pasted on the heads)
-and a ``face-reid-camera`` node (the real camera pipeline); one ``face-reid-master`` (Bayesian face table,
+the camera's sensor: renders the camera's frames in real time with licensed face photos pasted on the heads and
+everybody in made-up textured clothes) and a ``face-reid-camera`` node (the real camera pipeline, describing faces
+and bodies); one ``face-reid-master`` (Bayesian face table, tracking and deciding faceless tracks by body too,
 predefined people from a gallery folder, a temporary face database). This process subscribes to
 ``/tracks_named``, prints a live table of who is where and, at the end, a summary against the ground truth
 (:mod:`face_reid_master.demo.report`).

@@ -3,7 +3,9 @@
 Scripted so that things happen on screen: people walk to spots where a camera sees their face and look at
 it for a few seconds, each leaves the room through a door once, waits outside and comes back (a new track
 that must get the same face id); some of them are predefined people (gallery photos never shown in the
-scene), so names appear. Motion is built with the simulator's :class:`~face_reid_master.sim.motion.Planner`.
+scene), so names appear. Everybody wears clothes of their own (:data:`OUTFITS`, made-up textures the players
+draw), so the cameras describe bodies and the master can tell people apart by them too. Motion is built with the
+simulator's :class:`~face_reid_master.sim.motion.Planner`.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from face_reid_master.sim.world import Door, Room, SimCamera, World, make_world
 __all__ = [
     "DEFAULT_IDENTITIES",
     "DEFAULT_SEED",
+    "OUTFITS",
     "DemoPerson",
     "DemoScenario",
     "build_scenario",
@@ -38,8 +41,11 @@ DEFAULT_IDENTITIES = ("lfw_Colin_Powell", "lfw_Ariel_Sharon", "lfw_Vladimir_Puti
                       "lfw_Hugo_Chavez", "lfw_Arnold_Schwarzenegger")
 DEFAULT_SEED = 4
 MIN_PHOTOS = 4  # an identity needs >= 4 photos: some for the gallery, the rest shown in the scene
-_PALETTE = ((40, 60, 170), (150, 90, 30), (40, 140, 60), (130, 50, 130), (30, 150, 170), (90, 90, 90))
-_LEGS = ((50, 40, 35), (70, 60, 50), (40, 40, 60), (60, 50, 45), (30, 30, 30), (80, 70, 60))
+# Everybody's clothes (BGR shirt, trousers, white stripes on the shirt): made-up textures drawn by the renderer
+# (synthetic_clothes), no dataset images; shirts of different hues, plain and striped in turn, trousers unlike.
+OUTFITS = (((40, 60, 170), (110, 60, 30), False), ((150, 90, 30), (90, 140, 170), True),
+           ((40, 140, 60), (30, 30, 30), False), ((130, 50, 130), (120, 120, 120), True),
+           ((30, 150, 170), (40, 60, 90), False), ((90, 90, 90), (50, 90, 40), True))
 _HAIR = ((30, 40, 55), (20, 20, 25), (60, 70, 90), (40, 50, 60), (25, 30, 40), (90, 100, 110))
 _ROOM_FOR_CAMERAS = {1: (5.0, 4.0), 2: (6.0, 5.0), 3: (7.0, 5.5), 4: (8.0, 6.0)}
 _GT_RATE_HZ = 10.0
@@ -87,7 +93,8 @@ class DemoPerson:
     trajectory: Trajectory
     visits: tuple[tuple[float, float], ...]  # (enter_s, leave_s) spans inside the room (times at the door)
     photo_spans: tuple[tuple[PhotoSpan, ...], ...]  # per camera
-    colours: tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]  # body, legs, hair
+    clothes: tuple[tuple[int, int, int], tuple[int, int, int], bool]  # shirt, trousers (BGR), striped shirt
+    hair: tuple[int, int, int]
 
 
 @dataclass(frozen=True)
@@ -125,7 +132,9 @@ class DemoScenario:
         """What the player of camera ``camera_index`` renders (phases interleave the cameras' frames)."""
         cam = self.world.cameras[camera_index]
         people = tuple(
-            PlayedPerson(p.gt_id, p.trajectory, p.photo_spans[camera_index], *p.colours) for p in self.people
+            PlayedPerson(p.gt_id, p.trajectory, p.photo_spans[camera_index], p.clothes[0], p.clothes[1], p.hair,
+                         p.clothes)
+            for p in self.people
         )
         room = self.world.room
         return PlayerSpec(
@@ -364,9 +373,8 @@ def build_scenario(faces_dir: Path, seed: int = DEFAULT_SEED, num_cameras: int =
             # one photo per camera for the whole run (one day: same look on a return; the cameras' different
             # viewpoints and lighting are stood for by different photos)
             per_cam = tuple((PhotoSpan(-1e9, 1e9, str(scene[(p + c) % len(scene)])),) for c in range(num_cameras))
-            colours = (_PALETTE[p % len(_PALETTE)], _LEGS[p % len(_LEGS)], _HAIR[p % len(_HAIR)])
             people.append(DemoPerson(p, identity, display_name(identity), in_gallery, scene, gallery, traj, visits,
-                                     per_cam, colours))
+                                     per_cam, OUTFITS[p % len(OUTFITS)], _HAIR[p % len(_HAIR)]))
         scenario = DemoScenario(s, float(duration_s), world, tuple(people))
         if _scenario_ok(scenario):
             return scenario

@@ -44,6 +44,13 @@ def _colour(value: Any, name: str) -> tuple[int, int, int]:
     return vals  # type: ignore[return-value]
 
 
+def _clothes(value: Any) -> tuple[tuple[int, int, int], tuple[int, int, int], bool] | None:
+    if value is None:
+        return None
+    shirt, trousers, stripes = value
+    return _colour(shirt, "clothes shirt"), _colour(trousers, "clothes trousers"), bool(stripes)
+
+
 @dataclass(frozen=True)
 class PhotoSpan:
     """The face photo a person shows this camera during scene time [start_s, end_s)."""
@@ -55,7 +62,9 @@ class PhotoSpan:
 
 @dataclass(frozen=True)
 class PlayedPerson:
-    """One person of the scene: ground-truth id, motion, face photos over time and clothes (BGR)."""
+    """One person of the scene: ground-truth id, motion, face photos over time and clothes (BGR): flat colours, or
+    with ``clothes`` (shirt, trousers, stripes) a made-up textured crop
+    (:func:`~face_reid_master.sim.renderer.synthetic_clothes`) on the body."""
 
     gt_id: int
     trajectory: Trajectory
@@ -63,6 +72,7 @@ class PlayedPerson:
     body_bgr: tuple[int, int, int] = (150, 80, 40)
     legs_bgr: tuple[int, int, int] = (60, 50, 45)
     hair_bgr: tuple[int, int, int] = (30, 40, 55)
+    clothes: tuple[tuple[int, int, int], tuple[int, int, int], bool] | None = None
 
     def photo_at(self, t_s: float) -> str | None:
         """Path of the photo shown at scene time ``t_s`` (None: no face)."""
@@ -115,7 +125,9 @@ class PlayerSpec:
                 {"gt_id": p.gt_id, "t_s": p.trajectory.t_s.tolist(), "xy": p.trajectory.xy.tolist(),
                  "facing_rad": p.trajectory.facing_rad.tolist(), "height_m": p.trajectory.height_m,
                  "photos": [[s.start_s, s.end_s, s.path] for s in p.photos],
-                 "body_bgr": list(p.body_bgr), "legs_bgr": list(p.legs_bgr), "hair_bgr": list(p.hair_bgr)}
+                 "body_bgr": list(p.body_bgr), "legs_bgr": list(p.legs_bgr), "hair_bgr": list(p.hair_bgr),
+                 "clothes": None if p.clothes is None else [list(p.clothes[0]), list(p.clothes[1]),
+                                                            bool(p.clothes[2])]}
                 for p in self.people
             ],
         }
@@ -134,7 +146,7 @@ class PlayerSpec:
                                np.asarray(p["facing_rad"], float), float(p["height_m"])),
                     tuple(PhotoSpan(float(a), float(b), str(path)) for a, b, path in p["photos"]),
                     _colour(p["body_bgr"], "body_bgr"), _colour(p["legs_bgr"], "legs_bgr"),
-                    _colour(p["hair_bgr"], "hair_bgr"),
+                    _colour(p["hair_bgr"], "hair_bgr"), _clothes(p.get("clothes")),
                 )
                 for p in doc["people"]
             )
@@ -163,13 +175,16 @@ class ScenePlayer:
     def __init__(self, spec: PlayerSpec, detector: Any | None = None) -> None:
         from face_reid_camera.faces.detector import YuNetDetector
         from face_reid_camera.faces.photos import PhotoError, read_photo
-        from face_reid_master.sim.renderer import crop_face_for_rendering
+        from face_reid_master.sim.renderer import crop_face_for_rendering, synthetic_clothes
 
         self.spec = spec
         self.room = Room(*spec.room_size_m)
         self.pose = spec.pose
         self.crops: dict[str, NDArray[np.uint8] | None] = {}
         self.warnings: list[str] = []
+        # one texture per person, the same in every camera's player (its noise seeded by the person)
+        self.textures = {p.gt_id: synthetic_clothes(*p.clothes, np.random.default_rng([p.gt_id]))
+                         for p in spec.people if p.clothes is not None}
         det = detector if detector is not None else YuNetDetector()
         for person in spec.people:
             for span in person.photos:
@@ -207,7 +222,8 @@ class ScenePlayer:
             face = self.crops.get(path) if path is not None else None
             people.append(SyntheticPerson(float(pos[0, 0]), float(pos[0, 1]), person.trajectory.height_m,
                                           float(facing[0]), face_image_bgr=face, body_color_bgr=person.body_bgr,
-                                          legs_color_bgr=person.legs_bgr, hair_color_bgr=person.hair_bgr))
+                                          legs_color_bgr=person.legs_bgr, hair_color_bgr=person.hair_bgr,
+                                          body_texture_bgr=self.textures.get(person.gt_id)))
             index.append(p)
         frame = render_scene(people, spec.intrinsics, self.pose, rng=np.random.default_rng([spec.seed, frame_index]),
                              floor_size_m=spec.floor_size_m)

@@ -3,6 +3,7 @@ the table, and the process clean-up (process groups, death with the parent)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -101,6 +102,7 @@ def test_player_spec_round_trip_and_rendering(scenario: demo_scenario.DemoScenar
     for a, b in zip(spec.people, back.people, strict=True):
         np.testing.assert_allclose(a.trajectory.xy, b.trajectory.xy)
         assert a.photos == b.photos
+        assert a.clothes is not None and a.clothes == b.clothes
     doc = spec.to_json()
     del doc["people"][0]["t_s"]
     with pytest.raises(ValueError, match="malformed player spec"):
@@ -126,6 +128,39 @@ def test_player_spec_round_trip_and_rendering(scenario: demo_scenario.DemoScenar
     assert shown.any()
     # the analytic model and the renderer agree on most frames (they differ at the edges of the angle limits)
     assert (shown == vis.face_visible).mean() > 0.8
+
+
+def test_people_wear_textured_clothes(scenario: demo_scenario.DemoScenario) -> None:
+    """Bodies are in the demo: everybody wears made-up clothes of their own (no two alike), drawn as a texture by
+    each camera's player, the same texture in every camera."""
+    outfits = [p.clothes for p in scenario.people]
+    assert len(set(outfits)) == len(outfits) and outfits == list(demo_scenario.OUTFITS[:len(outfits)])
+    specs = [scenario.player_spec(c, 5.0) for c in range(len(scenario.cameras))]
+    players = [ScenePlayer(spec) for spec in specs]
+    for p in range(len(scenario.people)):
+        np.testing.assert_array_equal(players[0].textures[p], players[1].textures[p])
+    flat = [ScenePlayer(dataclasses.replace(spec, people=tuple(dataclasses.replace(q, clothes=None)
+                                                                 for q in spec.people))) for spec in specs]
+    striped = next(p for p, person in enumerate(scenario.people) if person.clothes[2])
+    plain = next(p for p, person in enumerate(scenario.people) if not person.clothes[2])
+    # near-white grey pixels (the stripes are (235, 235, 235)) a person shows, with their clothes and without
+    white = {(p, dressed): 0 for p in (striped, plain) for dressed in (True, False)}
+    seen = {striped: 0, plain: 0}
+    for dressed, plain_player in zip(players, flat, strict=True):
+        for k, t in enumerate(np.arange(1.0, 40.0, 2.0)):
+            for is_dressed, player in ((True, dressed), (False, plain_player)):
+                frame, _, inside, _ = player.render(float(t), k)
+                drawn = list(np.flatnonzero(inside))  # person_ids index the people drawn (those in the room)
+                for p in seen:
+                    if p not in drawn:
+                        continue
+                    pixels = frame.rgb_bgr[frame.person_ids == drawn.index(p)].astype(int)
+                    seen[p] += pixels.shape[0] if is_dressed else 0
+                    grey = pixels.max(axis=1) - pixels.min(axis=1) < 25
+                    white[p, is_dressed] += int(np.count_nonzero(grey & (pixels.min(axis=1) > 170)))
+    assert min(seen.values()) > 5000  # both were seen
+    assert white[striped, True] - white[striped, False] > 0.05 * seen[striped], (white, seen)
+    assert abs(white[plain, True] - white[plain, False]) < 0.01 * seen[plain], (white, seen)
 
 
 def _perfect_messages(scenario: demo_scenario.DemoScenario, *, return_face_offset: int = 0, name_for: dict[int, str]
