@@ -34,6 +34,7 @@ from face_reid_camera.common.embedding_spaces import (
 )
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric
+from face_reid_master.body.online_metric import OnlineBodyMetric
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel
@@ -138,6 +139,33 @@ class MasterConfig:
         low_open=True, high_open=True)
     body_min_observations: int = param(
         10, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
+    body_online_update: bool = param(
+        False, "Update the body metric online from body pairs the faces labelled (second seed, Algorithm 1; "
+        "needs body_identity).")
+    body_online_background: bool = param(
+        True, "Re-fit the body metric on a worker thread (false: in the frame's thread, deterministic; for "
+        "evaluation).")
+    body_online_interval_s: float = param(
+        30.0, "Least time between two body-metric re-fits (s).", low=0.0, high=86400.0)
+    body_online_min_new_pairs: int = param(
+        10, "Mined pairs added since the last re-fit before another (count).", low=1, high=100000)
+    body_online_prior_pairs: float = param(
+        200.0, "Weight of the shipped body metric in the re-fit, in pairs of each kind (count).", low=0.0,
+        high=1e9, low_open=True)
+    body_online_verified_confidence: float = param(
+        0.99, "theta_1: a track's bodies teach the metric only when its face decided it with at least this "
+        "posterior (0..1).", low=0.0, high=1.0)
+    body_online_negative_face_distance: float = param(
+        0.0, "theta_2: two faces count as different people when none of their features are closer than this "
+        "face-embedding distance (0 = the face decision distance).", low=0.0, high=4.0)
+    body_online_rank_limit: int = param(
+        1, "E: a person's own body ranked beyond E faces, or another's within E, is a pair to learn from "
+        "(count).", low=1, high=1000)
+    body_online_max_pairs_per_track: int = param(
+        8, "Pairs one track may take part in: what a wrong face decision can teach the metric at most "
+        "(count).", low=1, high=10000)
+    body_online_max_pairs: int = param(
+        2000, "Mined pairs kept (the oldest go first) (count).", low=1, high=1000000)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
@@ -167,9 +195,11 @@ class MasterStats:
     embeddings_rejected_space: int = 0
     embeddings_rejected_nonfinite: int = 0
     embeddings_skipped_quality: int = 0
-    bodies_received: int = 0  # detections with well-formed body fields (not used for identity yet)
+    bodies_received: int = 0  # detections with well-formed body fields
     bodies_rejected_malformed: int = 0  # body fields with NaN / Inf appearance or out-of-range visibility
     bodies_rejected_space: int = 0  # descriptors of another projection than the body metric's
+    body_metric_refits: int = 0  # online body-metric updates installed
+    body_pairs_mined: int = 0  # body pairs the faces labelled, kept for the online update
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
@@ -241,10 +271,20 @@ class MasterCore:
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
         body_evidence = None
+        self.online_metric: OnlineBodyMetric | None = None
         if self.body_metric is not None and cfg.body_identity and cfg.method == "bayes":
-            body_evidence = BodyEvidence(self.body_metric.features["fused"].likelihood, window_s=cfg.body_window_s,
-                                         posterior_threshold=cfg.body_posterior_threshold,
-                                         min_observations=cfg.body_min_observations)
+            if cfg.body_online_update:
+                self.online_metric = OnlineBodyMetric(
+                    self.body_metric.features["fused"], prior_pairs=cfg.body_online_prior_pairs,
+                    min_new_pairs=cfg.body_online_min_new_pairs, interval_s=cfg.body_online_interval_s,
+                    background=cfg.body_online_background, capacity=cfg.body_online_max_pairs,
+                    max_pairs_per_track=cfg.body_online_max_pairs_per_track)
+            body_evidence = BodyEvidence(
+                self.body_metric.features["fused"].likelihood, window_s=cfg.body_window_s,
+                posterior_threshold=cfg.body_posterior_threshold, min_observations=cfg.body_min_observations,
+                online=self.online_metric, rank_limit=cfg.body_online_rank_limit,
+                verified_confidence=cfg.body_online_verified_confidence,
+                negative_face_distance=cfg.body_online_negative_face_distance or None)
         if cfg.method == "bayes":
             if cfg.new_person_scale_c != model.new_person_scale_c:
                 model = model.with_new_person_scale(cfg.new_person_scale_c)
@@ -496,6 +536,8 @@ class MasterCore:
             self.identity.track_deleted(track_id, stamp)
             self._face_obs.pop(track_id, None)
         events = self.identity.step(stamp)
+        if self.online_metric is not None:
+            self._online_metric_step(stamp)
         for ev in events:
             if ev.kind == IdentityEventKind.NEW_FACE:
                 self.stats.faces_created += 1
@@ -509,6 +551,21 @@ class MasterCore:
                 self._save_face(ev.face_id)
             self._name_checked.pop(ev.face_id, None)
         return events
+
+    def _online_metric_step(self, stamp: float) -> None:
+        """Start a body-metric re-fit when one is due; install a finished one: the tracker's and the body
+        evidence's embeddings are converted to it (face galleries off-thread where possible)."""
+        online, body = self.online_metric, self.identity.body_evidence
+        assert online is not None and body is not None and self.body_metric is not None
+        done = online.poll(stamp, body.conversion_snapshot, BodyEvidence.convert_snapshot)
+        self.stats.body_pairs_mined = online.pairs_mined["positive"] + online.pairs_mined["negative"]
+        if done is None:
+            return
+        new, change, converted = done
+        self.body_metric = dataclasses.replace(self.body_metric, features={**self.body_metric.features, "fused": new})
+        self.tracker.change_appearance(change)
+        body.change_metric(change, converted)  # type: ignore[arg-type]
+        self.stats.body_metric_refits += 1
 
     def _maintain_faces(self, stamp: float) -> None:
         cfg = self.config

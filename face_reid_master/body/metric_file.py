@@ -74,11 +74,16 @@ class BodyFeatureMetric:
         return self.metric.distances(x[:, self.columns], y[:, self.columns])
 
     @cached_property
-    def _embedding_matrix(self) -> npt.NDArray[np.float64]:
-        """(input, r) matrix E with ||E^T (x - y)|| = the metric distance: W L, where M = L L^T (M's negative
-        eigenvalues, rounding noise of a positive semi-definite matrix, clipped to 0)."""
+    def embedding_factor(self) -> npt.NDArray[np.float64]:
+        """(r, r) L with M = L L^T (M's negative eigenvalues, rounding noise of a positive semi-definite
+        matrix, clipped to 0): a subspace vector z = W^T x embeds as z L."""
         values, vectors = np.linalg.eigh(self.metric.metric)
-        return self.metric.projection @ (vectors * np.sqrt(np.maximum(values, 0.0)))
+        return vectors * np.sqrt(np.maximum(values, 0.0))
+
+    @cached_property
+    def _embedding_matrix(self) -> npt.NDArray[np.float64]:
+        """(input, r) matrix E = W L with ||E^T (x - y)|| = the metric distance."""
+        return self.metric.projection @ self.embedding_factor
 
     def embed(self, wire: npt.ArrayLike) -> npt.NDArray[np.float32]:
         """(n, r) embeddings of wire vectors whose Euclidean distances are this metric's distances (compare

@@ -21,7 +21,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from face_reid_master.body.metric_file import default_body_metric
 from face_reid_master.core import MasterConfig
+from face_reid_master.evaluation.body_rank import scenario_bodies, scenario_rank1
 from face_reid_master.evaluation.gallery import GalleryInfo, default_gallery_people, scenario_gallery
 from face_reid_master.evaluation.metrics import evaluate_run, paired_reid_times
 from face_reid_master.evaluation.plots import save_plots
@@ -70,6 +72,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--evidence", choices=("face", "fused"), default="fused",
                    help="fused (default): bodies (where the scenario has them) also steer the tracker's association "
                         "(body_appearance_tracking); face: positions and faces only, as before bodies")
+    p.add_argument("--online-update", choices=("on", "off"), default="off",
+                   help="on: the body metric is updated online from body pairs the faces labelled "
+                        "(body_online_update, re-fitted in the frame's thread so that runs repeat); the JSON "
+                        "reports the metric's rank-1 on the scenario's bodies before and after")
     p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
     p.add_argument("--live", action="store_true",
                    help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
@@ -130,6 +136,7 @@ def _parameters(config: MasterConfig, likelihood: FaceLikelihood, tick_period_s:
     out["tick_period_s"] = tick_period_s
     out["evidence"] = "fused" if config.body_appearance_tracking else "face"
     out["body_appearance_tracking"] = config.body_appearance_tracking
+    out["body"] = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if f.name.startswith("body_")}
     out["tracker"] = dataclasses.asdict(config.tracker)
     if config.method == "bayes":
         out["likelihood_data"] = likelihood.metadata.get("data", "")
@@ -207,8 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             result[m] = res
         result["paired"] = paired_reid_times(runs["bayes"][1], runs["threshold"][1], ("bayes", "threshold"))
     else:
-        config = MasterConfig(method=args.method, embedding_space=space,
-                              body_appearance_tracking=args.evidence != "face")
+        config = _config(args, args.method, space)
         if args.live:
             return _main_live(args, scenario, gallery, config, model, days, t0, log)
         result = _run_offline(args, args.method, scenario, gallery, days, log, model)[0]
@@ -217,12 +223,36 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+def _config(args: argparse.Namespace, method: str, space: str) -> MasterConfig:
+    """The master configuration the evaluation's options ask for."""
+    return MasterConfig(method=method, embedding_space=space, body_appearance_tracking=args.evidence != "face",
+                        body_online_update=args.online_update == "on", body_online_background=False)
+
+
+def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, float, list[int]]]
+                      ) -> dict[str, Any] | None:
+    """Rank-1 of the shipped and of the final body metric on the scenario's bodies, and the update's counts."""
+    final = run.body_metric
+    if final is None:
+        return None
+    base = default_body_metric()
+    bodies = scenario_bodies(scenario.frames, scenario.frame_gt_ids, base.space, days)
+    if not bodies.labels.size:
+        return None
+    stats = run.master_stats
+    return {"bodies": int(bodies.labels.size),
+            "rank1_shipped": scenario_rank1(bodies, base.features["fused"]),
+            "rank1_final": scenario_rank1(bodies, final),
+            "refits": int(stats.get("body_metric_refits", 0)),
+            "pairs_mined": int(stats.get("body_pairs_mined", 0))}
+
+
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
                  days: list[tuple[int, float, float, list[int]]], log: Any,
                  model: FaceLikelihood) -> tuple[dict[str, Any], RunLog]:
     """The master core with ``method`` (and ``model``: likelihoods, weights, thresholds) over the scenario;
     (the JSON-ready metrics, the run's log)."""
-    config = MasterConfig(method=method, embedding_space=model.space, body_appearance_tracking=args.evidence != "face")
+    config = _config(args, method, model.space)
     likelihood = model
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
@@ -240,6 +270,9 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
         "gallery": gallery.as_json(),
         **{k: v for k, v in metrics.items() if k != "method"},
     }
+    body_metric = _body_metric_json(run, scenario, days)
+    if body_metric is not None:
+        result["body_metric"] = body_metric
     if args.plot:
         t2 = time.perf_counter()
         prefix = args.plot if args.method != "both" else f"{args.plot}_{method}"

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_master.body.metric_file import BodyFeatureMetric
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.records import IdentityEventKind
@@ -127,6 +128,7 @@ class RunLog:
     runtime_s: float = 0.0
     det_name: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     names: tuple[str, ...] = ()
+    body_metric: BodyFeatureMetric | None = None  # the fused body metric at the end (online update: updated)
 
     def __post_init__(self) -> None:
         arrays = {k: getattr(self, k) for k in ("det_frame", "det_stamp_s", "det_gt", "det_track", "det_face")}
@@ -296,6 +298,7 @@ def run_master(
         runtime_s=time.perf_counter() - t_start,
         det_name=np.array(rows_name, dtype=np.int64),
         names=tuple(name_index),
+        body_metric=None if core.body_metric is None else core.body_metric.features["fused"],
     )
 
 

@@ -319,7 +319,10 @@ class IdentityManagerBase:
                 continue
             for emb, t, source in parts:
                 if track.face_id is not None:
-                    body.add_face_bodies(track.face_id, emb, t)
+                    verified = track.evidence in ("face", "both") and track.confidence >= body.verified_confidence
+                    if verified and body.wants_probe(tid, t):
+                        self.stats.body_pairs_mined += body.mine(track.face_id, tid, emb[-1], t, self._faces_differ)
+                    body.add_face_bodies(track.face_id, emb, t, tid if verified else -1)
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
                     body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source)
         events = []
@@ -353,6 +356,17 @@ class IdentityManagerBase:
         if emb.shape[0]:
             body.add_face_bodies(fid, emb, newest)
         body.forget_track(tid)
+
+    def _faces_differ(self, face_a: int, face_b: int) -> bool:
+        """Whether two learned faces are confidently different people: no features of theirs closer than the
+        body evidence's ``negative_face_distance`` (default: the decision distance)."""
+        assert self.body_evidence is not None
+        limit = self.body_evidence.negative_face_distance or self.feature_gate_distance
+        a, b = self._faces.get(face_a), self._faces.get(face_b)
+        if limit is None or a is None or b is None:
+            return False
+        d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
+        return bool(d.size) and float(d.min()) > limit
 
     def _consistent(self, obs: F32Array, slot: int) -> npt.NDArray[np.bool_]:
         """Which observations lie within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
@@ -585,6 +599,8 @@ class IdentityManagerBase:
         track.confidence = 0.0
         track.votes.clear()
         track.n_observations = 0
+        if track.evidence in ("face", "both") and self.body_evidence is not None:
+            self.body_evidence.track_unverified(track.track_id)
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
@@ -595,7 +611,7 @@ class IdentityManagerBase:
         self._pending_obs.pop(tid, None)
         self._pending_bodies.pop(tid, None)
         if self.body_evidence is not None:
-            self.body_evidence.forget_track(tid)
+            self.body_evidence.track_ended(tid)
         track = self._tracks.pop(tid, None)
         if track is None:
             return None

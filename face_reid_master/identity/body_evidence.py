@@ -8,17 +8,23 @@ face in face_list with recent bodies, the log-likelihood ratio of its body obser
 body distance, fitted with the metric); a face is decided when its posterior, against every other such face
 and "someone else" (a person without recent bodies here: new, or in other clothes), passes a strict
 threshold after enough observations. Body evidence never creates a face: only a face does.
+
+With an :class:`~face_reid_master.body.online_metric.OnlineBodyMetric`, bodies of tracks their faces
+identified confidently are also probes of the online metric update: compared with every face's recent
+face-verified bodies, a ranking that disagrees with the faces gives a pair to learn from (:meth:`mine`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
+from face_reid_master.body.online_metric import MinedPair, OnlineBodyMetric
 from face_reid_master.identity.likelihood import LikelihoodModel
 
 __all__ = ["BodyEvidence"]
@@ -29,23 +35,34 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass
 class _Gallery:
-    """A face's recent body embeddings (a ring) and their stamps."""
+    """A face's recent body embeddings (a ring), their stamps and the tracks they came from (-1: a track
+    identified by its body, not verified by its face)."""
 
     rows: F32
     stamps: FloatArray
+    tracks: npt.NDArray[np.int64]
     count: int = 0
     next: int = 0
+    written: int = 0  # rows written so far (tells a conversion made off-thread whether it is still valid)
 
-    def add(self, embeddings: F32, stamp: float) -> None:
+    def add(self, embeddings: F32, stamp: float, track_id: int) -> None:
         for row in embeddings:
             self.rows[self.next] = row
             self.stamps[self.next] = stamp
+            self.tracks[self.next] = track_id
             self.next = (self.next + 1) % self.rows.shape[0]
             self.count = min(self.count + 1, self.rows.shape[0])
+        self.written += embeddings.shape[0]
 
     def recent(self, since: float) -> F32:
         kept = self.stamps[: self.count] >= since
         return self.rows[: self.count][kept]
+
+    def verified(self, since: float, other_than: int) -> tuple[F32, npt.NDArray[np.int64]]:
+        """Recent face-verified rows of tracks other than ``other_than``, and their tracks."""
+        t = self.tracks[: self.count]
+        kept = (self.stamps[: self.count] >= since) & (t >= 0) & (t != other_than)
+        return self.rows[: self.count][kept], t[kept]
 
 
 @dataclass
@@ -69,11 +86,20 @@ class BodyEvidence:
     (frames of one glance are far from independent). ``other_log_odds``: log prior odds of "someone else".
     ``min_interval_s``: one camera's observations of a track count as evidence at most this often (the
     frames in between show nearly the same view; they are still kept for the face's gallery).
+    ``online``: the online metric update fed by :meth:`mine` (None: the metric stays as shipped).
+    ``mine_interval_s``: a track's bodies are probes at most this often; ``rank_limit``: the seed's E (a
+    person's own body ranked beyond E faces is an error positive, another's within E an error negative).
+    ``verified_confidence`` (the seed's theta_1): a track's bodies are face-verified (probes, and gallery rows
+    others are mined against) when its face decided it with at least this posterior. ``negative_face_distance``
+    (theta_2, face-embedding distance; None = the identity layer's decision distance): two faces are
+    confidently different people when none of their features are closer than this.
     """
 
     def __init__(self, likelihood: LikelihoodModel, *, window_s: float = 3600.0, gallery_size: int = 64,
                  posterior_threshold: float = 0.99, min_observations: int = 10, max_log_ratio: float = 0.3,
-                 other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5) -> None:
+                 other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5,
+                 online: OnlineBodyMetric | None = None, mine_interval_s: float = 2.0, rank_limit: int = 1,
+                 verified_confidence: float = 0.99, negative_face_distance: float | None = None) -> None:
         if not isinstance(likelihood, LikelihoodModel):
             raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
         self.likelihood = likelihood
@@ -86,23 +112,36 @@ class BodyEvidence:
         self.other_log_odds = check_real("other_log_odds", other_log_odds)
         self.track_buffer = check_int("track_buffer", track_buffer, 1)
         self.min_interval_s = check_real("min_interval_s", min_interval_s, 0.0)
+        if online is not None and not isinstance(online, OnlineBodyMetric):
+            raise ValueError(f"online must be an OnlineBodyMetric or None, got {type(online).__name__}")
+        self.online = online
+        self.mine_interval_s = check_real("mine_interval_s", mine_interval_s, 0.0)
+        self.rank_limit = check_int("rank_limit", rank_limit, 1)
+        self.verified_confidence = check_real("verified_confidence", verified_confidence, 0.0, 1.0)
+        self.negative_face_distance = None if negative_face_distance is None else check_real(
+            "negative_face_distance", negative_face_distance, 0.0, math.inf, low_open=True)
         self._faces: dict[int, _Gallery] = {}
         self._tracks: dict[int, _TrackBodies] = {}
+        self._mined_at: dict[int, float] = {}  # track -> stamp of its last probe
 
     # ------------------------------------------------------------------ faces
-    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float) -> None:
-        """What the person of ``face_id`` wears now (rows of the body metric's embedding)."""
+    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float, track_id: int = -1) -> None:
+        """What the person of ``face_id`` wears now (rows of the body metric's embedding), seen on track
+        ``track_id`` (-1: not verified by the face; such rows are never mined)."""
         if embeddings.shape[0] == 0:
             return
         gallery = self._faces.get(face_id)
         if gallery is None or gallery.rows.shape[1] != embeddings.shape[1]:
             gallery = self._faces[face_id] = _Gallery(np.empty((self.gallery_size, embeddings.shape[1]), np.float32),
-                                                      np.full(self.gallery_size, -math.inf))
-        gallery.add(embeddings, stamp_s)
+                                                      np.full(self.gallery_size, -math.inf),
+                                                      np.full(self.gallery_size, -1, np.int64))
+        gallery.add(embeddings, stamp_s, track_id)
 
     def forget_face(self, face_id: int) -> None:
-        """Drop a face's bodies (the face was forgotten)."""
+        """Drop a face's bodies and mined pairs (the face was forgotten)."""
         self._faces.pop(face_id, None)
+        if self.online is not None:
+            self.online.pool.remove_face(face_id)
         for track in self._tracks.values():
             track.log_ratio.pop(face_id, None)
             track.counts.pop(face_id, None)
@@ -155,6 +194,90 @@ class BodyEvidence:
 
     def forget_track(self, track_id: int) -> None:
         self._tracks.pop(track_id, None)
+
+    def track_ended(self, track_id: int) -> None:
+        """The track was deleted: nothing of it is kept but its faces' galleries and its mined pairs."""
+        self._tracks.pop(track_id, None)
+        self._mined_at.pop(track_id, None)
+        if self.online is not None:
+            self.online.pool.track_ended(track_id)
+
+    def track_unverified(self, track_id: int) -> None:
+        """The track's face decision was wrong (a swap): the pairs it gave are dropped."""
+        if self.online is not None:
+            self.online.pool.remove_track(track_id)
+
+    # ------------------------------------------------------------------ online metric update
+    def wants_probe(self, track_id: int, stamp_s: float) -> bool:
+        """Whether a verified track's bodies at ``stamp_s`` should be mined (rate and pair budget)."""
+        return (self.online is not None and stamp_s >= self._mined_at.get(track_id, -math.inf) + self.mine_interval_s
+                and self.online.room_for(track_id, track_id))
+
+    def mine(self, face_id: int, track_id: int, probe: F32, stamp_s: float,
+             differ: Callable[[int, int], bool]) -> int:
+        """Algorithm 1 of the second seed for one face-verified body ``probe`` (r,) of ``track_id``, face
+        ``face_id``: ranked against every face's recent face-verified bodies (those of other tracks), its own
+        face beyond ``rank_limit`` gives an error positive and a face within it that ``differ`` says is
+        somebody else an error negative (each with the nearest body of that face). Pairs kept."""
+        if self.online is None:
+            return 0
+        self._mined_at[track_id] = stamp_s
+        since = stamp_s - self.window_s
+        faces, rows, tracks = [], [], []
+        for fid, gallery in self._faces.items():
+            if gallery.rows.shape[1] != probe.shape[0]:
+                continue
+            r, t = gallery.verified(since, track_id)
+            if r.shape[0]:
+                faces.append(fid)
+                rows.append(r)
+                tracks.append(t)
+        if not faces:
+            return 0
+        allrows = np.concatenate(rows)
+        d2 = (allrows * allrows).sum(axis=1) - 2.0 * allrows @ probe
+        starts = np.concatenate([[0], np.cumsum([r.shape[0] for r in rows])[:-1]])
+        nearest = np.minimum.reduceat(d2, starts)
+        order = np.argsort(nearest, kind="stable")
+        rank = np.empty(len(faces), np.intp)
+        rank[order] = np.arange(1, len(faces) + 1)
+        pairs = []
+        for k, fid in enumerate(faces):
+            if fid == face_id:
+                wanted = rank[k] > self.rank_limit
+            else:
+                wanted = rank[k] <= self.rank_limit and differ(face_id, fid)
+            if not wanted:
+                continue
+            j = int(np.argmin(d2[starts[k]: starts[k] + rows[k].shape[0]]))
+            other = int(tracks[k][j])
+            if self.online.room_for(track_id, other):
+                pairs.append(MinedPair(probe - rows[k][j], fid == face_id, face_id, fid, track_id, other, stamp_s))
+        return self.online.add(pairs)
+
+    def conversion_snapshot(self) -> list[tuple[int, _Gallery, int, F32]]:
+        """What an off-thread conversion of the face galleries needs: (face, gallery, rows written, rows)."""
+        return [(fid, g, g.written, g.rows) for fid, g in self._faces.items()]
+
+    @staticmethod
+    def convert_snapshot(snapshot: object, change: F32) -> dict[int, tuple[_Gallery, int, F32]]:
+        """The snapshot's galleries in the new metric's embedding (runs off the frame's thread)."""
+        assert isinstance(snapshot, list)
+        return {fid: (g, written, rows @ change) for fid, g, written, rows in snapshot}
+
+    def change_metric(self, change: F32, converted: dict[int, tuple[_Gallery, int, F32]] | None = None) -> None:
+        """Every kept embedding to the new metric (rows @ ``change``); galleries converted off-thread and not
+        written since are taken from ``converted``."""
+        converted = converted or {}
+        for fid, gallery in self._faces.items():
+            done = converted.get(fid)
+            if done is not None and done[0] is gallery and done[1] == gallery.written:
+                gallery.rows = done[2].astype(np.float32, copy=False)
+            else:
+                gallery.rows = gallery.rows @ change
+        for track in self._tracks.values():
+            if track.rows:
+                track.rows = list(np.stack(track.rows) @ change)
 
     def posterior(self, track_id: int, candidates: list[int], now_s: float) -> dict[int, float]:
         """{face_id: posterior} over the candidates with recent bodies, plus 0 = someone else."""

@@ -91,3 +91,4 @@ class IdentityStats:
     swaps_released: int = 0
     body_observations: int = 0
     assigned_by_body: int = 0
+    body_pairs_mined: int = 0  # body pairs the faces labelled kept for the online metric update
