@@ -34,7 +34,7 @@ from face_reid_camera.common.embedding_spaces import (
 )
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric
-from face_reid_master.body.online_metric import OnlineBodyMetric
+from face_reid_master.body.online_metric import OnlineBodyMetric, subspace_key
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel
@@ -318,12 +318,14 @@ class MasterCore:
         self._names: dict[int, str] = {}  # face id -> name from the predefined people
         self._last_stamp = -math.inf
         self._last_prune_s = -math.inf
+        self._pairs_saved: tuple[int, float] = (0, -math.inf)  # pool version and stamp of the last pair save
         if store is not None:
             faces = store.load_faces()
             self.identity.import_faces(faces)
             self.identity.reserve_face_ids(int(store.max_face_id()))
             for face in faces:
                 self._refresh_name(face.face_id, face.features)
+            self._restore_body_pairs()
 
     # ------------------------------------------------------------------------------ input
     def process_frame(self, frame: CameraFrameRecord, now_s: float | None = None) -> FrameOutcome:
@@ -567,8 +569,37 @@ class MasterCore:
         body.change_metric(change, converted)  # type: ignore[arg-type]
         self.stats.body_metric_refits += 1
 
+    def _restore_body_pairs(self) -> None:
+        """The online update's pairs saved by an earlier run: the metric they taught is in use at once."""
+        online, load = self.online_metric, getattr(self.store, "load_body_pairs", None)
+        if online is None or load is None or self.body_metric is None:
+            return
+        try:
+            rows = load(subspace_key(online.base))
+        except Exception:  # the store logs; the shipped metric stays
+            self.stats.store_errors += 1
+            return
+        if online.restore(rows):
+            self.body_metric = dataclasses.replace(self.body_metric,
+                                                   features={**self.body_metric.features, "fused": online.current})
+            self._pairs_saved = (online.pool.version, -math.inf)
+
+    def _save_body_pairs(self, stamp: float, force: bool = False) -> None:
+        """Persist the online update's pairs when they changed (at most every save_interval_s unless forced)."""
+        online, save = self.online_metric, getattr(self.store, "save_body_pairs", None)
+        if online is None or save is None or online.pool.version == self._pairs_saved[0]:
+            return
+        if not force and stamp - self._pairs_saved[1] < self.config.save_interval_s:
+            return
+        self._pairs_saved = (online.pool.version, stamp)
+        try:
+            save(online.pool.rows(), subspace_key(online.base))
+        except Exception:  # the store logs; the pairs stay in memory
+            self.stats.store_errors += 1
+
     def _maintain_faces(self, stamp: float) -> None:
         cfg = self.config
+        self._save_body_pairs(stamp)
         if self.store is not None and stamp - self._last_prune_s >= cfg.prune_interval_s:
             self._last_prune_s = stamp
             self._prune_unnamed(stamp)
@@ -622,6 +653,7 @@ class MasterCore:
         """Write every face with unsaved features to the store (call at shutdown)."""
         for fid in list(self._dirty_faces):
             self._save_face(fid)
+        self._save_body_pairs(self._last_stamp, force=True)
 
     # ------------------------------------------------------------------------------ people
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:

@@ -19,6 +19,7 @@ came from and a track takes part in at most that many (a swapped track's pairs a
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -31,8 +32,8 @@ from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.linear_metric import LinearMetric
 from face_reid_master.body.metric_file import BodyFeatureMetric
 
-__all__ = ["MinedPair", "OnlineBodyMetric", "PairPool", "embedding_change", "refit_metric", "subspace_prior",
-           "to_subspace"]
+__all__ = ["MinedPair", "OnlineBodyMetric", "PairPool", "embedding_change", "refit_metric", "subspace_key",
+           "subspace_prior", "to_subspace"]
 
 FloatArray = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -53,6 +54,12 @@ def subspace_prior(base: BodyFeatureMetric) -> FloatArray:
                          f"{values.min():.3g}): not the XQDA form the online update assumes")
     sigma_e = np.linalg.inv(inner)
     return 0.5 * (sigma_e + sigma_e.T)
+
+
+def subspace_key(feature: BodyFeatureMetric) -> str:
+    """Names the subspace of a metric (its W): saved pairs are differences there and only valid with it."""
+    w = np.ascontiguousarray(feature.metric.projection, dtype="<f8")
+    return f"{feature.name}:{w.shape[0]}x{w.shape[1]}:{hashlib.sha256(w.tobytes()).hexdigest()[:16]}"
 
 
 def _factor(feature: BodyFeatureMetric) -> FloatArray:
@@ -132,6 +139,7 @@ class PairPool:
         self.stamps = np.zeros(self.capacity)
         self.count = 0
         self.version = 0  # bumped by every change
+        self.removals = 0  # pairs removed because their face was forgotten or their track released
         self._per_track: dict[int, int] = {}
 
     def room_for(self, track_a: int, track_b: int) -> bool:
@@ -172,11 +180,15 @@ class PairPool:
 
     def remove_face(self, face_id: int) -> int:
         """Drop every pair of a face (the person was forgotten): how many."""
-        return self._remove(np.flatnonzero((self.faces[: self.count] == face_id).any(axis=1)))
+        n = self._remove(np.flatnonzero((self.faces[: self.count] == face_id).any(axis=1)))
+        self.removals += n
+        return n
 
     def remove_track(self, track_id: int) -> int:
         """Drop every pair a track took part in (its face decision was wrong): how many."""
-        return self._remove(np.flatnonzero((self.tracks[: self.count] == track_id).any(axis=1)))
+        n = self._remove(np.flatnonzero((self.tracks[: self.count] == track_id).any(axis=1)))
+        self.removals += n
+        return n
 
     def track_ended(self, track_id: int) -> None:
         """A deleted track adds no more pairs: its count is no longer needed (ids are not reused)."""
@@ -197,6 +209,7 @@ class PairPool:
 class _Job:
     future: Future[tuple[BodyFeatureMetric, F32, object]]
     version: int
+    removals: int
 
 
 class OnlineBodyMetric:
@@ -224,6 +237,7 @@ class OnlineBodyMetric:
         self.pairs_mined = {"positive": 0, "negative": 0}
         self.pairs_refused = 0  # a track had had its share
         self._fitted_version = 0
+        self._fitted_removals = 0
         self._last_refit_s = -math.inf
         self._job: _Job | None = None
         self._executor: ThreadPoolExecutor | None = None
@@ -258,7 +272,7 @@ class OnlineBodyMetric:
         self.pool._per_track.clear()
         if n:
             self.current = self._refit(*self.pool.split())
-            self._fitted_version = self.pool.version
+            self._fitted_version, self._fitted_removals = self.pool.version, self.pool.removals
             self.refits += 1
         return n
 
@@ -267,10 +281,11 @@ class OnlineBodyMetric:
         return refit_metric(self.base, positive, negative, prior_pairs=self.prior_pairs)
 
     def due(self, now_s: float) -> bool:
-        """Enough new pairs and time since the last re-fit, and none running."""
-        return (self._job is None and self.pool.version != self._fitted_version
-                and self.pool.version - self._fitted_version >= self.min_new_pairs
-                and now_s - self._last_refit_s >= self.interval_s)
+        """Enough new pairs (or a removal: a forgotten person's pairs must leave the metric) and time since
+        the last re-fit, and none running."""
+        changed = self.pool.version - self._fitted_version >= self.min_new_pairs \
+            or self.pool.removals != self._fitted_removals
+        return self._job is None and changed and now_s - self._last_refit_s >= self.interval_s
 
     def poll(self, now_s: float, prepare: Callable[[], object] | None = None,
              convert: Callable[[object, F32], object] | None = None
@@ -285,9 +300,9 @@ class OnlineBodyMetric:
             try:
                 new, change, converted = job.future.result()
             except (ValueError, np.linalg.LinAlgError):  # a degenerate pair set: keep the metric in use
-                self._fitted_version = job.version
+                self._fitted_version, self._fitted_removals = job.version, job.removals
             else:
-                self._fitted_version = job.version
+                self._fitted_version, self._fitted_removals = job.version, job.removals
                 self.current = new
                 self.refits += 1
                 done = (new, change, converted)
@@ -302,18 +317,18 @@ class OnlineBodyMetric:
                 change = embedding_change(old, new)
                 return new, change, convert(snapshot, change) if convert is not None else None
 
-            version = self.pool.version
+            version, removals = self.pool.version, self.pool.removals
             if self.background:
                 if self._executor is None:
                     self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="body-metric-refit")
-                self._job = _Job(self._executor.submit(work), version)
+                self._job = _Job(self._executor.submit(work), version, removals)
             else:
                 try:
                     new, change, converted = work()
                 except (ValueError, np.linalg.LinAlgError):
-                    self._fitted_version = version
+                    self._fitted_version, self._fitted_removals = version, removals
                 else:
-                    self._fitted_version = version
+                    self._fitted_version, self._fitted_removals = version, removals
                     self.current = new
                     self.refits += 1
                     done = (new, change, converted)
