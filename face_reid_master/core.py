@@ -650,10 +650,13 @@ class MasterCore:
             self.stats.faces_pruned += 1
 
     def flush(self) -> None:
-        """Write every face with unsaved features to the store (call at shutdown)."""
+        """Write every face with unsaved features (and the online update's pairs) to the store, and stop the
+        body-metric worker (call at shutdown)."""
         for fid in list(self._dirty_faces):
             self._save_face(fid)
         self._save_body_pairs(self._last_stamp, force=True)
+        if self.online_metric is not None:
+            self.online_metric.close()
 
     # ------------------------------------------------------------------------------ people
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
