@@ -139,6 +139,19 @@ class MasterConfig:
         low_open=True, high_open=True)
     body_min_observations: int = param(
         10, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
+    body_fusion: str = param(
+        "funnel", "How a faceless track's body appearance and head height are fused (second seed, Algorithm 2): "
+        "'funnel' (appearance prunes the faces, the rest are also judged by height) or 'score' (both summed for "
+        "every face).", choices=("funnel", "score"))
+    body_funnel_alpha: float = param(
+        1.5, "Funnel: a face whose recent bodies are farther than this times the nearest face's is abandoned "
+        "for that observation (> 1).", low=1.0, high=100.0, low_open=True)
+    body_height_same_std_m: float = param(
+        0.05, "Spread of one person's head height around their face's recent median (m).", low=0.0, high=1.0,
+        low_open=True)
+    body_height_other_std_m: float = param(
+        0.12, "Spread of another person's head height around a face's recent median (m; > the same-person "
+        "spread).", low=0.0, high=2.0, low_open=True)
     body_online_update: bool = param(
         False, "Update the body metric online from body pairs the faces labelled (second seed, Algorithm 1; "
         "needs body_identity).")
@@ -284,7 +297,9 @@ class MasterCore:
                 posterior_threshold=cfg.body_posterior_threshold, min_observations=cfg.body_min_observations,
                 online=self.online_metric, rank_limit=cfg.body_online_rank_limit,
                 verified_confidence=cfg.body_online_verified_confidence,
-                negative_face_distance=cfg.body_online_negative_face_distance or None)
+                negative_face_distance=cfg.body_online_negative_face_distance or None, fusion=cfg.body_fusion,
+                funnel_alpha=cfg.body_funnel_alpha, height_same_std_m=cfg.body_height_same_std_m,
+                height_other_std_m=cfg.body_height_other_std_m)
         if cfg.method == "bayes":
             if cfg.new_person_scale_c != model.new_person_scale_c:
                 model = model.with_new_person_scale(cfg.new_person_scale_c)
@@ -377,7 +392,8 @@ class MasterCore:
             for track_id, det_index in result.associations:
                 row = appearance[det_index]
                 if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
-                    self.identity.add_body_observations(track_id, row[None, :], stamp, frame.camera_id)
+                    self.identity.add_body_observations(track_id, row[None, :], stamp, frame.camera_id,
+                                                        heights[det_index: det_index + 1])
         events = self._identity_step(result.deleted, stamp)
         for track_id in touched_tracks:
             fid = self.identity.face_id_of(track_id)

@@ -69,9 +69,13 @@ def _parser() -> argparse.ArgumentParser:
                         "both embedders serves dlib_resnet_v1, sface_2021dec and dlib_resnet_v1+sface_2021dec")
     p.add_argument("--pooled-likelihood", action="store_true",
                    help="judge every face by the pooled likelihood, ignoring the face-size buckets")
-    p.add_argument("--evidence", choices=("face", "fused"), default="fused",
-                   help="fused (default): bodies (where the scenario has them) also steer the tracker's association "
-                        "(body_appearance_tracking); face: positions and faces only, as before bodies")
+    p.add_argument("--evidence", choices=("face", "body", "fused"), default="fused",
+                   help="fused (default): bodies (where the scenario has them) steer the tracker's association "
+                        "(body_appearance_tracking) and name tracks that show no face (body_identity); body: "
+                        "bodies for the tracker only; face: positions and faces only, as before bodies")
+    p.add_argument("--fusion", choices=("funnel", "score"), default="funnel",
+                   help="how body appearance and head height are fused for a faceless track (body_fusion): the "
+                        "feature funnel (default) or plain score-level fusion")
     p.add_argument("--online-update", choices=("on", "off"), default="off",
                    help="on: the body metric is updated online from body pairs the faces labelled "
                         "(body_online_update, re-fitted in the frame's thread so that runs repeat); the JSON "
@@ -134,7 +138,7 @@ def _parameters(config: MasterConfig, likelihood: FaceLikelihood, tick_period_s:
         out["threshold_distance"] = config.threshold_distance or likelihood.threshold_distance
     out["likelihood_size_buckets"] = list(likelihood.eye_px_edges) if likelihood.conditioned else "pooled"
     out["tick_period_s"] = tick_period_s
-    out["evidence"] = "fused" if config.body_appearance_tracking else "face"
+    out["evidence"] = ("fused" if config.body_identity else "body") if config.body_appearance_tracking else "face"
     out["body_appearance_tracking"] = config.body_appearance_tracking
     out["body"] = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if f.name.startswith("body_")}
     out["tracker"] = dataclasses.asdict(config.tracker)
@@ -226,6 +230,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _config(args: argparse.Namespace, method: str, space: str) -> MasterConfig:
     """The master configuration the evaluation's options ask for."""
     return MasterConfig(method=method, embedding_space=space, body_appearance_tracking=args.evidence != "face",
+                        body_identity=args.evidence == "fused", body_fusion=args.fusion,
                         body_online_update=args.online_update == "on", body_online_background=False)
 
 

@@ -138,7 +138,7 @@ class IdentityManagerBase:
         if body_evidence is not None and not isinstance(body_evidence, BodyEvidence):
             raise ValueError(f"body_evidence must be a BodyEvidence or None, got {type(body_evidence).__name__}")
         self.body_evidence = body_evidence
-        self._pending_bodies: dict[int, list[tuple[F32Array, float, str]]] = {}
+        self._pending_bodies: dict[int, list[tuple[F32Array, float, str, FloatArray | None]]] = {}
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
                 "feature_gate_distance", feature_gate_distance, 0.0, math.inf, low_open=True, high_open=True
@@ -214,12 +214,14 @@ class IdentityManagerBase:
             self._tracks[tid] = TrackEntry(tid, first_seen_s=stamp, last_seen_s=stamp)
         return True
 
-    def add_body_observations(self, track_id: int, embeddings: F32Array, stamp_s: float, source: str = "") -> None:
-        """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) seen by camera
-        ``source`` for the next :meth:`step`; ignored without body evidence or for a deleted track."""
+    def add_body_observations(self, track_id: int, embeddings: F32Array, stamp_s: float, source: str = "",
+                              heights: FloatArray | None = None) -> None:
+        """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) and head
+        ``heights`` (k, m; None = unknown) seen by camera ``source`` for the next :meth:`step`; ignored
+        without body evidence or for a deleted track."""
         if self.body_evidence is None or track_id in self._dead or track_id in self._pending_deleted:
             return
-        self._pending_bodies.setdefault(track_id, []).append((embeddings, stamp_s, source))
+        self._pending_bodies.setdefault(track_id, []).append((embeddings, stamp_s, source, heights))
         self.stats.body_observations += embeddings.shape[0]
         if track_id not in self._tracks:
             self._tracks[track_id] = TrackEntry(track_id, first_seen_s=stamp_s, last_seen_s=stamp_s)
@@ -317,14 +319,14 @@ class IdentityManagerBase:
             track = self._tracks.get(tid)
             if track is None:
                 continue
-            for emb, t, source in parts:
+            for emb, t, source, heights in parts:
                 if track.face_id is not None:
                     verified = track.evidence in ("face", "both") and track.confidence >= body.verified_confidence
                     if verified and body.wants_probe(tid, t):
                         self.stats.body_pairs_mined += body.mine(track.face_id, tid, emb[-1], t, self._faces_differ)
-                    body.add_face_bodies(track.face_id, emb, t, tid if verified else -1)
+                    body.add_face_bodies(track.face_id, emb, t, tid if verified else -1, heights)
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
-                    body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source)
+                    body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source, heights)
         events = []
         for tid, fid, p in body.decide(self._available, stamp):
             track = self._tracks.get(tid)
@@ -352,9 +354,9 @@ class IdentityManagerBase:
         body = self.body_evidence
         if body is None:
             return
-        emb, newest = body.track_bodies(tid)
+        emb, newest, heights = body.track_bodies(tid)
         if emb.shape[0]:
-            body.add_face_bodies(fid, emb, newest)
+            body.add_face_bodies(fid, emb, newest, heights=heights)
         body.forget_track(tid)
 
     def _faces_differ(self, face_a: int, face_b: int) -> bool:

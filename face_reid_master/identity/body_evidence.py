@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.online_metric import MinedPair, OnlineBodyMetric
+from face_reid_master.identity.feature_funnel import FUSIONS, funnel_survivors, gaussian_log_ratio
 from face_reid_master.identity.likelihood import LikelihoodModel
 
 __all__ = ["BodyEvidence"]
@@ -41,15 +42,17 @@ class _Gallery:
     rows: F32
     stamps: FloatArray
     tracks: npt.NDArray[np.int64]
+    heights: FloatArray  # the person's head height with each row (m, NaN = unknown)
     count: int = 0
     next: int = 0
     written: int = 0  # rows written so far (tells a conversion made off-thread whether it is still valid)
 
-    def add(self, embeddings: F32, stamp: float, track_id: int) -> None:
-        for row in embeddings:
+    def add(self, embeddings: F32, stamp: float, track_id: int, heights: FloatArray) -> None:
+        for row, height in zip(embeddings, heights, strict=True):
             self.rows[self.next] = row
             self.stamps[self.next] = stamp
             self.tracks[self.next] = track_id
+            self.heights[self.next] = height
             self.next = (self.next + 1) % self.rows.shape[0]
             self.count = min(self.count + 1, self.rows.shape[0])
         self.written += embeddings.shape[0]
@@ -57,6 +60,12 @@ class _Gallery:
     def recent(self, since: float) -> F32:
         kept = self.stamps[: self.count] >= since
         return self.rows[: self.count][kept]
+
+    def height(self, since: float) -> float:
+        """Median head height of the recent rows (NaN: none measured)."""
+        h = self.heights[: self.count][self.stamps[: self.count] >= since]
+        h = h[np.isfinite(h)]
+        return float(np.median(h)) if h.size else math.nan
 
     def verified(self, since: float, other_than: int) -> tuple[F32, npt.NDArray[np.int64]]:
         """Recent face-verified rows of tracks other than ``other_than``, and their tracks."""
@@ -71,6 +80,7 @@ class _TrackBodies:
 
     rows: list[F32] = field(default_factory=list)
     stamps: list[float] = field(default_factory=list)
+    heights: list[float] = field(default_factory=list)
     log_ratio: dict[int, float] = field(default_factory=dict)
     counts: dict[int, int] = field(default_factory=dict)
     last_used: dict[str, float] = field(default_factory=dict)  # camera -> stamp of its last observation used
@@ -93,13 +103,21 @@ class BodyEvidence:
     others are mined against) when its face decided it with at least this posterior. ``negative_face_distance``
     (theta_2, face-embedding distance; None = the identity layer's decision distance): two faces are
     confidently different people when none of their features are closer than this.
+    ``fusion``: how a faceless track's body appearance and head height are combined (see
+    :mod:`~face_reid_master.identity.feature_funnel`): "funnel" (appearance first; a face whose recent bodies
+    are farther than ``funnel_alpha`` x the nearest face's is abandoned for that observation, the others are
+    also judged by height) or "score" (both ratios summed for every face). ``height_same_std_m`` /
+    ``height_other_std_m``: spread of the difference between a person's head height and their face's recent
+    median, for the same person / another person (m).
     """
 
     def __init__(self, likelihood: LikelihoodModel, *, window_s: float = 3600.0, gallery_size: int = 64,
                  posterior_threshold: float = 0.99, min_observations: int = 10, max_log_ratio: float = 0.3,
                  other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5,
                  online: OnlineBodyMetric | None = None, mine_interval_s: float = 2.0, rank_limit: int = 1,
-                 verified_confidence: float = 0.99, negative_face_distance: float | None = None) -> None:
+                 verified_confidence: float = 0.99, negative_face_distance: float | None = None,
+                 fusion: str = "funnel", funnel_alpha: float = 1.5, height_same_std_m: float = 0.05,
+                 height_other_std_m: float = 0.12) -> None:
         if not isinstance(likelihood, LikelihoodModel):
             raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
         self.likelihood = likelihood
@@ -120,22 +138,32 @@ class BodyEvidence:
         self.verified_confidence = check_real("verified_confidence", verified_confidence, 0.0, 1.0)
         self.negative_face_distance = None if negative_face_distance is None else check_real(
             "negative_face_distance", negative_face_distance, 0.0, math.inf, low_open=True)
+        if fusion not in FUSIONS:
+            raise ValueError(f"fusion must be one of {FUSIONS}, got {fusion!r}")
+        self.fusion = fusion
+        self.funnel_alpha = check_real("funnel_alpha", funnel_alpha, 1.0, math.inf, low_open=True)
+        self.height_same_std_m = check_real("height_same_std_m", height_same_std_m, 0.0, math.inf, low_open=True)
+        self.height_other_std_m = check_real("height_other_std_m", height_other_std_m, self.height_same_std_m,
+                                             math.inf, low_open=True)
         self._faces: dict[int, _Gallery] = {}
         self._tracks: dict[int, _TrackBodies] = {}
         self._mined_at: dict[int, float] = {}  # track -> stamp of its last probe
 
     # ------------------------------------------------------------------ faces
-    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float, track_id: int = -1) -> None:
-        """What the person of ``face_id`` wears now (rows of the body metric's embedding), seen on track
-        ``track_id`` (-1: not verified by the face; such rows are never mined)."""
+    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float, track_id: int = -1,
+                        heights: npt.ArrayLike | None = None) -> None:
+        """What the person of ``face_id`` wears now (rows of the body metric's embedding) and their head
+        ``heights`` (m per row, None = unknown), seen on track ``track_id`` (-1: not verified by the face; such
+        rows are never mined)."""
         if embeddings.shape[0] == 0:
             return
         gallery = self._faces.get(face_id)
         if gallery is None or gallery.rows.shape[1] != embeddings.shape[1]:
-            gallery = self._faces[face_id] = _Gallery(np.empty((self.gallery_size, embeddings.shape[1]), np.float32),
-                                                      np.full(self.gallery_size, -math.inf),
-                                                      np.full(self.gallery_size, -1, np.int64))
-        gallery.add(embeddings, stamp_s, track_id)
+            size = self.gallery_size
+            gallery = self._faces[face_id] = _Gallery(np.empty((size, embeddings.shape[1]), np.float32),
+                                                      np.full(size, -math.inf), np.full(size, -1, np.int64),
+                                                      np.full(size, math.nan))
+        gallery.add(embeddings, stamp_s, track_id, _heights(heights, embeddings.shape[0]))
 
     def forget_face(self, face_id: int) -> None:
         """Drop a face's bodies and mined pairs (the face was forgotten)."""
@@ -152,27 +180,32 @@ class BodyEvidence:
 
     # ------------------------------------------------------------------ tracks
     def observe(self, track_id: int, embeddings: F32, stamp_s: float, candidates: list[int],
-                source: str = "") -> None:
-        """Body observations of a track seen by camera ``source``: kept (for its face, once it has one) and,
-        at most every ``min_interval_s`` per camera, compared with the recent bodies of the ``candidates``."""
+                source: str = "", heights: npt.ArrayLike | None = None) -> None:
+        """Body observations of a track seen by camera ``source`` (with head ``heights``, m, None = unknown):
+        kept (for its face, once it has one) and, at most every ``min_interval_s`` per camera, compared with
+        the recent bodies of the ``candidates``."""
         track = self._tracks.setdefault(track_id, _TrackBodies())
+        h = _heights(heights, embeddings.shape[0])
         track.rows.extend(embeddings)
         track.stamps.extend([stamp_s] * embeddings.shape[0])
+        track.heights.extend(h.tolist())
         if len(track.rows) > self.track_buffer:  # keep an even spread of the track's history
             keep = np.linspace(0, len(track.rows) - 1, self.track_buffer).round().astype(int)
             track.rows = [track.rows[i] for i in keep]
             track.stamps = [track.stamps[i] for i in keep]
+            track.heights = [track.heights[i] for i in keep]
         if not candidates or stamp_s < track.last_used.get(source, -math.inf) + self.min_interval_s:
             return
         track.last_used[source] = stamp_s
         since = stamp_s - self.window_s
-        faces, galleries = [], []
+        faces, galleries, face_heights = [], [], []
         for face_id in candidates:
             gallery = self._faces.get(face_id)
             recent = gallery.recent(since) if gallery is not None else None
             if recent is not None and recent.shape[0] and recent.shape[1] == embeddings.shape[1]:
                 faces.append(face_id)
                 galleries.append(recent)
+                face_heights.append(gallery.height(since))  # type: ignore[union-attr]
         if not faces:
             return
         rows = np.concatenate(galleries)  # every candidate's recent bodies: one GEMM for all of them
@@ -180,17 +213,31 @@ class BodyEvidence:
             - 2.0 * embeddings @ rows.T
         starts = np.concatenate([[0], np.cumsum([g.shape[0] for g in galleries])[:-1]])
         d = np.sqrt(np.maximum(np.minimum.reduceat(d2, starts, axis=1), 0.0))  # (observations, faces)
-        lr = np.clip(self.likelihood.log_likelihood_ratio(d), -self.max_log_ratio, self.max_log_ratio).sum(axis=0)
+        lr = self._log_ratios(d, np.abs(h[:, None] - np.array(face_heights)[None, :])).sum(axis=0)
         for face_id, value in zip(faces, lr.tolist(), strict=True):
             track.log_ratio[face_id] = track.log_ratio.get(face_id, 0.0) + value
             track.counts[face_id] = track.counts.get(face_id, 0) + embeddings.shape[0]
 
-    def track_bodies(self, track_id: int) -> tuple[F32, float]:
-        """The track's kept body embeddings (k, r) and the stamp of its newest (for its face's gallery)."""
+    def _log_ratios(self, appearance: FloatArray, height_difference: FloatArray) -> FloatArray:
+        """Per observation and face, the log-likelihood ratio of "same person" from the appearance distances
+        and head-height differences (NaN: not measured, no evidence), fused as ``fusion`` says."""
+        cap = self.max_log_ratio
+        lr = np.clip(self.likelihood.log_likelihood_ratio(appearance), -cap, cap)
+        geo = np.clip(gaussian_log_ratio(height_difference, self.height_same_std_m, self.height_other_std_m),
+                      -cap, cap)
+        lr = lr + np.where(np.isfinite(geo), geo, 0.0)
+        if self.fusion == "funnel":  # appearance prunes; the faces abandoned get the bound against them
+            keep = funnel_survivors([appearance, height_difference], [self.funnel_alpha])
+            lr = np.where(keep, lr, -cap)
+        return lr
+
+    def track_bodies(self, track_id: int) -> tuple[F32, float, FloatArray]:
+        """The track's kept body embeddings (k, r), the stamp of its newest and their head heights (for its
+        face's gallery)."""
         track = self._tracks.get(track_id)
         if track is None or not track.rows:
-            return np.zeros((0, 0), np.float32), -math.inf
-        return np.stack(track.rows), max(track.stamps)
+            return np.zeros((0, 0), np.float32), -math.inf, np.zeros(0)
+        return np.stack(track.rows), max(track.stamps), np.array(track.heights)
 
     def forget_track(self, track_id: int) -> None:
         self._tracks.pop(track_id, None)
@@ -313,3 +360,13 @@ class BodyEvidence:
                 taken.add(face)
                 out.append((track_id, face, p))
         return out
+
+
+def _heights(heights: npt.ArrayLike | None, n: int) -> FloatArray:
+    """``n`` head heights (m) from the caller's (None: unknown = NaN)."""
+    if heights is None:
+        return np.full(n, math.nan)
+    h = np.asarray(heights, dtype=np.float64).reshape(-1)
+    if h.size != n:
+        raise ValueError(f"heights must hold one value per embedding row ({n}), got {h.size}")
+    return h
