@@ -213,6 +213,7 @@ class MasterStats:
     bodies_rejected_space: int = 0  # descriptors of another projection than the body metric's
     body_metric_refits: int = 0  # online body-metric updates installed
     body_pairs_mined: int = 0  # body pairs the faces labelled, kept for the online update
+    body_metric_refit_failures: int = 0  # re-fits that failed numerically (the metric in use stays)
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
@@ -269,6 +270,8 @@ class MasterCore:
         if body_metric is None and cfg.body_appearance_tracking:
             body_metric = default_body_metric()
         self.body_metric = body_metric if cfg.body_appearance_tracking else None
+        # the fused metric bodies are embedded with (the online update replaces it; body_metric stays as loaded)
+        self.body_fused = None if self.body_metric is None else self.body_metric.features["fused"]
         self._body_space_noticed: dict[str, str] = {}  # camera id -> the unusable body space it was logged for
         model = likelihood or default_face_likelihood(cfg.embedding_space)
         if isinstance(model, LikelihoodModel):
@@ -509,7 +512,8 @@ class MasterCore:
         if not finite.any():
             return None
         assert metric is not None
-        embedded = metric.features["fused"].embed(stacked[finite])
+        assert self.body_fused is not None
+        embedded = self.body_fused.embed(stacked[finite])
         out = np.full((len(bodies), embedded.shape[1]), np.nan, dtype=np.float32)
         out[np.asarray(usable)[finite]] = embedded
         return out
@@ -577,10 +581,11 @@ class MasterCore:
         assert online is not None and body is not None and self.body_metric is not None
         done = online.poll(stamp, body.conversion_snapshot, BodyEvidence.convert_snapshot)
         self.stats.body_pairs_mined = online.pairs_mined["positive"] + online.pairs_mined["negative"]
+        self.stats.body_metric_refit_failures = online.refit_failures
         if done is None:
             return
         new, change, converted = done
-        self.body_metric = dataclasses.replace(self.body_metric, features={**self.body_metric.features, "fused": new})
+        self.body_fused = new
         self.tracker.change_appearance(change)
         body.change_metric(change, converted)  # type: ignore[arg-type]
         self.stats.body_metric_refits += 1
@@ -596,8 +601,7 @@ class MasterCore:
             self.stats.store_errors += 1
             return
         if online.restore(rows):
-            self.body_metric = dataclasses.replace(self.body_metric,
-                                                   features={**self.body_metric.features, "fused": online.current})
+            self.body_fused = online.current
             self._pairs_saved = (online.pool.version, -math.inf)
 
     def _save_body_pairs(self, stamp: float, force: bool = False) -> None:

@@ -236,6 +236,8 @@ class OnlineBodyMetric:
         self.refits = 0
         self.pairs_mined = {"positive": 0, "negative": 0}
         self.pairs_refused = 0  # a track had had its share
+        self.refit_failures = 0  # re-fits that failed (the metric in use stays); last_error says why
+        self.last_error = ""
         self._fitted_version = 0
         self._fitted_removals = 0
         self._last_refit_s = -math.inf
@@ -299,14 +301,15 @@ class OnlineBodyMetric:
             job, self._job = self._job, None
             try:
                 new, change, converted = job.future.result()
-            except (ValueError, np.linalg.LinAlgError):  # a degenerate pair set: keep the metric in use
+            except (ValueError, np.linalg.LinAlgError) as exc:  # a degenerate pair set: keep the metric in use
                 self._fitted_version, self._fitted_removals = job.version, job.removals
+                self._failed(exc)
             else:
                 self._fitted_version, self._fitted_removals = job.version, job.removals
                 self.current = new
                 self.refits += 1
                 done = (new, change, converted)
-        if done is None and self.due(now_s):
+        if done is None and self.due(now_s):  # (not in the poll that installed one: the costs fall apart)
             self._last_refit_s = now_s
             positive, negative = self.pool.split()
             snapshot = prepare() if prepare is not None else None
@@ -325,14 +328,19 @@ class OnlineBodyMetric:
             else:
                 try:
                     new, change, converted = work()
-                except (ValueError, np.linalg.LinAlgError):
+                except (ValueError, np.linalg.LinAlgError) as exc:
                     self._fitted_version, self._fitted_removals = version, removals
+                    self._failed(exc)
                 else:
                     self._fitted_version, self._fitted_removals = version, removals
                     self.current = new
                     self.refits += 1
                     done = (new, change, converted)
         return done
+
+    def _failed(self, exc: Exception) -> None:
+        self.refit_failures += 1
+        self.last_error = f"{type(exc).__name__}: {exc}"[:200]
 
     def close(self) -> None:
         """Stop the worker (a running re-fit is abandoned)."""

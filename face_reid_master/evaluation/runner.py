@@ -298,7 +298,7 @@ def run_master(
         runtime_s=time.perf_counter() - t_start,
         det_name=np.array(rows_name, dtype=np.int64),
         names=tuple(name_index),
-        body_metric=None if core.body_metric is None else core.body_metric.features["fused"],
+        body_metric=core.body_fused,
     )
 
 

@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.online_metric import MinedPair, OnlineBodyMetric
+from face_reid_master.identity.body_gallery import FaceBodyPool, PoolSnapshot
 from face_reid_master.identity.feature_funnel import FUSIONS, funnel_survivors, gaussian_log_ratio
 from face_reid_master.identity.likelihood import LikelihoodModel
 
@@ -32,46 +33,6 @@ __all__ = ["BodyEvidence"]
 
 F32 = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
-
-
-@dataclass
-class _Gallery:
-    """A face's recent body embeddings (a ring), their stamps and the tracks they came from (-1: a track
-    identified by its body, not verified by its face)."""
-
-    rows: F32
-    stamps: FloatArray
-    tracks: npt.NDArray[np.int64]
-    heights: FloatArray  # the person's head height with each row (m, NaN = unknown)
-    count: int = 0
-    next: int = 0
-    written: int = 0  # rows written so far (tells a conversion made off-thread whether it is still valid)
-
-    def add(self, embeddings: F32, stamp: float, track_id: int, heights: FloatArray) -> None:
-        for row, height in zip(embeddings, heights, strict=True):
-            self.rows[self.next] = row
-            self.stamps[self.next] = stamp
-            self.tracks[self.next] = track_id
-            self.heights[self.next] = height
-            self.next = (self.next + 1) % self.rows.shape[0]
-            self.count = min(self.count + 1, self.rows.shape[0])
-        self.written += embeddings.shape[0]
-
-    def recent(self, since: float) -> F32:
-        kept = self.stamps[: self.count] >= since
-        return self.rows[: self.count][kept]
-
-    def height(self, since: float) -> float:
-        """Median head height of the recent rows (NaN: none measured)."""
-        h = self.heights[: self.count][self.stamps[: self.count] >= since]
-        h = h[np.isfinite(h)]
-        return float(np.median(h)) if h.size else math.nan
-
-    def verified(self, since: float, other_than: int) -> tuple[F32, npt.NDArray[np.int64]]:
-        """Recent face-verified rows of tracks other than ``other_than``, and their tracks."""
-        t = self.tracks[: self.count]
-        kept = (self.stamps[: self.count] >= since) & (t >= 0) & (t != other_than)
-        return self.rows[: self.count][kept], t[kept]
 
 
 @dataclass
@@ -145,7 +106,7 @@ class BodyEvidence:
         self.height_same_std_m = check_real("height_same_std_m", height_same_std_m, 0.0, math.inf, low_open=True)
         self.height_other_std_m = check_real("height_other_std_m", height_other_std_m, self.height_same_std_m,
                                              math.inf, low_open=True)
-        self._faces: dict[int, _Gallery] = {}
+        self._faces = FaceBodyPool(self.gallery_size)
         self._tracks: dict[int, _TrackBodies] = {}
         self._mined_at: dict[int, float] = {}  # track -> stamp of its last probe
 
@@ -157,17 +118,11 @@ class BodyEvidence:
         rows are never mined)."""
         if embeddings.shape[0] == 0:
             return
-        gallery = self._faces.get(face_id)
-        if gallery is None or gallery.rows.shape[1] != embeddings.shape[1]:
-            size = self.gallery_size
-            gallery = self._faces[face_id] = _Gallery(np.empty((size, embeddings.shape[1]), np.float32),
-                                                      np.full(size, -math.inf), np.full(size, -1, np.int64),
-                                                      np.full(size, math.nan))
-        gallery.add(embeddings, stamp_s, track_id, _heights(heights, embeddings.shape[0]))
+        self._faces.add(face_id, embeddings, stamp_s, track_id, _heights(heights, embeddings.shape[0]))
 
     def forget_face(self, face_id: int) -> None:
         """Drop a face's bodies and mined pairs (the face was forgotten)."""
-        self._faces.pop(face_id, None)
+        self._faces.release(face_id)
         if self.online is not None:
             self.online.pool.remove_face(face_id)
         for track in self._tracks.values():
@@ -175,8 +130,11 @@ class BodyEvidence:
             track.counts.pop(face_id, None)
 
     def has_recent_bodies(self, face_id: int, now_s: float) -> bool:
-        gallery = self._faces.get(face_id)
-        return gallery is not None and gallery.recent(now_s - self.window_s).shape[0] > 0
+        return self._faces.face_rows(face_id, now_s - self.window_s).shape[0] > 0
+
+    def face_bodies(self, face_id: int, now_s: float) -> F32:
+        """A face's recent body embeddings (k, r)."""
+        return self._faces.face_rows(face_id, now_s - self.window_s)
 
     # ------------------------------------------------------------------ tracks
     def observe(self, track_id: int, embeddings: F32, stamp_s: float, candidates: list[int],
@@ -197,23 +155,23 @@ class BodyEvidence:
         if not candidates or stamp_s < track.last_used.get(source, -math.inf) + self.min_interval_s:
             return
         track.last_used[source] = stamp_s
-        since = stamp_s - self.window_s
-        faces, galleries, face_heights = [], [], []
-        for face_id in candidates:
-            gallery = self._faces.get(face_id)
-            recent = gallery.recent(since) if gallery is not None else None
-            if recent is not None and recent.shape[0] and recent.shape[1] == embeddings.shape[1]:
-                faces.append(face_id)
-                galleries.append(recent)
-                face_heights.append(gallery.height(since))  # type: ignore[union-attr]
-        if not faces:
+        pool = self._faces
+        if embeddings.shape[1] != pool.dim:
             return
-        rows = np.concatenate(galleries)  # every candidate's recent bodies: one GEMM for all of them
-        d2 = (embeddings * embeddings).sum(axis=1)[:, None] + (rows * rows).sum(axis=1)[None, :] \
-            - 2.0 * embeddings @ rows.T
-        starts = np.concatenate([[0], np.cumsum([g.shape[0] for g in galleries])[:-1]])
-        d = np.sqrt(np.maximum(np.minimum.reduceat(d2, starts, axis=1), 0.0))  # (observations, faces)
-        lr = self._log_ratios(d, np.abs(h[:, None] - np.array(face_heights)[None, :])).sum(axis=0)
+        slots = np.array([pool.slot_of[f] for f in candidates if f in pool.slot_of], dtype=np.intp)
+        if not slots.size:
+            return
+        recent = pool.stamps >= stamp_s - self.window_s
+        best, _ = pool.nearest(embeddings, recent)  # every face at once: (observations, slots)
+        best = best[:, slots]
+        seen = np.isfinite(best).all(axis=0)
+        if not seen.any():
+            return
+        slots = slots[seen]
+        faces = pool.face[slots].tolist()
+        d = np.sqrt(best[:, seen])
+        face_heights = pool.slot_heights(recent)[slots]
+        lr = self._log_ratios(d, np.abs(h[:, None] - face_heights[None, :])).sum(axis=0)
         for face_id, value in zip(faces, lr.tolist(), strict=True):
             track.log_ratio[face_id] = track.log_ratio.get(face_id, 0.0) + value
             track.counts[face_id] = track.counts.get(face_id, 0) + embeddings.shape[0]
@@ -269,66 +227,52 @@ class BodyEvidence:
         if self.online is None:
             return 0
         self._mined_at[track_id] = stamp_s
-        since = stamp_s - self.window_s
-        faces, rows, tracks = [], [], []
-        for fid, gallery in self._faces.items():
-            if gallery.rows.shape[1] != probe.shape[0]:
-                continue
-            r, t = gallery.verified(since, track_id)
-            if r.shape[0]:
-                faces.append(fid)
-                rows.append(r)
-                tracks.append(t)
-        if not faces:
+        pool = self._faces
+        if probe.shape[0] != pool.dim or not pool.slots:
             return 0
-        allrows = np.concatenate(rows)
-        d2 = (allrows * allrows).sum(axis=1) - 2.0 * allrows @ probe
-        starts = np.concatenate([[0], np.cumsum([r.shape[0] for r in rows])[:-1]])
-        nearest = np.minimum.reduceat(d2, starts)
-        order = np.argsort(nearest, kind="stable")
-        rank = np.empty(len(faces), np.intp)
-        rank[order] = np.arange(1, len(faces) + 1)
+        verified = (pool.stamps >= stamp_s - self.window_s) & (pool.tracks >= 0) & (pool.tracks != track_id)
+        best, where = pool.nearest(probe[None, :], verified)
+        best, where = best[0], where[0]
+        slots = np.flatnonzero(np.isfinite(best))
+        if not slots.size:
+            return 0
+        rank = np.empty(slots.size, np.intp)
+        rank[np.argsort(best[slots], kind="stable")] = np.arange(1, slots.size + 1)
         pairs = []
-        for k, fid in enumerate(faces):
-            if fid == face_id:
-                wanted = rank[k] > self.rank_limit
-            else:
-                wanted = rank[k] <= self.rank_limit and differ(face_id, fid)
+        for k, slot in enumerate(slots.tolist()):
+            fid = int(pool.face[slot])
+            wanted = rank[k] > self.rank_limit if fid == face_id else \
+                rank[k] <= self.rank_limit and differ(face_id, fid)
             if not wanted:
                 continue
-            j = int(np.argmin(d2[starts[k]: starts[k] + rows[k].shape[0]]))
-            other = int(tracks[k][j])
+            row = int(where[slot])
+            other = int(pool.tracks[row])
             if self.online.room_for(track_id, other):
-                pairs.append(MinedPair(probe - rows[k][j], fid == face_id, face_id, fid, track_id, other, stamp_s))
+                pairs.append(MinedPair(probe - pool.rows[row], fid == face_id, face_id, fid, track_id, other,
+                                       stamp_s))
         return self.online.add(pairs)
 
-    def conversion_snapshot(self) -> list[tuple[int, _Gallery, int, F32]]:
-        """What an off-thread conversion of the face galleries needs: (face, gallery, rows written, rows)."""
-        return [(fid, g, g.written, g.rows) for fid, g in self._faces.items()]
+    def conversion_snapshot(self) -> PoolSnapshot:
+        """What an off-thread conversion of the face galleries needs."""
+        return self._faces.snapshot()
 
     @staticmethod
-    def convert_snapshot(snapshot: object, change: F32) -> dict[int, tuple[_Gallery, int, F32]]:
-        """The snapshot's galleries in the new metric's embedding (runs off the frame's thread)."""
-        assert isinstance(snapshot, list)
-        return {fid: (g, written, rows @ change) for fid, g, written, rows in snapshot}
+    def convert_snapshot(snapshot: object, change: F32) -> tuple[PoolSnapshot, F32, FloatArray]:
+        """The snapshot's face galleries in the new metric's embedding (runs off the frame's thread)."""
+        assert isinstance(snapshot, PoolSnapshot)
+        return FaceBodyPool.convert(snapshot, change)
 
-    def change_metric(self, change: F32, converted: dict[int, tuple[_Gallery, int, F32]] | None = None) -> None:
-        """Every kept embedding to the new metric (rows @ ``change``); galleries converted off-thread and not
-        written since are taken from ``converted``."""
-        converted = converted or {}
-        for fid, gallery in self._faces.items():
-            done = converted.get(fid)
-            if done is not None and done[0] is gallery and done[1] == gallery.written:
-                gallery.rows = done[2].astype(np.float32, copy=False)
-            else:
-                gallery.rows = gallery.rows @ change
+    def change_metric(self, change: F32, converted: tuple[PoolSnapshot, F32, FloatArray] | None = None) -> None:
+        """Every kept embedding to the new metric (rows @ ``change``); face galleries converted off-thread and
+        not written since are taken from ``converted``."""
+        self._faces.change_metric(change, converted)
         for track in self._tracks.values():
             if track.rows:
                 track.rows = list(np.stack(track.rows) @ change)
 
     def posterior(self, track_id: int, candidates: list[int], now_s: float) -> dict[int, float]:
         """{face_id: posterior} over the candidates with recent bodies, plus 0 = someone else."""
-        recent = {f for f in candidates if self.has_recent_bodies(f, now_s)}
+        recent = set(candidates) & set(self._faces.recent_faces(now_s - self.window_s).tolist())
         return self._posterior(self._tracks.get(track_id), recent)
 
     def _posterior(self, track: _TrackBodies | None, recent: set[int]) -> dict[int, float]:
@@ -346,7 +290,7 @@ class BodyEvidence:
         compared = [(tid, t) for tid, t in self._tracks.items() if t.log_ratio]  # faceless tracks with evidence
         if not compared:
             return []
-        recent = {f for f in self._faces if self.has_recent_bodies(f, now_s)}
+        recent = set(self._faces.recent_faces(now_s - self.window_s).tolist())
         free = set(available)
         wanted = []
         for track_id, track in compared:

@@ -39,7 +39,7 @@ class AppearanceGallery:
     def convert(self, change: F32) -> None:
         """The kept embeddings in another metric of the same subspace (rows @ ``change``, r x r)."""
         if self.count:
-            self._rows = (self._rows @ change).astype(np.float32, copy=False)
+            self._rows[: self.count] = self._rows[: self.count] @ change
 
     @property
     def rows(self) -> F32:

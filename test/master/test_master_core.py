@@ -252,7 +252,7 @@ def test_the_online_body_metric_survives_a_restart_and_forgetting_removes_its_pa
     rng = np.random.default_rng(3)
     with FaceStore(db) as store:
         core = MasterCore(cfg, store=store)
-        shipped = core.body_metric.features["fused"]
+        shipped = core.body_fused
         r = shipped.metric.metric.shape[0]
         for fid in (1, 2, 3):
             store.save_face(LearnedFace(fid, rng.normal(size=(3, 128)).astype(np.float32), None, 0.0, 0.0, 3))
@@ -265,7 +265,7 @@ def test_the_online_body_metric_survives_a_restart_and_forgetting_removes_its_pa
         assert len(store.load_body_pairs(key)) == 30 and store.load_body_pairs("another:subspace") == []
     with FaceStore(db) as store:
         core = MasterCore(cfg, store=store)
-        restored = core.body_metric.features["fused"]
+        restored = core.body_fused
         assert core.online_metric.pool.count == 30
         assert not np.allclose(restored.metric.metric, shipped.metric.metric, rtol=1e-3)
         assert core.forget_face(2)
@@ -274,4 +274,4 @@ def test_the_online_body_metric_survives_a_restart_and_forgetting_removes_its_pa
         assert core.online_metric.pool.count == len(stored)
         core.tick(1.0)  # the removal is due for a re-fit at once
         assert core.stats.body_metric_refits == 1
-        assert not np.allclose(core.body_metric.features["fused"].metric.metric, restored.metric.metric, rtol=1e-6)
+        assert not np.allclose(core.body_fused.metric.metric, restored.metric.metric, rtol=1e-6)

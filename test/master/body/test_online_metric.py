@@ -127,6 +127,9 @@ def test_a_background_refit_is_installed_at_a_later_poll_and_converts_galleries(
              for k, d in enumerate(rng.normal(size=(12, R)).astype(np.float32))]
     assert online.add(pairs) == 12
     assert online.poll(0.0, body.conversion_snapshot, BodyEvidence.convert_snapshot) is None  # started, not waited
+    late = _wire(rng, 2)  # written after the snapshot the worker converts: converted when installed
+    body.add_face_bodies(3, FUSED.embed(late), 0.5, track_id=1)
+    body.add_face_bodies(4, FUSED.embed(late), 0.5, track_id=2)
     deadline = time.monotonic() + 30.0
     done = None
     while done is None and time.monotonic() < deadline:
@@ -136,7 +139,8 @@ def test_a_background_refit_is_installed_at_a_later_poll_and_converts_galleries(
     new, change, converted = done
     assert online.current is new and online.refits == 1
     body.change_metric(change, converted)
-    assert np.allclose(body.conversion_snapshot()[0][3][:5], new.embed(wire), atol=1e-3)
+    assert np.allclose(body.face_bodies(3, 0.0), new.embed(np.concatenate([wire, late])), atol=1e-3)
+    assert np.allclose(body.face_bodies(4, 0.0), new.embed(late), atol=1e-3)
     online.close()
 
 

@@ -1,0 +1,168 @@
+"""The recent bodies of every learned face in one array, so that a body is compared with all of them at once.
+
+Face slot s owns rows [s * size, (s + 1) * size) (a ring of its newest ``size`` bodies). With each row: its
+stamp (rows older than a window no longer count; a free or unwritten row has -inf), the track it came from
+(-1: not verified by a face) and the person's head height (NaN: unknown). One GEMM over the whole array and
+a min over each slot's rows give every face's nearest body: no per-face loop.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["FaceBodyPool", "PoolSnapshot"]
+
+F32 = npt.NDArray[np.float32]
+FloatArray = npt.NDArray[np.float64]
+
+
+class PoolSnapshot:
+    """The rows of a pool at one moment (for a conversion off the frame's thread): the array, which slots
+    had been written how often, and the pool's allocation generation."""
+
+    def __init__(self, rows: F32, written: npt.NDArray[np.int64], generation: int) -> None:
+        self.rows, self.written, self.generation = rows, written, generation
+
+
+class FaceBodyPool:
+    """Every face's newest ``size`` body embeddings, stamps, tracks and head heights (see the module doc)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.dim = 0
+        self.generation = 0  # bumped when the arrays are reallocated
+        self.slot_of: dict[int, int] = {}
+        self._free: list[int] = []
+        self._alloc(0, 0)
+
+    def _alloc(self, slots: int, dim: int) -> None:
+        n = slots * self.size
+        self.rows = np.zeros((n, dim), np.float32)
+        self.norms = np.zeros(n)  # squared norms of the rows
+        self.stamps = np.full(n, -math.inf)
+        self.tracks = np.full(n, -1, np.int64)
+        self.heights = np.full(n, math.nan)
+        self.face = np.zeros(slots, np.int64)  # face id per slot (0: free)
+        self.next = np.zeros(slots, np.int64)
+        self.written = np.zeros(slots, np.int64)
+
+    @property
+    def slots(self) -> int:
+        return int(self.face.size)
+
+    def _grow(self) -> None:
+        old = (self.rows, self.norms, self.stamps, self.tracks, self.heights, self.face, self.next, self.written)
+        n_old = self.slots
+        self._alloc(max(8, 2 * n_old), self.dim)
+        for new, prev in zip((self.rows, self.norms, self.stamps, self.tracks, self.heights, self.face, self.next,
+                              self.written), old, strict=True):
+            new[: prev.shape[0]] = prev
+        self._free.extend(range(self.slots - 1, n_old - 1, -1))
+        self.generation += 1
+
+    def add(self, face_id: int, embeddings: F32, stamp_s: float, track_id: int, heights: FloatArray) -> None:
+        """Keep a face's new bodies (the oldest of its ring go). Another embedding length than the kept ones
+        (another metric) starts every face afresh."""
+        if embeddings.shape[1] != self.dim:
+            self.dim, self.slot_of, self._free = embeddings.shape[1], {}, []
+            self._alloc(0, self.dim)
+            self.generation += 1
+        slot = self.slot_of.get(face_id)
+        if slot is None:
+            if not self._free:
+                self._grow()
+            slot = self.slot_of[face_id] = self._free.pop()
+            self.face[slot] = face_id
+        base = slot * self.size
+        for row, height in zip(embeddings, heights, strict=True):
+            i = base + int(self.next[slot])
+            self.rows[i] = row
+            self.norms[i] = float(row.astype(np.float64) @ row)
+            self.stamps[i], self.tracks[i], self.heights[i] = stamp_s, track_id, height
+            self.next[slot] = (self.next[slot] + 1) % self.size
+        self.written[slot] += embeddings.shape[0]
+
+    def release(self, face_id: int) -> None:
+        """Drop a face's bodies."""
+        slot = self.slot_of.pop(face_id, None)
+        if slot is None:
+            return
+        rows = slice(slot * self.size, (slot + 1) * self.size)
+        self.rows[rows] = 0.0
+        self.norms[rows], self.stamps[rows], self.tracks[rows], self.heights[rows] = 0.0, -math.inf, -1, math.nan
+        self.face[slot], self.next[slot] = 0, 0
+        self.written[slot] += 1
+        self._free.append(slot)
+
+    def face_rows(self, face_id: int, since: float) -> F32:
+        """A face's rows stamped at or after ``since``."""
+        slot = self.slot_of.get(face_id)
+        if slot is None:
+            return np.zeros((0, self.dim), np.float32)
+        rows = slice(slot * self.size, (slot + 1) * self.size)
+        return self.rows[rows][self.stamps[rows] >= since]
+
+    def recent_faces(self, since: float) -> npt.NDArray[np.int64]:
+        """Face ids with a row stamped at or after ``since``."""
+        if not self.slots:
+            return np.zeros(0, np.int64)
+        newest = self.stamps.reshape(self.slots, self.size).max(axis=1)
+        return self.face[(newest >= since) & (self.face > 0)]
+
+    def nearest(self, embeddings: F32, mask: npt.NDArray[np.bool_]) -> tuple[FloatArray, npt.NDArray[np.intp]]:
+        """Per embedding (k, dim) and slot, the smallest squared distance to the slot's rows in ``mask`` (inf:
+        none) and that row's index: ((k, slots), (k, slots))."""
+        e = np.atleast_2d(embeddings).astype(np.float32, copy=False)
+        d2 = self.norms[None, :] - 2.0 * (e @ self.rows.T).astype(np.float64) \
+            + (e.astype(np.float64) ** 2).sum(axis=1)[:, None]
+        d2[:, ~mask] = np.inf
+        per_slot = d2.reshape(e.shape[0], self.slots, self.size)
+        arg = per_slot.argmin(axis=2)
+        best = np.take_along_axis(per_slot, arg[:, :, None], axis=2)[:, :, 0]
+        return np.maximum(best, 0.0), arg + (np.arange(self.slots) * self.size)[None, :]
+
+    def slot_heights(self, mask: npt.NDArray[np.bool_]) -> FloatArray:
+        """Per slot, the median head height of its rows in ``mask`` (NaN: none measured)."""
+        h = np.where(mask, self.heights, np.nan).reshape(self.slots, self.size)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slots: NaN is the answer
+            return np.nanmedian(h, axis=1) if self.slots else np.zeros(0)
+
+    # ------------------------------------------------------------------ metric changes
+    def snapshot(self) -> PoolSnapshot:
+        return PoolSnapshot(self.rows, self.written.copy(), self.generation)
+
+    @staticmethod
+    def convert(snapshot: PoolSnapshot, change: F32) -> tuple[PoolSnapshot, F32, FloatArray]:
+        """The snapshot's rows in another metric (rows @ ``change``) and their squared norms, computed off the
+        frame's thread."""
+        if snapshot.rows.shape[1] != change.shape[0]:  # nothing kept yet
+            return snapshot, snapshot.rows, np.zeros(snapshot.rows.shape[0])
+        rows = (snapshot.rows @ change).astype(np.float32, copy=False)
+        return snapshot, rows, np.einsum("ij,ij->i", rows, rows).astype(np.float64)
+
+    def change_metric(self, change: F32, converted: tuple[PoolSnapshot, F32, FloatArray] | None = None) -> None:
+        """Every row to the new metric: from ``converted`` where it was not written since the snapshot,
+        converted here otherwise (the rows written meanwhile: a few)."""
+        if self.rows.shape[1] != change.shape[0]:  # nothing kept yet
+            return
+        if converted is not None and converted[0].generation == self.generation \
+                and converted[1].shape == self.rows.shape:
+            snap, new, norms = converted
+            fresh = []
+            for slot in np.flatnonzero(self.written != snap.written).tolist():
+                k = int(self.written[slot] - snap.written[slot])
+                ring = np.arange(self.size) if k >= self.size else (int(self.next[slot]) - 1 - np.arange(k)) % self.size
+                fresh.append(slot * self.size + ring)
+            if fresh:
+                rows = np.concatenate(fresh)
+                new[rows] = self.rows[rows] @ change
+                norms[rows] = np.einsum("ij,ij->i", new[rows], new[rows])
+        else:
+            new = (self.rows @ change).astype(np.float32, copy=False)
+            norms = np.einsum("ij,ij->i", new, new).astype(np.float64)
+        self.rows, self.norms = new, norms
