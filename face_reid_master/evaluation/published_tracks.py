@@ -90,6 +90,7 @@ def run_log_from_messages(messages: Sequence[TrackMessage], truth: TruthLookup, 
                 kind = "known" if fid in faces else "new"
                 faces.setdefault(fid, (msg.stamp_s, tid))
                 log.assignments.append((msg.stamp_s, fid, kind))
+                log.evidence.append("body" if tr.identity_evidence == "body" else "face")  # what decided it
             elif not fid and current_face.get(tid):
                 log.released_s = msg.stamp_s
             current_face[tid] = fid
