@@ -397,7 +397,7 @@ class MasterCore:
                 if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
                     self.identity.add_body_observations(track_id, row[None, :], stamp, frame.camera_id,
                                                         heights[det_index: det_index + 1])
-        events = self._identity_step(result.deleted, stamp)
+        events = self._identity_step(result.deleted, stamp, result.lost, result.recovered)
         for track_id in touched_tracks:
             fid = self.identity.face_id_of(track_id)
             if fid is not None:
@@ -414,7 +414,7 @@ class MasterCore:
             return
         result = self.tracker.advance(now_s)
         self._last_stamp = now_s
-        self._identity_step(result.deleted, now_s)
+        self._identity_step(result.deleted, now_s, result.lost, result.recovered)
         self._maintain_faces(now_s)
 
     def _detections(
@@ -553,7 +553,12 @@ class MasterCore:
         return part
 
     # ------------------------------------------------------------------------------ identities
-    def _identity_step(self, deleted: Iterable[int], stamp: float) -> list[Any]:
+    def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
+                       recovered: Iterable[int] = ()) -> list[Any]:
+        for track_id in lost:
+            self.identity.track_lost(track_id)
+        for track_id in recovered:
+            self.identity.track_recovered(track_id)
         for track_id in deleted:
             self.identity.track_deleted(track_id, stamp)
             self._face_obs.pop(track_id, None)

@@ -158,6 +158,8 @@ class IdentityManagerBase:
         self._available_slots = np.zeros(0, dtype=np.intp)
         self._pending_obs: dict[int, list[Chunk]] = {}
         self._pending_deleted: dict[int, float] = {}
+        self._lent: dict[int, int] = {}  # face id -> the LOST track holding it while it is in face_list
+        self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
         self._dead: OrderedDict[int, float] = OrderedDict()
         self._next_face_id = 1
         self.stats = IdentityStats()
@@ -234,6 +236,39 @@ class IdentityManagerBase:
             return
         self._pending_deleted[tid] = stamp
 
+    def track_lost(self, track_id: int) -> None:
+        """The tracker lost the track (no detection for a while): its face goes back to face_list, lent, so
+        that the person's new track can be identified with it; the LOST track keeps it unless another takes
+        it (the person came back as a new track) before it is found again."""
+        track = self._tracks.get(track_id)
+        fid = None if track is None else track.face_id
+        if fid is None or fid in self._lent or fid in self._available:
+            return
+        self._make_available(fid)
+        self._lent[fid] = track_id
+
+    def track_recovered(self, track_id: int) -> None:
+        """The LOST track was detected again: it takes its face back from face_list if nobody took it."""
+        track = self._tracks.get(track_id)
+        fid = None if track is None else track.face_id
+        if fid is not None and self._lent.get(fid) == track_id:
+            del self._lent[fid]
+            self._make_unavailable([fid])
+            self._faces[fid].track_id = track_id
+
+    def _take_lent(self, fid: int, stamp: float) -> None:
+        """Face ``fid`` goes to another track: a LOST track that lent it is no longer identified."""
+        lender = self._lent.pop(fid, None)
+        track = None if lender is None else self._tracks.get(lender)
+        if track is None or track.face_id != fid:
+            return
+        confidence = track.confidence
+        track.face_id, track.confidence, track.evidence = None, 0.0, ""
+        track.votes.clear()
+        track.n_observations = 0
+        self.stats.lent_faces_taken += 1
+        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
+
     def sync_alive_tracks(self, alive_track_ids: Iterable[int], stamp_s: float) -> None:
         """Mark every known track not in ``alive_track_ids`` as deleted (OpenPTrack's garbage collection)."""
         alive = {check_int("track_id", t, -(2**63)) for t in alive_track_ids}
@@ -301,6 +336,8 @@ class IdentityManagerBase:
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         if self.body_evidence is not None:
             events.extend(self._body_step(stamp))
+        events.extend(self._side_events)
+        self._side_events = []
         for tid in list(self._pending_deleted):
             ev = self._remove_track(tid, self._pending_deleted[tid])
             if ev is not None:
@@ -337,6 +374,7 @@ class IdentityManagerBase:
     def _apply_body_decision(self, track: TrackEntry, fid: int, confidence: float, stamp: float) -> IdentityEvent:
         """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
         face = self._faces[fid]
+        self._take_lent(fid, stamp)
         self._make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
@@ -473,6 +511,10 @@ class IdentityManagerBase:
         face = self._faces.get(fid)
         if face is None:
             return False
+        lender = self._lent.pop(fid, None)
+        if lender is not None and lender in self._tracks and self._tracks[lender].face_id == fid:
+            self._tracks[lender].face_id = None  # a LOST track lent it: it holds nothing now
+            self._tracks[lender].confidence = 0.0
         if face.track_id is None:
             self._make_unavailable([fid])
         else:
@@ -574,6 +616,7 @@ class IdentityManagerBase:
         else:
             fid = face_or_new
             face = self._faces[fid]
+            self._take_lent(fid, stamp)
             self._make_unavailable([fid])
             self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
             self._bank.free_slot(track.slot)
@@ -622,7 +665,10 @@ class IdentityManagerBase:
                 self._bank.free_slot(track.slot)
             self._on_track_forgotten(tid)
             return None
-        self._make_available(track.face_id)
+        if self._lent.get(track.face_id) == tid:  # already in face_list
+            del self._lent[track.face_id]
+        else:
+            self._make_available(track.face_id)
         self.stats.released += 1
         return IdentityEvent(IdentityEventKind.RELEASED, tid, track.face_id, stamp, track.confidence)
 

@@ -502,3 +502,41 @@ def test_release_after_inconsistent_needs_the_gate_and_zero_never_releases() -> 
     for t in range(10):
         assert feed_one(m, 10, 1, rng, 1.0 + 0.1 * t) == []
     assert m.face_id_of(10) == 1 and m.stats.swaps_released == 0
+
+
+def test_a_lost_tracks_face_goes_to_the_persons_new_track() -> None:
+    """The tracker lost track 10 (face 2) and the person came back as track 11: track 11 gets face 2, not a
+    new id, and track 10 holds nothing any more; a lost track found again before that keeps its face."""
+    rng = np.random.default_rng(11)
+    m = manager_with_faces(3, rng, min_observations=3)
+    for i in range(3):
+        feed_one(m, 10, 1, rng, 0.1 * i)
+    assert m.face_id_of(10) == 2 and 2 not in m.available_face_ids()
+    m.track_lost(10)
+    assert 2 in m.available_face_ids() and m.face_id_of(10) == 2  # lent, still its
+    m.track_recovered(10)
+    assert 2 not in m.available_face_ids() and m.face_id_of(10) == 2
+    m.track_lost(10)
+    events = []
+    for i in range(3):
+        events += feed_one(m, 11, 1, rng, 1.0 + 0.1 * i)
+    assert sorted(event_kinds(events)) == sorted([(ASSIGNED, 11, 2), (RELEASED, 10, 2)])
+    assert m.face_id_of(11) == 2 and m.face_id_of(10) is None and m.stats.lent_faces_taken == 1
+    m.track_recovered(10)  # too late: the face has moved on
+    assert m.face_id_of(10) is None and m.face_id_of(11) == 2
+    m.track_deleted(10, 2.0)
+    m.step(2.0)
+    assert 2 not in m.available_face_ids() and m.face_id_of(11) == 2
+
+
+def test_a_lost_track_deleted_while_its_face_is_lent_gives_it_back_once() -> None:
+    rng = np.random.default_rng(12)
+    m = manager_with_faces(3, rng, min_observations=3)
+    for i in range(3):
+        feed_one(m, 10, 1, rng, 0.1 * i)
+    m.track_lost(10)
+    m.track_deleted(10, 1.0)
+    m.step(1.0)
+    assert m.available_face_ids().count(2) == 1 and m.face_id_of(10) is None
+    m.track_lost(10)  # late news of a deleted track: nothing happens
+    assert m.available_face_ids().count(2) == 1
