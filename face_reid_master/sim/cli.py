@@ -20,6 +20,7 @@ from pathlib import Path
 from face_reid_camera.body.projection import BODY_PROJECTION_FILE, load_body_projection
 from face_reid_camera.common.resources import model_path
 from face_reid_master.sim.bodies import BodySimConfig, InsufficientBodiesError
+from face_reid_master.sim.motion import PASSING_DISTANCE_RANGE_M, MotionConfig
 from face_reid_master.sim.photos import InsufficientFacesError
 from face_reid_master.sim.scenario_files import write_scenario
 from face_reid_master.sim.simulate import LEVELS, SimConfig, simulate
@@ -63,6 +64,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--body-projection", type=Path, default=None, metavar="FILE",
                    help=f"the cameras' body descriptor projection (default: the shipped models/{BODY_PROJECTION_FILE}"
                         ", made by face-reid-fit-body)")
+    p.add_argument("--passing-distance", type=float, default=MotionConfig.passing_distance_m, metavar="M",
+                   help=f"people pass each other at least this far apart (centre to centre, metres; "
+                        f"{PASSING_DISTANCE_RANGE_M[0]:g}-{PASSING_DISTANCE_RANGE_M[1]:g}, default "
+                        f"{MotionConfig.passing_distance_m:g}); 0: they walk through each other")
     p.add_argument("--cache", type=Path, default=None,
                    help="npz file caching the photo embeddings (keyed by path, mtime and size)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -99,6 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             rate_hz=args.rate_hz, second_day=args.second_day, new_people=args.new_people,
             room_size_m=_room(args.room), embedder=args.embedder, color_resolution=_resolution(args.color_resolution),
             bodies=BodySimConfig() if args.bodies is not None else None,
+            motion=MotionConfig(passing_distance_m=args.passing_distance),
         )
     except ValueError as exc:
         parser.print_usage(sys.stderr)

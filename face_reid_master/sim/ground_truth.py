@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_master.sim.crowd import closest_approach
 from face_reid_master.sim.motion import sample_trajectories
 from face_reid_master.sim.visibility import camera_views, count_losses
 from face_reid_master.sim.world import World
@@ -20,7 +21,7 @@ __all__ = ["sample_ground_truth"]
 def sample_ground_truth(cfg: SimConfig, world: World, days: list[Day], heights_all: NDArray[np.float64]
                         ) -> tuple[dict[str, NDArray[Any]], list[dict[str, Any]]]:
     """The ``ground_truth.npz`` arrays (trajectories and visibility sampled at ``ground_truth_rate_hz``) and the
-    losses per day (for the scenario summary)."""
+    losses per day (for the scenario summary), with the closest two people in the room came and how they gave way."""
     n_id, n_cam = heights_all.size, len(world.cameras)
     parts_t, parts_day, parts_xy, parts_fac, parts_room, parts_view, parts_face = [], [], [], [], [], [], []
     loss_info = []
@@ -42,6 +43,15 @@ def sample_ground_truth(cfg: SimConfig, world: World, days: list[Day], heights_a
             "in_view_fraction": round(float(view.any(axis=2).mean()), 4),
             "face_visible_fraction": round(float(face.any(axis=2).mean()), 4),
         })
+        closest = closest_approach(xy, in_room)  # two people in the room at once, at the ground truth's samples
+        loss_info[-1]["closest_approach_m"] = round(closest, 4) if np.isfinite(closest) else None
+        if day.crowd is not None:
+            loss_info[-1]["giving_way"] = {  # how people kept the passing distance (face_reid_master.sim.crowd)
+                "slowed_share": round(day.crowd.slowed_share, 4),
+                "aside_share": round(day.crowd.aside_share, 4),
+                "max_delay_s": round(day.crowd.max_delay_s, 2),
+                "blocked_steps": day.crowd.stood_steps,
+            }
         full_xy = np.full((n_id, t.size, 2), np.nan, dtype=np.float32)
         full_fac = np.full((n_id, t.size), np.nan, dtype=np.float32)
         full_room = np.zeros((n_id, t.size), dtype=bool)

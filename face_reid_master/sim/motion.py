@@ -19,7 +19,10 @@ from face_reid_camera.common.checks import is_finite_number
 from face_reid_master.sim.visibility import FloatArray
 from face_reid_master.sim.world import World, check_min_max, wrap_angle, wrap_angles
 
-__all__ = ["MotionConfig", "Planner", "Trajectory", "plan_trajectory", "sample_trajectories"]
+__all__ = ["PASSING_DISTANCE_RANGE_M", "MotionConfig", "Planner", "Trajectory", "plan_trajectory",
+           "sample_trajectories"]
+
+PASSING_DISTANCE_RANGE_M = (0.4, 0.8)  # centre to centre: shoulders just clear .. a comfortable berth
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,9 @@ class MotionConfig:
     initial_outside_max_s: float = 15.0
     waypoint_margin_m: float = 1.0
     height_range_m: tuple[float, float] = (1.55, 1.90)
+    # people pass each other at least this far apart (centre to centre, m) while both are in the room or a
+    # doorway (face_reid_master.sim.crowd), within PASSING_DISTANCE_RANGE_M; 0 = people walk through each other
+    passing_distance_m: float = 0.5
 
     def __post_init__(self) -> None:
         check_min_max("speed_range_mps", self.speed_range_mps, 0.05, 5.0)
@@ -57,6 +63,11 @@ class MotionConfig:
             value = getattr(self, name)
             if not (is_finite_number(value) and value >= 0):
                 raise ValueError(f"MotionConfig.{name} must be >= 0, got {value!r}")
+        low, high = PASSING_DISTANCE_RANGE_M
+        value = self.passing_distance_m
+        if not (is_finite_number(value) and (value == 0 or low <= value <= high)):
+            raise ValueError(f"MotionConfig.passing_distance_m must be 0 (people walk through each other) or within "
+                             f"[{low}, {high}] m, got {value!r}")
 
 
 @dataclass(frozen=True)

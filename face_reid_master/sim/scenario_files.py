@@ -5,7 +5,10 @@
   intrinsics, frame phase), ``photos`` (index, identity, path relative to ``faces_dir``),
   ``identities`` (gt_id, name, height_m, days, photos per day as photo indices), ``days`` (day,
   start_s, end_s, gt_ids) and ``summary`` (frames, detections, faces, glances, false positives, track
-  losses and visible segments per person and in total, coverage, skipped photos).
+  losses and visible segments per person and in total, coverage, skipped photos; per day also
+  ``closest_approach_m``, the closest two people in the room came at the ground truth's samples, and, when
+  people kept ``parameters.motion.passing_distance_m`` apart, ``giving_way``: shares of the time in the room
+  slowed and off the planned path, the largest delay, steps blocked; :mod:`face_reid_master.sim.crowd`).
 - ``frames.npz``: camera frames in stamp order (ties: camera order) and their detections, flat:
   ``frame_camera`` (F,) int16 index into cameras, ``frame_stamp_s`` (F,) float64, ``frame_offsets``
   (F+1,) int64: detections of frame i are rows offsets[i]:offsets[i+1] of ``det_position`` (D, 3)

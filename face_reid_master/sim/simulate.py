@@ -38,6 +38,7 @@ from face_reid_master.sim.bodies import (
     camera_light_gains,
     make_measures,
 )
+from face_reid_master.sim.crowd import CrowdConfig, CrowdStats, keep_apart
 from face_reid_master.sim.feature_level import feature_camera_day
 from face_reid_master.sim.frame_table import DetectionColumns, assemble_frames
 from face_reid_master.sim.ground_truth import sample_ground_truth
@@ -165,12 +166,13 @@ class SimConfig:
 
 @dataclass
 class Day:
-    """One simulated day: its people (gt ids), their trajectories."""
+    """One simulated day: its people (gt ids), their trajectories (and how they gave way to each other)."""
 
     day: int
     start_s: float
     gt_ids: list[int]
     trajectories: list[Trajectory]
+    crowd: CrowdStats | None = None  # how people gave way (None: nobody had to)
 
 
 def camera_stamps(start_s: float, duration_s: float, rate_hz: float, phase_s: float) -> NDArray[np.float64]:
@@ -230,6 +232,13 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
             rng = stream_rng(cfg.seed, S_MOTION, day.day, gt + 1)
             day.trajectories.append(plan_trajectory(world, rng, cfg.duration_s, cfg.motion, start_s=day.start_s,
                                                     height_m=float(heights_all[gt])))
+        if cfg.motion.passing_distance_m > 0 and len(day.trajectories) > 1:  # nobody walks through anybody
+            t_crowd = time.perf_counter()
+            day.trajectories, day.crowd = keep_apart(world, day.trajectories, day.start_s, cfg.duration_s,
+                                                     CrowdConfig(passing_distance_m=cfg.motion.passing_distance_m))
+            say(f"day {day.day}: people keep {cfg.motion.passing_distance_m:g} m apart "
+                f"({time.perf_counter() - t_crowd:.1f} s): {100 * day.crowd.slowed_share:.0f} % of the time slowed, "
+                f"{100 * day.crowd.aside_share:.0f} % off their paths, at most {day.crowd.max_delay_s:.1f} s late")
 
     bodies = None
     if cfg.bodies is not None:
