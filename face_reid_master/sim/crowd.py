@@ -143,9 +143,12 @@ class _Crowd:
         """Who counts (..., 2): in the room (what the cameras can see)."""
         return (np.abs(xy[..., 0]) <= self.present_half[0]) & (np.abs(xy[..., 1]) <= self.present_half[1])
 
-    def window(self, p0: FloatArray, p1: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """The part [lo, hi] of the straight step p0 -> p1 (..., 2) spent in the room (lo > hi: none)."""
-        in0, in1 = self.present(p0), self.present(p1)
+    def window(self, p0: FloatArray, p1: FloatArray, in0: BoolArray | None = None, in1: BoolArray | None = None
+               ) -> tuple[FloatArray, FloatArray]:
+        """The part [lo, hi] of the straight step p0 -> p1 (..., 2) spent in the room (lo > hi: none); ``in0``,
+        ``in1``: whether p0, p1 are in the room, if known."""
+        in0 = self.present(p0) if in0 is None else in0
+        in1 = self.present(p1) if in1 is None else in1
         lo = np.where(in0, 0.0, 2.0)
         hi = np.where(in1, 1.0, -1.0)
         cross = in0 != in1
@@ -193,11 +196,11 @@ class _Crowd:
         return off * np.maximum(1.0 - self.fade / np.maximum(size, 1e-12), 0.0)
 
     def choose(self, ids: IntArray, movers: IntArray, progress: IntArray, offset: FloatArray, pos: FloatArray,
-               move: FloatArray, expect: FloatArray, giving_way: BoolArray
+               here_now: BoolArray, move: FloatArray, expect: FloatArray, giving_way: BoolArray
                ) -> tuple[IntArray, FloatArray, FloatArray, BoolArray]:
         """The moves of ``movers`` (r,) given everybody else's ``move`` (P, 2) in this step (zero: standing still)
         and expected velocity ``expect`` (P, 2); ``giving_way`` (P,): who is choosing in this step. The P people are
-        ``ids`` (their plans), ``movers`` index them. Per mover, of the
+        ``ids`` (their plans), at ``pos`` (in the room: ``here_now``); ``movers`` index them. Per mover, of the
         options that are clear: a comfortable one with the most progress (then the smallest offset); else a
         comfortable one standing on the plan with the smallest offset, or, for somebody whose person in the way
         also gives way and comes first, keeping the farthest away (making room); else the one keeping the farthest
@@ -237,14 +240,16 @@ class _Crowd:
         size = np.hypot(offs[..., 0], offs[..., 1])
         limit = np.where(_ESCAPE, 2.0 * self.cfg.max_offset_m, self.cfg.max_offset_m)
         ok_place &= (size <= limit) | (size <= np.hypot(off0[:, 0], off0[:, 1])[:, None] + 1e-9)
-        was_here = self.present(here0)
+        was_here = here_now[movers]
         new_others = pos + move
-        o_lo, o_hi = self.window(pos, new_others)  # (P,): the part of their step each other spends in the room
-        m_lo, m_hi = self.window(here0[:, None, :], cand)  # (r, C)
+        here_next = self.present(new_others)
+        cand_here = self.present(cand)
+        o_lo, o_hi = self.window(pos, new_others, here_now, here_next)  # (P,): the part of their step in the room
+        m_lo, m_hi = self.window(here0[:, None, :], cand, was_here[:, None], cand_here)  # (r, C)
         lo = np.maximum(m_lo[..., None], o_lo[None, None, :])
         hi = np.minimum(m_hi[..., None], o_hi[None, None, :])  # (r, C, P): when both are in the room
         hi[rows, :, movers] = -1.0
-        floor = np.where(was_here[:, None] & self.present(pos)[None, :], np.minimum(self.c, dist - 1e-9), self.c)
+        floor = np.where(was_here[:, None] & here_now[None, :], np.minimum(self.c, dist - 1e-9), self.c)
         floor2 = (np.maximum(floor, 0.0) ** 2)[:, None, :]  # a pair already closer may only part
         mx = cand[..., 0] - here0[:, None, 0]  # (r, C)
         my = cand[..., 1] - here0[:, None, 1]
@@ -254,7 +259,7 @@ class _Crowd:
                            new_others[None, None, :, 1] - cand[..., 1, None],
                            expect[None, None, :, 0] - mx[..., None] / dt, expect[None, None, :, 1] - my[..., None] / dt,
                            0.0, self.cfg.horizon_s)
-        watch = self.present(cand)[..., None] & self.present(new_others)[None, None, :]
+        watch = cand_here[..., None] & here_next[None, None, :]
         watch[rows, :, movers] = False
         margin = np.where(watch, margin, np.inf).min(axis=2)  # (r, C) squared
         clear = ok_place & hard.all(axis=2)
@@ -298,7 +303,7 @@ class _Crowd:
         dist = np.hypot(rx, ry)
         floor = np.where(here_now[:, None] & here_now[None, :], np.minimum(c, dist - 1e-9), c)
         floor2 = np.maximum(floor, 0.0) ** 2  # a pair already closer may only part
-        lo, hi = self.window(pos, want)  # the part of their step each spends in the room
+        lo, hi = self.window(pos, want, here_now, here_want)  # the part of their step each spends in the room
         stay_lo, stay_hi = np.where(here_now, 0.0, 2.0), np.where(here_now, 1.0, -1.0)
         vx = move[None, :, 0] - move[:, None, 0]
         vy = move[None, :, 1] - move[:, None, 1]
@@ -318,7 +323,7 @@ class _Crowd:
         new_move = np.where(accept[:, None], move, 0.0)
         expect = np.where(accept[:, None], move / dt, vel)
         movers = np.flatnonzero(~accept)
-        j_m, off_m, pos_m, stood = self.choose(ids, movers, progress, offset, pos, new_move, expect, ~accept)
+        j_m, off_m, pos_m, stood = self.choose(ids, movers, progress, offset, pos, here_now, new_move, expect, ~accept)
         new_j[movers], new_off[movers] = j_m, off_m
         new_pos = pos + new_move
         new_pos[movers] = pos_m
@@ -337,8 +342,8 @@ class _Crowd:
             for p in redo:
                 now_move = new_pos - pos
                 expect[movers] = now_move[movers] / dt
-                j_p, off_p, pos_p, stood_p = self.choose(ids, np.array([p]), progress, offset, pos, now_move, expect,
-                                                         ~accept)
+                j_p, off_p, pos_p, stood_p = self.choose(ids, np.array([p]), progress, offset, pos, here_now,
+                                                         now_move, expect, ~accept)
                 new_j[p], new_off[p], new_pos[p] = j_p[0], off_p[0], pos_p[0]
                 n_stood += int(stood_p[0])
         return new_j, new_off, new_pos, n_stood
