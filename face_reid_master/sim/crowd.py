@@ -47,6 +47,7 @@ _PROGRESS = np.array([2, 2, 2, 2, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0])
 _CHANGE = np.array((_FADE, _KEEP, _AWAY, _TOWARD) * 2 + (_FADE, _AWAY, _TOWARD, _BACK, _BACK_AWAY, _BACK_TOWARD,
                                                           _FORWARD, _FORWARD_AWAY, _FORWARD_TOWARD))
 _ESCAPE = np.array([False] * 11 + [True] * 6)  # may reach twice the offset limit (getting out of a jam)
+_SETTLE_STEPS = 5  # an offset starts fading this many steps after its person last gave way
 
 
 @dataclass(frozen=True)
@@ -196,15 +197,17 @@ class _Crowd:
         return off * np.maximum(1.0 - self.fade / np.maximum(size, 1e-12), 0.0)
 
     def choose(self, ids: IntArray, movers: IntArray, progress: IntArray, offset: FloatArray, pos: FloatArray,
-               here_now: BoolArray, move: FloatArray, expect: FloatArray, giving_way: BoolArray
+               here_now: BoolArray, vel: FloatArray, move: FloatArray, expect: FloatArray, giving_way: BoolArray
                ) -> tuple[IntArray, FloatArray, FloatArray, BoolArray]:
         """The moves of ``movers`` (r,) given everybody else's ``move`` (P, 2) in this step (zero: standing still)
-        and expected velocity ``expect`` (P, 2); ``giving_way`` (P,): who is choosing in this step. The P people are
-        ``ids`` (their plans), at ``pos`` (in the room: ``here_now``); ``movers`` index them. Per mover, of the
-        options that are clear: a comfortable one with the most progress (then the smallest offset); else a
-        comfortable one standing on the plan with the smallest offset, or, for somebody whose person in the way
-        also gives way and comes first, keeping the farthest away (making room); else the one keeping the farthest
-        away; none clear: standing still. Returns progress (r,), offset (r, 2), position (r, 2), who stood (r,)."""
+        and expected velocity ``expect`` (P, 2); ``giving_way`` (P,): who is choosing in this step. The P people
+        are ``ids`` (their plans), at ``pos`` (in the room: ``here_now``) after a step at ``vel``; ``movers`` index
+        them. Per mover, of the options that are clear: a comfortable one with the most progress (then the smallest
+        offset and change of velocity); else a comfortable one standing on the plan with the smallest offset; else
+        the one keeping the farthest away; none clear: standing still. Who *yields* (their person in the way also
+        gives way and comes first) rather slows down than leaves the path, and, standing, keeps the farthest away
+        (makes room). Returns progress (r,), offset
+        (r, 2), position (r, 2) and who stood (r,)."""
         c2, dt = self.c * self.c, self.dt
         rows = np.arange(movers.size)
         j = progress[movers]
@@ -266,7 +269,11 @@ class _Crowd:
         comfy = clear & (margin >= c2)
         far = np.sqrt(np.minimum(margin, 100.0))
         stay_score = np.where(yielding[:, None], far, -size)
-        score = np.where(comfy & (steps[None, :] > 0), 100.0 + 10.0 * steps[None, :] - size,
+        jerk = np.hypot(mx / dt - vel[movers, 0, None], my / dt - vel[movers, 1, None])  # change of velocity (m/s)
+        # on: keeping pace (sidestepping) first, or, for who yields, leaving the path last (slowing down first)
+        growth = np.maximum(size - np.hypot(off0[:, 0], off0[:, 1])[:, None], 0.0)
+        on = np.where(yielding[:, None], 3.0 * steps[None, :] - 10.0 * growth, 10.0 * steps[None, :] - size)
+        score = np.where(comfy & (steps[None, :] > 0), 100.0 + on - 2.0 * jerk,
                          np.where(comfy, 50.0 + stay_score, np.where(clear, far + 0.01 * steps[None, :], -np.inf)))
         pick = np.argmax(score, axis=1)
         stood = ~clear.any(axis=1)
@@ -275,24 +282,29 @@ class _Crowd:
         new_pos = np.where(stood[:, None], here0, cand[rows, pick])
         return new_j, new_off, new_pos, stood
 
-    def step(self, progress: IntArray, offset: FloatArray, pos: FloatArray, vel: FloatArray
-             ) -> tuple[IntArray, FloatArray, FloatArray, int]:
-        """One step of everybody: progress, offset and position after it, and how many stood (no option clear)."""
+    def step(self, progress: IntArray, offset: FloatArray, pos: FloatArray, vel: FloatArray, settled: BoolArray
+             ) -> tuple[IntArray, FloatArray, FloatArray, int, BoolArray]:
+        """One step of everybody: progress, offset and position after it, how many stood (no option clear) and who
+        gave way. The planned step fades the offset of those ``settled`` (who have not given way for a while) and
+        keeps the others' (no zigzag between sidestepping and fading back)."""
         want_j = np.minimum(progress + 2, self.last)
-        want, want_off, ok_place = self.place(self.plan_xy[self.people, want_j], self.faded(offset), pos, offset)
+        want, want_off, ok_place = self.place(self.plan_xy[self.people, want_j],
+                                              np.where(settled[:, None], self.faded(offset), offset), pos, offset)
+        gave_way = np.zeros(progress.size, dtype=bool)
         # only people in the room (now or after the step), or who may not take their planned step, can be in the
         # way or give way: the others take their planned steps
         ids = np.flatnonzero(self.present(pos) | self.present(want) | ~ok_place)
         if ids.size < 2 and ok_place.all():
-            return want_j, want_off, want, 0
-        j, off, xy, stood = self.step_among(ids, progress[ids], offset[ids], pos[ids], vel[ids], want_j[ids],
-                                            want_off[ids], want[ids], ok_place[ids])
+            return want_j, want_off, want, 0, gave_way
+        j, off, xy, stood, gave = self.step_among(ids, progress[ids], offset[ids], pos[ids], vel[ids], want_j[ids],
+                                                  want_off[ids], want[ids], ok_place[ids])
         want_j[ids], want_off[ids], want[ids] = j, off, xy
-        return want_j, want_off, want, stood
+        gave_way[ids] = gave
+        return want_j, want_off, want, stood, gave_way
 
     def step_among(self, ids: IntArray, progress: IntArray, offset: FloatArray, pos: FloatArray, vel: FloatArray,
                    want_j: IntArray, want_off: FloatArray, want: FloatArray, ok_place: BoolArray
-                   ) -> tuple[IntArray, FloatArray, FloatArray, int]:
+                   ) -> tuple[IntArray, FloatArray, FloatArray, int, BoolArray]:
         """:meth:`step` for people ``ids`` (their progress, offset, position, velocity, planned step)."""
         c, dt = self.c, self.dt
         eye = np.eye(ids.size, dtype=bool)
@@ -317,13 +329,14 @@ class _Crowd:
         fine = (both_move >= floor2) & (other_stays >= floor2) & (comfy | ~watch)
         accept = ok_place & fine.all(axis=1)
         if accept.all():
-            return want_j, want_off, want, 0
+            return want_j, want_off, want, 0, ~accept
         new_j = np.where(accept, want_j, progress)
         new_off = np.where(accept[:, None], want_off, offset)
         new_move = np.where(accept[:, None], move, 0.0)
         expect = np.where(accept[:, None], move / dt, vel)
         movers = np.flatnonzero(~accept)
-        j_m, off_m, pos_m, stood = self.choose(ids, movers, progress, offset, pos, here_now, new_move, expect, ~accept)
+        j_m, off_m, pos_m, stood = self.choose(ids, movers, progress, offset, pos, here_now, vel, new_move, expect,
+                                               ~accept)
         new_j[movers], new_off[movers] = j_m, off_m
         new_pos = pos + new_move
         new_pos[movers] = pos_m
@@ -342,11 +355,11 @@ class _Crowd:
             for p in redo:
                 now_move = new_pos - pos
                 expect[movers] = now_move[movers] / dt
-                j_p, off_p, pos_p, stood_p = self.choose(ids, np.array([p]), progress, offset, pos, here_now,
+                j_p, off_p, pos_p, stood_p = self.choose(ids, np.array([p]), progress, offset, pos, here_now, vel,
                                                          now_move, expect, ~accept)
                 new_j[p], new_off[p], new_pos[p] = j_p[0], off_p[0], pos_p[0]
                 n_stood += int(stood_p[0])
-        return new_j, new_off, new_pos, n_stood
+        return new_j, new_off, new_pos, n_stood, ~accept
 
 
 def keep_apart(world: World, plans: Sequence[Trajectory], start_s: float, duration_s: float,
@@ -374,8 +387,10 @@ def keep_apart(world: World, plans: Sequence[Trajectory], start_s: float, durati
     aside = np.zeros((n_steps + 1, n_people), dtype=bool)
     out_xy[0], out_j[0] = pos, progress
     stood = 0
+    calm = np.full(n_people, _SETTLE_STEPS)  # steps since each last gave way
     for k in range(n_steps):
-        progress, offset, new_pos, n_stood = crowd.step(progress, offset, pos, vel)
+        progress, offset, new_pos, n_stood, gave_way = crowd.step(progress, offset, pos, vel, calm >= _SETTLE_STEPS)
+        calm = np.where(gave_way, 0, calm + 1)
         vel = (new_pos - pos) / dt
         pos = new_pos
         stood += n_stood
