@@ -6,15 +6,16 @@ moves along their own plan, but their *progress* along it may fall behind the cl
 they may step off it (an *offset* that fades back once the way is clear), so that no two people in the room come
 closer than ``passing_distance_m`` centre to centre.
 
-Each step, everybody whose planned step (on at full speed, the offset fading) is clear and comfortable takes it.
-*Clear*: it keeps the passing distance from everybody else's planned step and from everybody standing still
-(closest approach along both straight steps, while both are in the room, so between the steps too), or, for two
-people already closer, does not bring them closer. *Comfortable*: at the velocities of the step nobody comes
-closer than the passing distance within ``horizon_s``. The others choose, all at once, among: on at full or half
-speed or waiting, the offset fading, kept or growing by a sidestep away from or towards the person most in the way;
-stepping back, forward or diagonally. Of the clear options a person takes a comfortable one with the most progress
-(then the smallest offset), else the one keeping the farthest away; who is stopped by a person also giving way
-before them makes room; nothing clear: they stand still. They choose against each other standing still; where two
+Each step, everybody whose planned step (on at full speed, the offset fading once they have not given way for a
+second) is clear and comfortable takes it. *Clear*: it keeps the passing distance from everybody else's planned
+step and from everybody standing still (closest approach along both straight steps, while both are in the room, so
+between the steps too), or, for two people already closer, does not bring them closer. *Comfortable*: at the
+velocities of the step nobody comes closer than the passing distance within ``horizon_s``. The others choose, all
+at once, among: on at full or half speed or waiting, the offset fading, kept or growing by a sidestep away from or
+towards the person most in the way; stepping back, forward or diagonally. Of the clear options a person takes a
+comfortable one with the most progress (then the smallest offset and change of velocity), else the one keeping the
+farthest away; who is stopped by a person also giving way before them yields (slows down rather than leaving the
+path, makes room); nothing clear: they stand still. They choose against each other standing still; where two
 choices clash, the later person chooses again against everybody's choice. Standing still is always clear, since
 everybody who moved checked against it, so the distance holds at every instant. People outside the room are in
 nobody's way; a step out through a door starts close to the plan.
