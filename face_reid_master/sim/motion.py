@@ -3,7 +3,9 @@
 A person's motion is a :class:`Trajectory` (knots of time, floor position, facing), so it can be sampled
 exactly at any camera's frame stamps. :func:`plan_trajectory` makes random motion: walking between
 waypoints (turning first), pausing to look around, sometimes leaving through a door and coming back;
-:class:`Planner` is its knot builder, also used by scripted scenes (the demo).
+:class:`Planner` is its knot builder, also used by scripted scenes (the demo). Each person is planned
+alone; :func:`face_reid_master.sim.crowd.keep_apart` then plays a day's plans together so that nobody walks
+through anybody (``MotionConfig.passing_distance_m``).
 """
 
 from __future__ import annotations
@@ -41,8 +43,8 @@ class MotionConfig:
     initial_outside_max_s: float = 15.0
     waypoint_margin_m: float = 1.0
     height_range_m: tuple[float, float] = (1.55, 1.90)
-    # people pass each other at least this far apart (centre to centre, m) while both are in the room or a
-    # doorway (face_reid_master.sim.crowd), within PASSING_DISTANCE_RANGE_M; 0 = people walk through each other
+    # people pass each other at least this far apart (centre to centre, m) while both are in the room
+    # (face_reid_master.sim.crowd), within PASSING_DISTANCE_RANGE_M; 0 = people walk through each other
     passing_distance_m: float = 0.5
 
     def __post_init__(self) -> None:

@@ -5,7 +5,9 @@
 the camera messages at one of two levels sharing all of these: ``feature``
 (:mod:`~face_reid_master.sim.feature_level`, fast) or ``pixel`` (:mod:`~face_reid_master.sim.pixel_level`,
 rendered frames through the real camera pipeline). The result is written by
-:func:`~face_reid_master.sim.scenario_files.write_scenario`; the same seed gives byte-identical files.
+:func:`~face_reid_master.sim.scenario_files.write_scenario`; the same seed gives byte-identical files. People keep
+``motion.passing_distance_m`` from each other (:mod:`~face_reid_master.sim.crowd`; 0: they walk through each
+other).
 
 Bodies (``config.bodies`` and a crops folder, :mod:`~face_reid_master.sim.bodies`): every person wears a crop
 identity per day (a new one on day 2) and has body measures; detections then carry body descriptors,

@@ -355,3 +355,9 @@ def test_simulated_people_pass_each_other_instead_of_walking_through(faces: Path
     day = doc["summary"]["per_day"][0]
     assert day["closest_approach_m"] >= 0.5 - 1e-4 and day["giving_way"]["slowed_share"] > 0
     assert "giving_way" not in json.loads((ghosts / "scenario.json").read_text())["summary"]["per_day"][0]
+
+
+def test_cli_passing_distance_option(faces: Path, tmp_path: Path, capsys) -> None:
+    assert main(["--faces", str(faces), "--out", str(tmp_path / "s"), "--passing-distance", "0.3", "--quiet"]) == 2
+    assert "passing_distance_m must be 0" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
