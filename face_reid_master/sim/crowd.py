@@ -94,11 +94,16 @@ def _closest2(rx: FloatArray, ry: FloatArray, vx: FloatArray, vy: FloatArray, lo
               hi: FloatArray | float) -> FloatArray:
     """Smallest squared |r + s v| over s in [lo, hi] (relative positions r, relative velocities v); inf where the
     window is empty."""
-    vv = vx * vx + vy * vy
-    s = np.minimum(np.maximum(-(rx * vx + ry * vy) / np.maximum(vv, 1e-12), lo), hi)
+    s = -(rx * vx + ry * vy)
+    s /= np.maximum(vx * vx + vy * vy, 1e-12)
+    np.maximum(s, lo, out=s)
+    np.minimum(s, hi, out=s)
     dx = rx + s * vx
     dy = ry + s * vy
-    return np.where(np.greater(hi, lo) | np.equal(hi, lo), dx * dx + dy * dy, np.inf)
+    d2 = dx * dx + dy * dy
+    if not np.isscalar(lo) or not np.isscalar(hi):
+        d2[np.broadcast_to(np.less(hi, lo), d2.shape)] = np.inf
+    return d2
 
 
 def closest_approach(xy: NDArray[np.floating], present: NDArray[np.bool_]) -> float:
