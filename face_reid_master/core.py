@@ -114,6 +114,9 @@ class MasterConfig:
         3, "An identified track whose last this many face embeddings were all beyond the decision distance "
         "was swapped onto someone else: it loses its face and is classified afresh (count; 0 = never, the "
         "paper; needs learn_only_consistent_features).", low=0, high=1000)
+    lend_lost_faces: bool = param(
+        True, "The face of a track the tracker lost (tracker.lost_after_s) may be given to another track before "
+        "the lost one is deleted: the person came back as a new track (false = the paper: held until deleted).")
     # identity (threshold baseline)
     threshold_distance: float = param(
         0.0, "Threshold method: same face below this L2 distance (0 = the value derived for embedding_space, "
@@ -135,7 +138,7 @@ class MasterConfig:
         3600.0, "A face's body evidence expires after this (s): clothes change, faces do not.", low=0.0,
         high=1e7, low_open=True)
     body_posterior_threshold: float = param(
-        0.99, "A faceless track gets a face when its body posterior exceeds this (0.5..1).", low=0.5, high=1.0,
+        0.999, "A faceless track gets a face when its body posterior exceeds this (0.5..1).", low=0.5, high=1.0,
         low_open=True, high_open=True)
     body_min_observations: int = param(
         10, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
@@ -153,7 +156,7 @@ class MasterConfig:
         0.12, "Spread of another person's head height around a face's recent median (m; > the same-person "
         "spread).", low=0.0, high=2.0, low_open=True)
     body_online_update: bool = param(
-        False, "Update the body metric online from body pairs the faces labelled (second seed, Algorithm 1; "
+        True, "Update the body metric online from body pairs the faces labelled (second seed, Algorithm 1; "
         "needs body_identity).")
     body_online_background: bool = param(
         True, "Re-fit the body metric on a worker thread (false: in the frame's thread, deterministic; for "
@@ -163,7 +166,7 @@ class MasterConfig:
     body_online_min_new_pairs: int = param(
         10, "Mined pairs added since the last re-fit before another (count).", low=1, high=100000)
     body_online_prior_pairs: float = param(
-        200.0, "Weight of the shipped body metric in the re-fit, in pairs of each kind (count).", low=0.0,
+        1000.0, "Weight of the shipped body metric in the re-fit, in pairs of each kind (count).", low=0.0,
         high=1e9, low_open=True)
     body_online_verified_confidence: float = param(
         0.99, "theta_1: a track's bodies teach the metric only when its face decided it with at least this "
@@ -313,6 +316,7 @@ class MasterCore:
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
                 release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
+                lend_lost_faces=cfg.lend_lost_faces,
             )
         else:
             self.identity = make_identity_manager(

@@ -222,7 +222,7 @@ class OnlineBodyMetric:
     evaluation). ``capacity`` / ``max_pairs_per_track``: see :class:`PairPool`.
     """
 
-    def __init__(self, base: BodyFeatureMetric, *, prior_pairs: float = 200.0, min_new_pairs: int = 10,
+    def __init__(self, base: BodyFeatureMetric, *, prior_pairs: float = 1000.0, min_new_pairs: int = 10,
                  interval_s: float = 30.0, background: bool = True, capacity: int = 2000,
                  max_pairs_per_track: int = 8) -> None:
         subspace_prior(base)  # ValueError early for a metric the update cannot handle

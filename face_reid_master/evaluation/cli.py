@@ -76,7 +76,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fusion", choices=("funnel", "score"), default="funnel",
                    help="how body appearance and head height are fused for a faceless track (body_fusion): the "
                         "feature funnel (default) or plain score-level fusion")
-    p.add_argument("--online-update", choices=("on", "off"), default="off",
+    p.add_argument("--online-update", choices=("on", "off"), default="on",
                    help="on: the body metric is updated online from body pairs the faces labelled "
                         "(body_online_update, re-fitted in the frame's thread so that runs repeat); the JSON "
                         "reports the metric's rank-1 on the scenario's bodies before and after")

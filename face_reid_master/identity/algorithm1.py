@@ -116,6 +116,9 @@ class IdentityManagerBase:
     face goes back to face_list (a SWAPPED event) and the track is classified afresh from those
     observations on, so the other person does not carry this face's name.
 
+    ``lend_lost_faces`` (False = the paper): the face of a track the tracker lost goes back to face_list
+    while the track is LOST (:meth:`track_lost`), so that the person's new track can take it.
+
     Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
     ``_current_confidence`` and may override the ``_on_*`` notifications; the single-underscore state
     (``_tracks``, ``_available``, ``_available_slots``, ``_bank``) is shared with them only.
@@ -133,11 +136,13 @@ class IdentityManagerBase:
         feature_gate_distance: float | None = None,
         release_after_inconsistent: int = 0,
         body_evidence: BodyEvidence | None = None,
+        lend_lost_faces: bool = False,
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
         if body_evidence is not None and not isinstance(body_evidence, BodyEvidence):
             raise ValueError(f"body_evidence must be a BodyEvidence or None, got {type(body_evidence).__name__}")
         self.body_evidence = body_evidence
+        self.lend_lost_faces = bool(lend_lost_faces)
         self._pending_bodies: dict[int, list[tuple[F32Array, float, str, FloatArray | None]]] = {}
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
@@ -242,7 +247,7 @@ class IdentityManagerBase:
         it (the person came back as a new track) before it is found again."""
         track = self._tracks.get(track_id)
         fid = None if track is None else track.face_id
-        if fid is None or fid in self._lent or fid in self._available:
+        if not self.lend_lost_faces or fid is None or fid in self._lent or fid in self._available:
             return
         self._make_available(fid)
         self._lent[fid] = track_id

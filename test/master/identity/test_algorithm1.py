@@ -508,7 +508,7 @@ def test_a_lost_tracks_face_goes_to_the_persons_new_track() -> None:
     """The tracker lost track 10 (face 2) and the person came back as track 11: track 11 gets face 2, not a
     new id, and track 10 holds nothing any more; a lost track found again before that keeps its face."""
     rng = np.random.default_rng(11)
-    m = manager_with_faces(3, rng, min_observations=3)
+    m = manager_with_faces(3, rng, min_observations=3, lend_lost_faces=True)
     for i in range(3):
         feed_one(m, 10, 1, rng, 0.1 * i)
     assert m.face_id_of(10) == 2 and 2 not in m.available_face_ids()
@@ -531,7 +531,7 @@ def test_a_lost_tracks_face_goes_to_the_persons_new_track() -> None:
 
 def test_a_lost_track_deleted_while_its_face_is_lent_gives_it_back_once() -> None:
     rng = np.random.default_rng(12)
-    m = manager_with_faces(3, rng, min_observations=3)
+    m = manager_with_faces(3, rng, min_observations=3, lend_lost_faces=True)
     for i in range(3):
         feed_one(m, 10, 1, rng, 0.1 * i)
     m.track_lost(10)
