@@ -140,6 +140,9 @@ class MasterConfig:
     body_posterior_threshold: float = param(
         0.999, "A faceless track gets a face when its body posterior exceeds this (0.5..1).", low=0.5, high=1.0,
         low_open=True, high_open=True)
+    body_max_log_ratio: float = param(
+        0.5, "Bound of one body observation's evidence, in log odds (frames of one glance are far from "
+        "independent).", low=0.0, high=10.0, low_open=True)
     body_min_observations: int = param(
         10, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
     body_fusion: str = param(
@@ -301,6 +304,7 @@ class MasterCore:
             body_evidence = BodyEvidence(
                 self.body_metric.features["fused"].likelihood, window_s=cfg.body_window_s,
                 posterior_threshold=cfg.body_posterior_threshold, min_observations=cfg.body_min_observations,
+                max_log_ratio=cfg.body_max_log_ratio,
                 online=self.online_metric, rank_limit=cfg.body_online_rank_limit,
                 verified_confidence=cfg.body_online_verified_confidence,
                 negative_face_distance=cfg.body_online_negative_face_distance or None, fusion=cfg.body_fusion,
