@@ -126,7 +126,7 @@ class MinedPair:
 
 class PairPool:
     """The mined pairs (subspace differences), at most ``capacity`` (the oldest go first), each track in at
-    most ``max_pairs_per_track`` of them while it lives."""
+    most ``max_pairs_per_track`` of them while it lives (track ids < 0: no live track, e.g. restored pairs)."""
 
     def __init__(self, dim: int, *, capacity: int = 2000, max_pairs_per_track: int = 8) -> None:
         self.dim = check_int("dim", dim, 1)
@@ -145,7 +145,7 @@ class PairPool:
     def room_for(self, track_a: int, track_b: int) -> bool:
         """Whether both tracks may still take part in a pair."""
         cap = self.max_pairs_per_track
-        return self._per_track.get(track_a, 0) < cap and self._per_track.get(track_b, 0) < cap
+        return all(t < 0 or self._per_track.get(t, 0) < cap for t in (track_a, track_b))
 
     def add(self, z: npt.ArrayLike, positive: bool, faces: tuple[int, int], tracks: tuple[int, int],
             stamp_s: float) -> bool:
@@ -161,7 +161,8 @@ class PairPool:
         self.faces[i], self.tracks[i], self.stamps[i] = faces, tracks, stamp_s
         self.count += 1
         for t in set(tracks):
-            self._per_track[t] = self._per_track.get(t, 0) + 1
+            if t >= 0:
+                self._per_track[t] = self._per_track.get(t, 0) + 1
         self.version += 1
         return True
 
@@ -269,9 +270,7 @@ class OnlineBodyMetric:
         for z, positive, fa, fb, stamp in rows:
             z = np.asarray(z, dtype=np.float32).reshape(-1)
             if z.size == self.pool.dim and np.isfinite(z).all():
-                self.pool._per_track.clear()  # saved pairs carry no live tracks
-                n += int(self.pool.add(z, positive, (fa, fb), (-1, -1), stamp))
-        self.pool._per_track.clear()
+                n += int(self.pool.add(z, positive, (fa, fb), (-1, -1), stamp))  # no live tracks
         if n:
             self.current = self._refit(*self.pool.split())
             self._fitted_version, self._fitted_removals = self.pool.version, self.pool.removals

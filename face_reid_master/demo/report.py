@@ -4,7 +4,6 @@ end-of-run summary (metrics of :mod:`face_reid_master.evaluation.metrics`): per 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -16,6 +15,7 @@ from face_reid_master.evaluation.metrics import (
     evaluate_run,
     evaluated_tracks,
     face_persons,
+    holding_intervals,
     track_outcomes,
 )
 from face_reid_master.evaluation.published_tracks import TrackMessage, nearest_person, run_log_from_messages
@@ -83,12 +83,7 @@ def explain_failures(scenario: DemoScenario, log: RunLog, outcomes: Sequence[Tra
     bayes method's default), so an unidentified faceless track also means that its clothes matched nobody."""
     people = scenario.people
     face_person = face_persons(log)
-    held: dict[int, list[tuple[float, float, int]]] = {}  # face id -> (from, until, track) holding intervals
-    for tr in log.tracks.values():
-        for k, (stamp, fid, _) in enumerate(tr.assignments):
-            until = tr.assignments[k + 1][0] if k + 1 < len(tr.assignments) else (
-                tr.released_s if tr.released_s is not None else math.inf)
-            held.setdefault(fid, []).append((stamp, until, tr.track_id))
+    held = holding_intervals(log)  # face id -> (from, until, track) holding intervals
 
     def own_faces(p: int, before: float) -> list[int]:
         return sorted(f for f, (s, _) in log.faces.items() if face_person[f] == p and s < before)

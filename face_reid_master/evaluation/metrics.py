@@ -71,6 +71,17 @@ def face_persons(log: RunLog) -> dict[int, int]:
             for fid, (stamp, tid) in log.faces.items()}
 
 
+def holding_intervals(log: RunLog) -> dict[int, list[tuple[float, float, int]]]:
+    """Face id -> (from, until, track id) of every time a track held the face (until: inf while held)."""
+    held: dict[int, list[tuple[float, float, int]]] = {}
+    for t in log.tracks.values():
+        for k, (stamp, fid, _) in enumerate(t.assignments):
+            until = t.assignments[k + 1][0] if k + 1 < len(t.assignments) else (
+                t.released_s if t.released_s is not None else math.inf)
+            held.setdefault(fid, []).append((stamp, until, t.track_id))
+    return held
+
+
 def track_outcomes(log: RunLog) -> list[TrackOutcome]:
     """Per evaluated track: is it a re-identification case, and did it get its person's face (docs)."""
     face_person = face_persons(log)
@@ -79,12 +90,7 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
         p = face_person[fid]
         if p >= 0:
             learned_at[p] = min(stamp, learned_at.get(p, math.inf))
-    held: dict[int, list[tuple[float, float, int]]] = {}  # face id -> (from, until, track) holding intervals
-    for t in log.tracks.values():
-        for k, (stamp, fid, _) in enumerate(t.assignments):
-            until = t.assignments[k + 1][0] if k + 1 < len(t.assignments) else (
-                t.released_s if t.released_s is not None else math.inf)
-            held.setdefault(fid, []).append((stamp, until, t.track_id))
+    held = holding_intervals(log)
 
     def all_faces_busy(person: int, at: float, track_id: int) -> bool:
         own = [f for f, (s, _) in log.faces.items() if face_person[f] == person and s < at]

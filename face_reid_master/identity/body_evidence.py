@@ -129,9 +129,6 @@ class BodyEvidence:
             track.log_ratio.pop(face_id, None)
             track.counts.pop(face_id, None)
 
-    def has_recent_bodies(self, face_id: int, now_s: float) -> bool:
-        return self._faces.face_rows(face_id, now_s - self.window_s).shape[0] > 0
-
     def face_bodies(self, face_id: int, now_s: float) -> F32:
         """A face's recent body embeddings (k, r)."""
         return self._faces.face_rows(face_id, now_s - self.window_s)

@@ -66,6 +66,7 @@ def test_a_track_takes_part_in_a_bounded_number_of_pairs_and_its_pairs_go_with_i
     assert not pool.add(np.full(3, np.nan), False, (1, 2), (8, 9), 21.0)  # not finite: refused
     assert pool.remove_track(7) == 4 and pool.count == 1
     assert pool.remove_face(2) == 1 and pool.count == 0
+    assert all(pool.add(np.ones(3), True, (1, 1), (-1, -1), 30.0) for _ in range(6))  # restored: no live track
 
 
 def test_the_pool_forgets_its_oldest_pairs_first() -> None:

@@ -39,7 +39,7 @@ def test_bodies_expire_and_forgotten_faces_lose_theirs() -> None:
     body.add_face_bodies(1, RED, 0.0)
     for k in range(5):
         body.observe(7, RED, 200.0 + k, [1])  # the person's clothes were seen 200 s ago: longer than the window
-    assert body.decide([1], 205.0) == [] and not body.has_recent_bodies(1, 205.0)
+    assert body.decide([1], 205.0) == [] and body.face_bodies(1, 205.0).shape[0] == 0
     body.add_face_bodies(1, RED, 201.0)
     body.observe(8, RED, 202.0, [1])
     body.forget_face(1)
