@@ -259,7 +259,7 @@ class MasterNode(ManagedNode):
             "frames_applied": stats["frames_applied"],
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "embeddings_rejected",
-                                                                       "detections_rejected", "bodies_"))})
+                                                                       "detections_rejected", "bodies_", "body_"))})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"]
         warnings = [] if self._subscribed else ["no camera topic found yet"]
         return health.report(now_s, extra, warnings)
