@@ -62,15 +62,10 @@ def subspace_key(feature: BodyFeatureMetric) -> str:
     return f"{feature.name}:{w.shape[0]}x{w.shape[1]}:{hashlib.sha256(w.tobytes()).hexdigest()[:16]}"
 
 
-def _factor(feature: BodyFeatureMetric) -> FloatArray:
-    """L (r, r) with L L^T = M: a subspace vector z embeds as z L."""
-    return feature.embedding_factor
-
-
 def to_subspace(feature: BodyFeatureMetric, embeddings: npt.ArrayLike) -> FloatArray:
     """Embedding rows of ``feature`` (e = z L) back in the subspace z (needs a full-rank metric)."""
     e = np.atleast_2d(np.asarray(embeddings, dtype=np.float64))
-    return np.linalg.solve(_factor(feature).T, e.T).T
+    return np.linalg.solve(feature.embedding_factor.T, e.T).T
 
 
 def embedding_change(old: BodyFeatureMetric, new: BodyFeatureMetric) -> F32:
@@ -78,7 +73,7 @@ def embedding_change(old: BodyFeatureMetric, new: BodyFeatureMetric) -> F32:
     if old.metric.projection.shape != new.metric.projection.shape or \
             not np.array_equal(old.metric.projection, new.metric.projection):
         raise ValueError("the two metrics do not share their subspace: embeddings cannot be converted")
-    return np.linalg.solve(_factor(old), _factor(new)).astype(np.float32)
+    return np.linalg.solve(old.embedding_factor, new.embedding_factor).astype(np.float32)
 
 
 def refit_metric(base: BodyFeatureMetric, positive: npt.ArrayLike, negative: npt.ArrayLike, *,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -20,12 +21,14 @@ F32 = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
 
 
+@dataclass(frozen=True)
 class PoolSnapshot:
     """The rows of a pool at one moment (for a conversion off the frame's thread): the array, which slots
     had been written how often, and the pool's allocation generation."""
 
-    def __init__(self, rows: F32, written: npt.NDArray[np.int64], generation: int) -> None:
-        self.rows, self.written, self.generation = rows, written, generation
+    rows: F32
+    written: npt.NDArray[np.int64]
+    generation: int
 
 
 class FaceBodyPool:
