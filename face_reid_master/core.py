@@ -144,7 +144,11 @@ class MasterConfig:
         0.5, "Bound of one body observation's evidence, in log odds (frames of one glance are far from "
         "independent).", low=0.0, high=10.0, low_open=True)
     body_min_observations: int = param(
-        10, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
+        6, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
+    body_alike_face_distance: float = param(
+        0.0, "Two learned faces whose features are closer than this face-embedding distance count as one person "
+        "in a body decision (a second face learned while another track held the first); 0 = half the face "
+        "decision distance.", low=0.0, high=4.0)
     body_fusion: str = param(
         "funnel", "How a faceless track's body appearance and head height are fused (second seed, Algorithm 2): "
         "'funnel' (appearance prunes the faces, the rest are also judged by height) or 'score' (both summed for "
@@ -309,7 +313,8 @@ class MasterCore:
                 verified_confidence=cfg.body_online_verified_confidence,
                 negative_face_distance=cfg.body_online_negative_face_distance or None, fusion=cfg.body_fusion,
                 funnel_alpha=cfg.body_funnel_alpha, height_same_std_m=cfg.body_height_same_std_m,
-                height_other_std_m=cfg.body_height_other_std_m)
+                height_other_std_m=cfg.body_height_other_std_m,
+                alike_face_distance=cfg.body_alike_face_distance or None)
         if cfg.method == "bayes":
             if cfg.new_person_scale_c != model.new_person_scale_c:
                 model = model.with_new_person_scale(cfg.new_person_scale_c)

@@ -370,7 +370,7 @@ class IdentityManagerBase:
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
                     body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source, heights)
         events = []
-        for tid, fid, p in body.decide(self._available, stamp):
+        for tid, fid, p in body.decide(self._available, stamp, self._faces_alike):
             track = self._tracks.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self._available:
                 events.append(self._apply_body_decision(track, fid, p, stamp))
@@ -412,6 +412,19 @@ class IdentityManagerBase:
             return False
         d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
         return bool(d.size) and float(d.min()) > limit
+
+    def _faces_alike(self, face_a: int, face_b: int) -> bool:
+        """Whether two learned faces are one person: features of theirs closer than the body evidence's
+        ``alike_face_distance`` (default: half the decision distance)."""
+        assert self.body_evidence is not None
+        limit = self.body_evidence.alike_face_distance
+        if limit is None and self.feature_gate_distance is not None:
+            limit = 0.5 * self.feature_gate_distance
+        a, b = self._faces.get(face_a), self._faces.get(face_b)
+        if limit is None or a is None or b is None:
+            return False
+        d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
+        return bool(d.size) and float(d.min()) < limit
 
     def _consistent(self, obs: F32Array, slot: int) -> npt.NDArray[np.bool_]:
         """Which observations lie within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""

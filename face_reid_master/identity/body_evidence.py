@@ -69,7 +69,10 @@ class BodyEvidence:
     are farther than ``funnel_alpha`` x the nearest face's is abandoned for that observation, the others are
     also judged by height) or "score" (both ratios summed for every face). ``height_same_std_m`` /
     ``height_other_std_m``: spread of the difference between a person's head height and their face's recent
-    median, for the same person / another person (m).
+    median, for the same person / another person (m). ``alike_face_distance`` (face-embedding distance; None =
+    half the identity layer's decision distance): two learned faces with features closer than this are taken
+    for one person when a decision weighs them (a person gets a second face while another track holds the
+    first); their posteriors are added up.
     """
 
     def __init__(self, likelihood: LikelihoodModel, *, window_s: float = 3600.0, gallery_size: int = 64,
@@ -78,7 +81,7 @@ class BodyEvidence:
                  online: OnlineBodyMetric | None = None, mine_interval_s: float = 2.0, rank_limit: int = 1,
                  verified_confidence: float = 0.99, negative_face_distance: float | None = None,
                  fusion: str = "funnel", funnel_alpha: float = 1.5, height_same_std_m: float = 0.05,
-                 height_other_std_m: float = 0.12) -> None:
+                 height_other_std_m: float = 0.12, alike_face_distance: float | None = None) -> None:
         if not isinstance(likelihood, LikelihoodModel):
             raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
         self.likelihood = likelihood
@@ -106,6 +109,8 @@ class BodyEvidence:
         self.height_same_std_m = check_real("height_same_std_m", height_same_std_m, 0.0, math.inf, low_open=True)
         self.height_other_std_m = check_real("height_other_std_m", height_other_std_m, self.height_same_std_m,
                                              math.inf, low_open=True)
+        self.alike_face_distance = None if alike_face_distance is None else check_real(
+            "alike_face_distance", alike_face_distance, 0.0, math.inf, low_open=True)
         self._faces = FaceBodyPool(self.gallery_size)
         self._tracks: dict[int, _TrackBodies] = {}
         self._mined_at: dict[int, float] = {}  # track -> stamp of its last probe
@@ -279,11 +284,13 @@ class BodyEvidence:
         p /= p.sum()
         return dict(zip([0, *faces], p.tolist(), strict=True))
 
-    def decide(self, available: list[int], now_s: float) -> list[tuple[int, int, float]]:
+    def decide(self, available: list[int], now_s: float,
+               alike: Callable[[int, int], bool] | None = None) -> list[tuple[int, int, float]]:
         """(track id, face id, posterior) of the faceless tracks decided now: one face per track and one track
         per face (the most confident first). The posterior is over every face with recent bodies (those held
         by live tracks too: a track that looks most like someone already tracked is not decided), and only an
-        ``available`` face (in face_list) can be given."""
+        ``available`` face (in face_list) can be given. ``alike(a, b)``: whether faces a and b are one person
+        (their posteriors are added up; the most likely available one of them is given)."""
         compared = [(tid, t) for tid, t in self._tracks.items() if t.log_ratio]  # faceless tracks with evidence
         if not compared:
             return []
@@ -293,6 +300,10 @@ class BodyEvidence:
         for track_id, track in compared:
             post = self._posterior(track, recent)
             face, p = max(post.items(), key=lambda kv: kv[1])
+            if face == 0:
+                continue
+            if face not in free or p <= self.posterior_threshold:
+                face, p = self._alike_group(post, face, free, alike)
             if face in free and p > self.posterior_threshold and track.counts.get(face, 0) >= self.min_observations:
                 wanted.append((p, track_id, face))
         out, taken = [], set()
@@ -301,6 +312,17 @@ class BodyEvidence:
                 taken.add(face)
                 out.append((track_id, face, p))
         return out
+
+    def _alike_group(self, post: dict[int, float], top: int, free: set[int],
+                     alike: Callable[[int, int], bool] | None) -> tuple[int, float]:
+        """The most likely available face of the top face's person and that person's summed posterior (the
+        top face alone when ``alike`` is None or "someone else" already holds too much)."""
+        if alike is None or post[0] >= 1.0 - self.posterior_threshold:
+            return top, post[top]
+        floor = (1.0 - self.posterior_threshold) / len(post)  # faces below this cannot change the verdict
+        group = [top] + [g for g, q in post.items() if g not in (0, top) and q > floor and alike(top, g)]
+        given = max((g for g in group if g in free), key=post.__getitem__, default=top)
+        return given, float(sum(post[g] for g in group))
 
 
 def _heights(heights: npt.ArrayLike | None, n: int) -> FloatArray:

@@ -55,6 +55,24 @@ def test_one_face_goes_to_one_track_the_most_confident_first() -> None:
     assert [(t, f) for t, f, _ in body.decide([1], 5.0)] == [(7, 1)]
 
 
+def test_two_faces_of_one_person_add_up_and_only_such_faces() -> None:
+    body = _evidence(posterior_threshold=0.99)
+    for face in (1, 2):  # one person learned twice (a second face while another track held the first)
+        body.add_face_bodies(face, RED, 0.0)
+    body.add_face_bodies(3, BLUE, 0.0)
+    for k in range(4):
+        body.observe(7, RED, 1.0 + k, [1, 2, 3])
+    post = body.posterior(7, [1, 2, 3], 5.0)
+    assert 0.4 < post[1] < 0.6 and post[1] + post[2] > 0.99  # split between the two faces: neither passes
+    assert body.decide([1, 2, 3], 5.0) == []
+    assert body.decide([1, 2, 3], 5.0, lambda a, b: False) == []  # different people: still undecided
+    one_person = lambda a, b: {a, b} == {1, 2}  # noqa: E731
+    ((track, face, p),) = body.decide([1, 2, 3], 5.0, one_person)
+    assert track == 7 and face in (1, 2) and p > 0.99
+    ((_, face, _),) = body.decide([2, 3], 5.0, one_person)  # face 1 is held: its twin is given
+    assert face == 2
+
+
 def _manager() -> BayesIdentityManager:
     return BayesIdentityManager(BODY_LIKELIHOOD, embedding_dim=DIM, min_observations=2,
                                 body_evidence=_evidence())
@@ -103,7 +121,32 @@ def test_body_evidence_never_creates_a_face_nor_decides_a_track_that_showed_a_fa
     assert ids.face_id_of(3) is None  # its face decides, not its body
 
 
-@pytest.mark.parametrize("bad", [{"window_s": 0.0}, {"posterior_threshold": 1.0}, {"min_observations": 0}])
+def test_the_identity_layer_takes_two_close_faces_for_one_person_only() -> None:
+    ids = BayesIdentityManager(BODY_LIKELIHOOD, embedding_dim=DIM, min_observations=2, body_evidence=_evidence(),
+                               feature_gate_distance=0.75)  # alike: closer than 0.375
+    ids.add_observations(1, np.repeat(_face(0), 3, axis=0), 0.0)  # Alice, in red
+    ids.add_body_observations(1, RED, 0.0)
+    ids.step(0.0)
+    ids.add_observations(2, np.repeat(_face(0) * 1.2, 3, axis=0), 0.5)  # a duplicate track of her: 0.02 away,
+    ids.add_body_observations(2, RED, 0.5)  # but her face is held by track 1, so a second face is learned
+    ids.step(0.5)
+    assert len(ids.face_ids()) == 2
+    assert ids._faces_alike(*ids.face_ids())  # much closer than half the decision distance
+    ids.add_observations(3, np.repeat(_face(1) * 5, 3, axis=0), 0.6)  # Bob: another person, 0.51 away
+    ids.step(0.6)
+    (bob,) = set(ids.face_ids()) - {ids.face_id_of(1), ids.face_id_of(2)}
+    assert not ids._faces_alike(ids.face_id_of(1), bob)
+    for tid in (1, 2, 3):
+        ids.track_deleted(tid, 1.0)
+    ids.step(1.0)
+    for k in range(3):  # she comes back, faceless: the two faces split her body evidence
+        ids.add_body_observations(4, RED, 2.0 + k)
+        ids.step(2.0 + k)
+    assert ids.face_id_of(4) in (ids.face_ids()[0], ids.face_ids()[1]) and ids.evidence_of(4) == "body"
+
+
+@pytest.mark.parametrize("bad", [{"window_s": 0.0}, {"posterior_threshold": 1.0}, {"min_observations": 0},
+                                 {"alike_face_distance": 0.0}])
 def test_arguments_are_checked(bad: dict) -> None:
     with pytest.raises(ValueError, match=next(iter(bad))):
         BodyEvidence(BODY_LIKELIHOOD, **bad)
