@@ -12,6 +12,13 @@ __all__ = ["check_bgr_image", "check_colour_image", "check_int", "check_mask", "
            "is_finite_number"]
 
 
+def shown(text: object, max_chars: int = 80) -> str:
+    """``text`` quoted for a log line or a terminal: escaped (no newlines or terminal escapes) and cut to
+    ``max_chars`` characters ("..." marks the cut)."""
+    value = text if isinstance(text, str) else str(text)
+    return repr(value[:max_chars]) + ("..." if len(value) > max_chars else "")
+
+
 def is_finite_number(value: object) -> bool:
     """True for a finite int/float (numpy scalars included), False for bools, NaN, Inf and anything else."""
     return (

@@ -11,6 +11,8 @@ carries on.
 from __future__ import annotations
 
 import math
+import os
+import stat
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -21,6 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.checks import shown
 from face_reid_camera.common.embedding_spaces import EMBEDDER_CHOICES, embedder_space, space_dim
 from face_reid_camera.faces.detector import YuNetDetector
 from face_reid_camera.faces.embedder import CombinedEmbedder, FaceEmbedder
@@ -33,8 +36,11 @@ __all__ = [
     "PhotoError",
     "ProgressBar",
     "ProgressCallback",
+    "decode_photo",
+    "image_size",
     "list_identity_photos",
     "progress_bar",
+    "read_confined_photo",
     "read_photo",
 ]
 
@@ -48,6 +54,9 @@ _EMBEDDING_LENGTHS = frozenset(space_dim(embedder_space(choice)) for choice in E
 # Faces whose eyes are more than this many times farther apart than in the embedder's chip template are
 # shrunk with INTER_AREA before the (bilinear) alignment warp.
 _MAX_WARP_SHRINK = 2.0
+DEFAULT_MAX_PIXELS = 100_000_000  # a decoded photo larger than this is refused (3 bytes per pixel in memory)
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_JPEG_SOF = frozenset({0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF})
 
 
 class PhotoError(ValueError):
@@ -116,12 +125,88 @@ def read_photo(path: str | Path) -> NDArray[np.uint8]:
         data = np.fromfile(p, dtype=np.uint8)  # not cv2.imread: works with any path encoding
     except OSError as exc:
         raise PhotoError(f"cannot read photo {p}: {exc.strerror or exc}") from None
-    if data.size == 0:
-        raise PhotoError(f"photo {p} is an empty file")
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    return decode_photo(data.tobytes(), f"photo {p}")
+
+
+def image_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) read from a JPEG or PNG header; None for another format or an unreadable header."""
+    if data[:8] == _PNG_SIGNATURE and data[12:16] == b"IHDR" and len(data) >= 24:
+        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in _JPEG_SOF:
+            if i + 9 > len(data):
+                return None
+            return int.from_bytes(data[i + 7:i + 9], "big"), int.from_bytes(data[i + 5:i + 7], "big")
+        if marker == 0x01 or 0xD0 <= marker <= 0xD9:  # markers without a length
+            i += 2
+            continue
+        i += 2 + int.from_bytes(data[i + 2:i + 4], "big")
+    return None
+
+
+def decode_photo(data: bytes, what: str = "photo", max_pixels: int = DEFAULT_MAX_PIXELS,
+                 jpeg_png_only: bool = False) -> NDArray[np.uint8]:
+    """Decode an encoded photo to (H, W, 3) uint8 BGR; PhotoError if it is empty, corrupt, larger than
+    ``max_pixels`` by its header, or (``jpeg_png_only``) not a JPEG / PNG whose size the header gives."""
+    if not data:
+        raise PhotoError(f"{what} is an empty file")
+    size = image_size(data)
+    if size is None and jpeg_png_only:
+        raise PhotoError(f"{what} is not a JPEG or PNG image")
+    if size is not None and size[0] * size[1] > max_pixels:
+        raise PhotoError(f"{what} is {size[0]} x {size[1]} pixels, more than {max_pixels}")
+    try:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
+    except (cv2.error, MemoryError) as exc:
+        raise PhotoError(f"{what} cannot be decoded: {str(exc).strip()[:120]}") from None
     if image is None or image.size == 0:
-        raise PhotoError(f"photo {p} is not a decodable image (corrupt or unsupported format)")
+        raise PhotoError(f"{what} is not a decodable image (corrupt or unsupported format)")
     return image
+
+
+def read_confined_photo(root: str | Path, requested: str, max_bytes: int) -> bytes:
+    """The bytes of photo ``requested`` (relative to ``root``, or absolute) if it is a regular file of at most
+    ``max_bytes`` inside ``root`` once every symlink is resolved; PhotoError otherwise. Never blocks (FIFOs and
+    devices are refused before they are read) and never reads more than ``max_bytes`` + 1 bytes."""
+    quoted = shown(requested)
+    if not str(root):
+        raise PhotoError("photo paths are refused: no photo root is configured")
+    if not requested or "\x00" in requested or len(requested) > 4096:
+        raise PhotoError(f"photo path {quoted} is empty, too long or holds a NUL byte")
+    base = os.path.realpath(root)
+    real = os.path.realpath(os.path.join(base, requested))
+    if os.path.commonpath([base, real]) != base:
+        raise PhotoError(f"photo path {quoted} is outside the photo root")
+    try:
+        if not stat.S_ISREG(os.stat(real).st_mode):  # FIFOs, devices, sockets, directories: never opened
+            raise PhotoError(f"photo path {quoted} is not a regular file")
+        fd = os.open(real, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise PhotoError(f"cannot open photo {quoted}: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)  # what was opened (the path may have changed since)
+        if not stat.S_ISREG(st.st_mode):
+            raise PhotoError(f"photo path {quoted} is not a regular file")
+        if st.st_size > max_bytes:
+            raise PhotoError(f"photo {quoted} is {st.st_size} bytes, more than {max_bytes}")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(max_bytes + 1)
+    except OSError as exc:
+        raise PhotoError(f"cannot read photo {quoted}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if len(data) > max_bytes:
+        raise PhotoError(f"photo {quoted} is more than {max_bytes} bytes")
+    return data
 
 
 def list_identity_photos(root: str | Path) -> tuple[dict[str, list[Path]], list[Path]]:

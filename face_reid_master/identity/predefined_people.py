@@ -19,14 +19,39 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from face_reid_camera.common.checks import shown
+
 __all__ = [
+    "MAX_NAME_CHARS",
     "NameMatch",
     "PredefinedPeople",
     "assign_one_to_one",
+    "check_person_name",
     "face_to_person_distance",
 ]
 
 FloatArray = npt.NDArray[np.float64]
+
+
+MAX_NAME_CHARS = 64
+
+
+def check_person_name(name: object) -> str:
+    """``name`` if it is a usable person name: a string of 1..MAX_NAME_CHARS printable characters (no control
+    characters, newlines or terminal escapes: names are shown in logs, lists and on robots) without leading or
+    trailing spaces; ValueError saying what is wrong otherwise."""
+    if not isinstance(name, str):
+        raise ValueError(f"person name must be a string, got {type(name).__name__}")
+    quoted = shown(name, 40)
+    if not name.strip():
+        raise ValueError("person name must not be empty")
+    if len(name) > MAX_NAME_CHARS:
+        raise ValueError(f"person name {quoted} has {len(name)} characters, more than {MAX_NAME_CHARS}")
+    if not name.isprintable():
+        raise ValueError(f"person name {quoted} holds control characters (newlines, escapes, ...)")
+    if name != name.strip():
+        raise ValueError(f"person name {quoted} starts or ends with a space")
+    return name
 
 
 def _as_features(features: npt.ArrayLike, dim: int, what: str) -> npt.NDArray[np.float32]:
@@ -148,8 +173,7 @@ class PredefinedPeople:
     # ------------------------------------------------------------------------------ gallery
     def set_person(self, name: str, features: npt.ArrayLike) -> None:
         """Add or replace a named person's gallery embeddings (k, embedding_dim)."""
-        if not isinstance(name, str) or not name.strip():
-            raise ValueError(f"person name must be a non-empty string, got {name!r}")
+        check_person_name(name)
         self._people[name] = _as_features(features, self.embedding_dim, f"features of {name!r}")
         for fid, row in self._rows.items():
             row[name] = self._distance(self._faces[fid], self._people[name])

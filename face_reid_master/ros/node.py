@@ -19,6 +19,7 @@ import numpy as np
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
+from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
@@ -35,6 +36,10 @@ face_reid_msgs/CameraFrame in, named tracks on /tracks_named out, status on /dia
 Parameters (all declared with descriptions and ranges; `ros2 param describe` lists them):
 """
 
+_MAX_REPLY_CHARS = 1000  # service replies are cut to this
+_MAX_LOG_CHARS = 300  # log lines about a request are cut to this
+
+
 class MasterNode(ManagedNode):
     """The master node; see the module docstring."""
 
@@ -46,6 +51,8 @@ class MasterNode(ManagedNode):
         self.store: Any = None
         self.health: NodeHealth | None = None
         self._services: list[Any] = []
+        self._service_calls: dict[str, int] = {}
+        self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
         self._timers: list[Any] = []
         self.tracks_pub: Any = None
@@ -76,11 +83,16 @@ class MasterNode(ManagedNode):
         rate = float(values["max_publish_rate_hz"])
         self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
-        self._services = [
-            self.create_service(AddPerson, "~/add_person", self._add_person),
-            self.create_service(ForgetFace, "~/forget_face", self._forget_face),
-            self.create_service(ListFaces, "~/list_faces", self._list_faces),
-        ]
+        self._services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
+        if values["admin_services"]:
+            self._services += [self.create_service(AddPerson, "~/add_person", self._add_person),
+                               self.create_service(ForgetFace, "~/forget_face", self._forget_face)]
+            self.get_logger().warning(
+                "admin services on (admin_services: true): any participant of this DDS domain can call "
+                "~/add_person and ~/forget_face; there is no authentication yet")
+        else:
+            self.get_logger().info("admin services off (admin_services: false): ~/add_person and ~/forget_face "
+                                   "are not offered")
         self.get_logger().info(
             f"master: method={config.method}, {len(self.core.identity.face_ids())} learned faces loaded, "
             f"{len(self.core.people.names())} predefined people, body appearance "
@@ -260,54 +272,77 @@ class MasterNode(ManagedNode):
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "embeddings_rejected",
                                                                        "detections_rejected", "bodies_", "body_"))})
+        extra.update({f"{k}_calls": v for k, v in self._service_calls.items()})
+        extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"]
         warnings = [] if self._subscribed else ["no camera topic found yet"]
         return health.report(now_s, extra, warnings)
 
     # ------------------------------------------------------------------ services
     def _add_person(self, request: Any, response: Any) -> Any:
-        name = request.name.strip()
-        rows: list[np.ndarray] = []
-        notes: list[str] = []
-        try:
-            if not name:
-                raise ValueError("name must not be empty")
-            emb = np.asarray(request.embeddings, dtype=np.float32)
-            dim = space_dim(str(self.values["embedding_space"]))
-            if emb.size % dim:
-                raise ValueError(f"embeddings must hold k x {dim} values (space {self.values['embedding_space']}), "
-                                 f"got {emb.size}")
-            if emb.size:
-                rows.extend(emb.reshape(-1, dim))
-            if request.image_paths:
-                from face_reid_camera.faces.photos import PhotoError
+        return self._handle("add_person", self._do_add_person, request, response)
 
-                embedder = self._photo_embedder()
-                for path in request.image_paths:
-                    try:
-                        found = embedder.embed_photo(Path(path))
-                    except (PhotoError, OSError) as exc:
-                        notes.append(f"skipped {path}: {exc}")
-                        continue
-                    if found is None:
-                        notes.append(f"skipped {path}: no face found")
-                    else:
-                        rows.append(found.embedding)
+    def _forget_face(self, request: Any, response: Any) -> Any:
+        return self._handle("forget_face", self._do_forget_face, request, response)
+
+    def _handle(self, what: str, handler: Any, request: Any, response: Any) -> Any:
+        """Run a service handler: a refused request (ValueError) or any other error is reported in the
+        response and logged (cut), never raised into the executor."""
+        try:
+            handler(request, response)
+        except ValueError as exc:
+            response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]
+        except Exception as exc:  # a request must never take the node down
+            response.success = False
+            response.message = f"internal error: {type(exc).__name__}: {str(exc)[:200]}"
+        self._service_calls[what] = self._service_calls.get(what, 0) + 1
+        if not response.success:
+            self._service_refusals[what] = self._service_refusals.get(what, 0) + 1
+        self.get_logger().info(f"{what}: {response.message[:_MAX_LOG_CHARS]}", throttle_duration_sec=1.0)
+        return response
+
+    def _do_add_person(self, request: Any, response: Any) -> None:
+        from face_reid_camera.faces.photos import PhotoError, decode_photo, read_confined_photo
+        from face_reid_master.identity.predefined_people import check_person_name
+
+        name = check_person_name(request.name.strip())
+        dim = space_dim(str(self.values["embedding_space"]))
+        max_rows = int(self.values["max_embeddings_per_request"])
+        max_photos = int(self.values["max_photos_per_request"])
+        if len(request.embeddings) > max_rows * dim:
+            raise ValueError(f"more than {max_rows} embeddings in one request (max_embeddings_per_request)")
+        if len(request.embeddings) % dim:
+            raise ValueError(f"embeddings must hold k x {dim} values (space {self.values['embedding_space']}), "
+                             f"got {len(request.embeddings)}")
+        if len(request.image_paths) > max_photos:
+            raise ValueError(f"more than {max_photos} photos in one request (max_photos_per_request)")
+        emb = np.asarray(request.embeddings, dtype=np.float32)
+        rows: list[np.ndarray] = list(emb.reshape(-1, dim)) if emb.size else []
+        notes: list[str] = []
+        for path in request.image_paths:
+            try:
+                data = read_confined_photo(str(self.values["photo_root"]), path, int(self.values["max_photo_bytes"]))
+                found = self._photo_embedder().embed_photo(decode_photo(data, shown(path), jpeg_png_only=True))
+            except PhotoError as exc:
+                notes.append(f"skipped: {exc}")
+                continue
+            if found is None:
+                notes.append(f"skipped {shown(path)}: no face found")
+            else:
+                rows.append(found.embedding)
+        try:
             if not rows:
                 raise ValueError("no usable face embedding")
             self._core().add_person(name, np.stack(rows))
-            response.success, response.num_embeddings = True, len(rows)
-            response.message = "; ".join([f"added {name} with {len(rows)} embeddings", *notes])
         except ValueError as exc:
-            response.success, response.message = False, "; ".join([str(exc), *notes])
-        self.get_logger().info(f"add_person: {response.message}")
-        return response
+            raise ValueError("; ".join([str(exc), *notes])[:_MAX_REPLY_CHARS]) from None
+        response.success, response.num_embeddings = True, len(rows)
+        response.message = "; ".join([f"added {name} with {len(rows)} embeddings", *notes])[:_MAX_REPLY_CHARS]
 
-    def _forget_face(self, request: Any, response: Any) -> Any:
+    def _do_forget_face(self, request: Any, response: Any) -> None:
         core = self._core()
         if not request.face_id and not request.name:
-            response.success, response.message = False, "give a face_id or a name"
-            return response
+            raise ValueError("give a face_id or a name")
         ids = [int(request.face_id)] if request.face_id else [
             fid for fid in core.identity.face_ids() if core.face_name(fid) == request.name
         ]
@@ -315,8 +350,6 @@ class MasterNode(ManagedNode):
         response.forgotten_face_ids = forgotten
         response.success = bool(forgotten)
         response.message = f"forgot faces {forgotten}" if forgotten else "no such face"
-        self.get_logger().info(f"forget_face: {response.message}")
-        return response
 
     def _list_faces(self, request: Any, response: Any) -> Any:
         core = self._core()

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from face_reid_master.identity.predefined_people import check_person_name
 from face_reid_master.identity.records import LearnedFace
 
 __all__ = [
@@ -140,9 +141,7 @@ def _check_face_id(face_id: Any) -> int:
 
 
 def _check_name(name: Any) -> str | None:
-    if name is not None and not isinstance(name, str):
-        raise ValueError(f"name must be a str or None, got {name!r}")
-    return name
+    return None if name is None else check_person_name(name)
 
 
 class FaceStore:

@@ -17,6 +17,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from face_reid_camera.common.checks import shown
+from face_reid_master.identity.predefined_people import check_person_name
 from face_reid_master.storage.face_store import (
     FaceStore,
     FaceStoreError,
@@ -88,7 +90,7 @@ def _print_list(faces: list[FaceSummary], as_json: bool) -> None:
         return
     print(f"{'id':>6}  {'name':<24} {'features':>8} {'observ.':>8}  {'created (UTC)':<20}  {'last seen (UTC)':<20}")
     for f in faces:
-        name = f.name if f.name is not None else "-"
+        name = "-" if f.name is None else f.name if f.name.isprintable() and len(f.name) <= 24 else shown(f.name, 20)
         print(
             f"{f.face_id:>6}  {name:<24} {f.n_features:>8} {f.n_observations:>8}  "
             f"{_iso(f.created_s):<20}  {_iso(f.last_seen_s):<20}"
@@ -104,9 +106,9 @@ def _run(store: FaceStore, args: argparse.Namespace) -> int:
         if args.name is not None:
             ids = store.forget_name(args.name)
             if not ids:
-                print(f"{PROG}: no face named {args.name!r}", file=sys.stderr)
+                print(f"{PROG}: no face named {shown(args.name)}", file=sys.stderr)
                 return EXIT_NOT_FOUND
-            print(f"forgot face(s) {', '.join(str(i) for i in ids)} named {args.name!r}")
+            print(f"forgot face(s) {', '.join(str(i) for i in ids)} named {shown(args.name)}")
             return EXIT_OK
         if not store.forget(args.face_id):
             print(f"{PROG}: no face {args.face_id}", file=sys.stderr)
@@ -118,10 +120,16 @@ def _run(store: FaceStore, args: argparse.Namespace) -> int:
     if new_name is not None and not new_name.strip():
         print(f"{PROG}: error: empty name (use --clear to remove a name)", file=sys.stderr)
         return EXIT_USAGE
+    try:
+        if new_name is not None:
+            check_person_name(new_name)
+    except ValueError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     if not store.set_name(args.face_id, new_name):
         print(f"{PROG}: no face {args.face_id}", file=sys.stderr)
         return EXIT_NOT_FOUND
-    print(f"face {args.face_id} " + (f"renamed {new_name!r}" if new_name is not None else "name cleared"))
+    print(f"face {args.face_id} " + (f"renamed {shown(new_name)}" if new_name is not None else "name cleared"))
     return EXIT_OK
 
 

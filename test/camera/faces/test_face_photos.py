@@ -238,3 +238,77 @@ def test_progress_bar_tty_redraws_one_line() -> None:
     assert "[" + "#" * 30 + "]" in text
     with pytest.raises(ValueError):
         ProgressBar(-1, "x")
+
+
+# ---------------------------------------------------------------- photos from untrusted requests
+def test_image_size_reads_real_jpeg_and_png_headers(tmp_path: Path) -> None:
+    from face_reid_camera.faces.photos import image_size
+
+    photo = sorted((FACES_DIR / "deepface_id02").glob("*.jpg"))[0]
+    image = read_photo(photo)
+    assert image_size(photo.read_bytes()) == (image.shape[1], image.shape[0])
+    assert image_size(DESK_FRAME.read_bytes()) == tuple(cv2.imread(str(DESK_FRAME)).shape[1::-1])
+    assert image_size(b"GIF89a....") is None and image_size(b"\xff\xd8\xff") is None
+
+
+def test_decode_photo_refuses_bombs_other_formats_and_garbage() -> None:
+    from face_reid_camera.faces.photos import decode_photo
+
+    # a PNG header claiming 60000 x 60000 pixels (10.8 GB decoded): refused before any decoding
+    bomb = b"\x89PNG\r\n\x1a\n" + b"\x00\x00\x00\rIHDR" + (60000).to_bytes(4, "big") * 2 + b"\x08\x02\x00\x00\x00"
+    with pytest.raises(PhotoError, match="60000 x 60000 pixels"):
+        decode_photo(bomb + b"\x00" * 64)
+    ok, bmp = cv2.imencode(".bmp", np.zeros((8, 8, 3), np.uint8))
+    assert ok and decode_photo(bmp.tobytes()).shape == (8, 8, 3)  # trusted folders: any format cv2 reads
+    with pytest.raises(PhotoError, match="not a JPEG or PNG"):
+        decode_photo(bmp.tobytes(), jpeg_png_only=True)
+    with pytest.raises(PhotoError, match="empty"):
+        decode_photo(b"")
+    with pytest.raises(PhotoError, match="not a decodable image"):
+        decode_photo(b"\xff\xd8\xff\xe0" + b"\x00" * 100)
+
+
+def test_read_confined_photo_reads_only_regular_files_inside_the_root(tmp_path: Path) -> None:
+    import os
+    import threading
+
+    from face_reid_camera.faces.photos import read_confined_photo
+
+    root = tmp_path / "gallery"
+    (root / "alice").mkdir(parents=True)
+    photo = sorted((FACES_DIR / "deepface_id02").glob("*.jpg"))[0]
+    shutil.copy(photo, root / "alice" / "a.jpg")
+    (root / "inside.jpg").symlink_to(root / "alice" / "a.jpg")
+    assert read_confined_photo(root, "alice/a.jpg", 10**7) == photo.read_bytes()
+    assert read_confined_photo(root, str(root / "inside.jpg"), 10**7) == photo.read_bytes()  # symlink inside
+    outside = tmp_path / "secret.jpg"
+    shutil.copy(photo, outside)
+    (root / "out.jpg").symlink_to(outside)
+    (root / "zero").symlink_to("/dev/zero")
+    with open(root / "sparse.jpg", "wb") as f:  # a 64 GB sparse file: refused by its size, not read
+        f.truncate(64 * 2**30)
+    os.mkfifo(root / "fifo.jpg")
+    for requested, why in ((str(outside), "outside the photo root"), ("../secret.jpg", "outside the photo root"),
+                           ("out.jpg", "outside the photo root"), ("zero", "outside the photo root"),
+                           ("/dev/zero", "outside the photo root"), ("alice", "not a regular file"),
+                           ("sparse.jpg", "68719476736 bytes, more than 1000000"), ("fifo.jpg", "not a regular file"),
+                           ("missing.jpg", "No such file"), ("a\x00b", "NUL"), ("x" * 5000, "too long")):
+        result: list[BaseException] = []
+        worker = threading.Thread(target=lambda r=requested, out=result: out.append(_refusal(root, r)), daemon=True)
+        worker.start()
+        worker.join(10.0)  # a FIFO opened for reading would block here forever
+        assert result, f"{requested[:40]!r} froze the reader"
+        assert isinstance(result[0], PhotoError) and why in str(result[0]), (requested[:40], result[0])
+        assert len(str(result[0])) < 300  # a 5000-character path is cut in the message
+    with pytest.raises(PhotoError, match="no photo root"):
+        read_confined_photo("", "alice/a.jpg", 10**7)
+
+
+def _refusal(root: Path, requested: str) -> BaseException:
+    from face_reid_camera.faces.photos import read_confined_photo
+
+    try:
+        read_confined_photo(root, requested, 10**6)
+    except BaseException as exc:  # returned to the test thread
+        return exc
+    return AssertionError("not refused")

@@ -177,3 +177,19 @@ def test_real_learned_faces_get_the_right_names(lfw_embeddings: dict[str, np.nda
     assert {f: m.name for f, m in links.items()} == {names.index(n) + 1: n for n in named}
     for s in strangers:
         assert names.index(s) + 1 not in links
+
+
+def test_person_names_are_short_printable_and_refused_otherwise() -> None:
+    from face_reid_master.identity.predefined_people import MAX_NAME_CHARS, check_person_name
+
+    assert check_person_name("Zoë O'Neill-Søren") == "Zoë O'Neill-Søren"
+    for bad, why in (("", "empty"), ("   ", "empty"), ("A" * (MAX_NAME_CHARS + 1), "more than"),
+                     ("x" * 1_000_000, "1000000 characters"), ("Eve\n   7  Mallory", "control"),
+                     ("\x1b[2J\x1b[31mroot", "control"), (" Bob", "space"), (42, "string")):
+        with pytest.raises(ValueError, match=why) as info:
+            check_person_name(bad)
+        assert len(str(info.value)) < 200 and "\x1b" not in str(info.value) and "\n" not in str(info.value)
+    people = PredefinedPeople(embedding_dim=4, name_threshold=0.5)
+    with pytest.raises(ValueError, match="control"):
+        people.set_person("Eve\nMallory", np.ones((1, 4), np.float32))
+    assert people.names() == []

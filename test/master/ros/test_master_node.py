@@ -117,7 +117,8 @@ def _call(executor, node: Node, client, request):
 
 
 def test_services_add_list_forget_and_refuse_hostile_requests(ros_context, tmp_path: Path) -> None:
-    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false", "admin_services:=true",
+                   f"photo_root:={tmp_path}")
     client_node = Node("client", context=node.context)
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
@@ -151,6 +152,74 @@ def test_services_add_list_forget_and_refuse_hostile_requests(ros_context, tmp_p
     finally:
         executor.shutdown()
         client_node.destroy_node()
+        node.destroy_node()
+
+
+def test_admin_services_are_off_by_default(ros_context, tmp_path: Path) -> None:
+    node = _master(ros_context, tmp_path)
+    try:
+        assert node.trigger_configure() == OK
+        offered = {srv.srv_name for srv in node.services}
+        assert "~/list_faces" in offered and not offered & {"~/add_person", "~/forget_face"}
+    finally:
+        node.destroy_node()
+
+
+def test_add_person_survives_hostile_photo_paths_names_and_sizes(ros_context, tmp_path: Path) -> None:
+    """Each of these crashed (cv2.error / allocation error: exit 1) or froze (FIFO) the master before
+    photo_root and the request caps, or stored what it should not (a 1,000,000-character name)."""
+    import os
+    import shutil
+    import threading
+
+    from conftest import FACES_DIR
+
+    root = tmp_path / "gallery"
+    root.mkdir()
+    photo = sorted((FACES_DIR / "deepface_id02").glob("*.jpg"))[0]
+    shutil.copy(photo, root / "alice.jpg")
+    with open(root / "huge.jpg", "wb") as f:
+        f.truncate(2 * 2**30 + 1)  # 2 GB (sparse): np.fromfile + cv2.imdecode raised cv2.error
+    with open(root / "sparse.jpg", "wb") as f:
+        f.truncate(64 * 2**30)  # 64 GB: the allocation failed
+    os.mkfifo(root / "fifo.jpg")  # froze the executor until someone wrote to it
+    (root / "dir.jpg").mkdir()
+    (root / "passwd.jpg").symlink_to("/etc/passwd")
+    (root / "bomb.png").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + (50000).to_bytes(4, "big") * 2
+                                    + b"\x08\x02\x00\x00\x00" + bytes(64))
+    node = _master(ros_context, tmp_path, "admin_services:=true", f"photo_root:={root}", "max_photos_per_request:=8",
+                   "max_embeddings_per_request:=4")
+    alice = _unit(7)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        for req, why in (
+            (AddPerson.Request(name="Eve", image_paths=["huge.jpg"]), "more than 20000000"),
+            (AddPerson.Request(name="Eve", image_paths=["sparse.jpg"]), "more than 20000000"),
+            (AddPerson.Request(name="Eve", image_paths=["fifo.jpg"]), "not a regular file"),
+            (AddPerson.Request(name="Eve", image_paths=["/dev/zero"]), "outside the photo root"),
+            (AddPerson.Request(name="Eve", image_paths=["dir.jpg"]), "not a regular file"),
+            (AddPerson.Request(name="Eve", image_paths=["passwd.jpg"]), "outside the photo root"),
+            (AddPerson.Request(name="Eve", image_paths=[str(photo)]), "outside the photo root"),
+            (AddPerson.Request(name="Eve", image_paths=["bomb.png"]), "50000 x 50000 pixels"),
+            (AddPerson.Request(name="Eve", image_paths=["alice.jpg"] * 9), "more than 8 photos"),
+            (AddPerson.Request(name="Eve", embeddings=np.tile(alice, 5).tolist()), "more than 4 embeddings"),
+            (AddPerson.Request(name="x" * 1_000_000, embeddings=alice.tolist()), "1000000 characters"),
+            (AddPerson.Request(name="Eve\n    2  root", embeddings=alice.tolist()), "control characters"),
+            (AddPerson.Request(name="\x1b[2JEve", embeddings=alice.tolist()), "control characters"),
+        ):
+            replies: list = []
+            worker = threading.Thread(
+                target=lambda r=req, out=replies: out.append(node._add_person(r, AddPerson.Response())), daemon=True)
+            worker.start()
+            worker.join(30.0)
+            assert replies, f"{why}: the service handler froze"
+            assert not replies[0].success and why in replies[0].message, (why, replies[0].message[:300])
+            assert len(replies[0].message) <= 1000
+        assert node.core.people.names() == []  # nothing stored by any of them
+        reply = node._add_person(AddPerson.Request(name="Alice", image_paths=["alice.jpg"]), AddPerson.Response())
+        assert reply.success and reply.num_embeddings == 1 and node.core.people.names() == ["Alice"]
+        assert node._service_refusals["add_person"] == 13 and node._service_calls["add_person"] == 14
+    finally:
         node.destroy_node()
 
 

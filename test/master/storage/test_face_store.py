@@ -530,3 +530,24 @@ def test_a_store_from_before_spaces_is_the_dlib_space(db: Path) -> None:
         FaceStore(db, embedding_space="sface_2021dec")
     with FaceStore(db) as store:
         assert store.embedding_space == "dlib_resnet_v1" and len(store.load_faces()) == 1
+
+
+def test_cli_never_prints_raw_control_characters_and_refuses_them(db: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    import sqlite3
+
+    _cli_store(db)
+    hostile = "Ann\n     9  Mallory  1  1  x  y\x1b[2J" + "z" * 1000  # written by an older version
+    conn = sqlite3.connect(db)
+    with conn:
+        conn.execute("UPDATE faces SET name = ? WHERE face_id = 1", (hostile,))
+    conn.close()
+    assert cli_main(["--db", str(db), "list"]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and len(out.splitlines()) == 5  # header, 3 rows, count
+    assert cli_main(["--db", str(db), "rename", "2", "Eve\nroot"]) == 2
+    assert "control characters" in capsys.readouterr().err
+    with FaceStore(db) as store:
+        with pytest.raises(ValueError, match="more than 64"):
+            store.set_name(2, "x" * 1_000_000)
+        assert [s.name for s in store.list_faces()][1] is None
