@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,6 +31,7 @@ from face_reid_camera.common.embedding_spaces import (
     SFACE_SPACE,
     embedder_space,
     extract_space,
+    plausible_norms,
     space_dim,
 )
 from face_reid_camera.common.param_table import param, validate_fields
@@ -86,6 +88,12 @@ class MasterConfig:
                                    low=0.0, high=86400.0)
     max_stamp_future_s: float = param(2.0, "Frames newer than this vs the clock are rejected (s).",
                                       low=0.0, high=86400.0)
+    max_people_per_frame: int = param(
+        200, "Frames with more people are rejected whole (count; a camera sees a few dozen at most).", low=1,
+        high=100000)
+    max_camera_rate_hz: float = param(
+        100.0, "Frames of one camera beyond this many in one second are rejected (Hz; cameras send <= 30-60).",
+        low=1.0, high=100000.0)
     min_face_quality: float = param(0.0, "Embeddings with lower face quality are ignored (0..1).", low=0.0, high=1.0)
     publish_tentative: bool = param(False, "Also publish tracks not confirmed yet (bool).")
     save_interval_s: float = param(30.0, "Faces with new embeddings are saved at least this often (s).",
@@ -211,12 +219,17 @@ class MasterStats:
     frames_rejected_future: int = 0
     frames_rejected_bad_stamp: int = 0
     frames_rejected_tracker_late: int = 0
+    frames_rejected_too_many_people: int = 0
+    frames_rejected_camera_rate: int = 0
+    frames_future_clamped: int = 0  # stamped ahead of the master's clock (within max_stamp_future_s): applied at it
+    clock_jumps_back: int = 0  # the master's own clock went back: the tracker started afresh
     detections_received: int = 0
     detections_rejected_position: int = 0
     embeddings_used: int = 0
     embeddings_rejected_length: int = 0
     embeddings_rejected_space: int = 0
     embeddings_rejected_nonfinite: int = 0
+    embeddings_rejected_norm: int = 0  # lengths no embedder of the space produces
     embeddings_skipped_quality: int = 0
     bodies_received: int = 0  # detections with well-formed body fields
     bodies_rejected_malformed: int = 0  # body fields with NaN / Inf appearance or out-of-range visibility
@@ -348,6 +361,8 @@ class MasterCore:
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
         self._names: dict[int, str] = {}  # face id -> name from the predefined people
         self._last_stamp = -math.inf
+        self._last_now_s = -math.inf  # the caller's clock at the last frame (live)
+        self._camera_frames: dict[str, deque[float]] = {}  # camera -> its frames' times in the last second
         self._last_prune_s = -math.inf
         self._pairs_saved: tuple[int, float] = (0, -math.inf)  # pool version and stamp of the last pair save
         if store is not None:
@@ -374,6 +389,13 @@ class MasterCore:
             st.frames_rejected_unknown_camera += 1
             return FrameOutcome(False, "empty camera id" if frame.camera_id == "" else "camera id is not a str",
                                 "unknown_camera")
+        if len(frame.people) > cfg.max_people_per_frame:
+            st.frames_rejected_too_many_people += 1
+            return FrameOutcome(False, f"{len(frame.people)} people in one frame (> max_people_per_frame)",
+                                "too_many_people")
+        if not self._camera_rate_ok(frame.camera_id, stamp if now_s is None else now_s):
+            st.frames_rejected_camera_rate += 1
+            return FrameOutcome(False, f"camera sends more than {cfg.max_camera_rate_hz:g} frames/s", "camera_rate")
         if now_s is not None:
             if stamp < now_s - cfg.max_stamp_age_s:
                 st.frames_rejected_stale += 1
@@ -383,9 +405,18 @@ class MasterCore:
                 st.frames_rejected_future += 1
                 return FrameOutcome(False, f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)",
                                     "future_stamp")
+            if now_s < self._last_now_s - self.config.tracker.max_detection_delay_s:  # our own clock went back
+                st.clock_jumps_back += 1
+                self._identity_step(self.tracker.reset(), now_s, (), ())
+                self._last_stamp = -math.inf
+            self._last_now_s = now_s
+            if stamp > now_s:  # no camera moves the tracker clock past the master's: others' frames stay on time
+                st.frames_future_clamped += 1
+                stamp = now_s
 
         positions, stds, heights, appearance, embeddings, person_index = self._detections(frame)
-        result = self.tracker.update_arrays(positions, stds, heights, stamp, frame.camera_id, appearance)
+        result = self.tracker.update_arrays(positions, stds, heights, stamp, frame.camera_id, appearance,
+                                            resync_backward=now_s is None)
         if result.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             st.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})", "tracker_late")
@@ -420,6 +451,23 @@ class MasterCore:
         notices, self._notices = tuple(self._notices), []
         return FrameOutcome(True, track_of_person=track_of_person, tracks_created=tuple(result.created),
                             tracks_deleted=tuple(result.deleted), identity_events=tuple(events), notices=notices)
+
+    def _camera_rate_ok(self, camera_id: str, now_s: float) -> bool:
+        """Whether the camera sent fewer than ``max_camera_rate_hz`` frames in the second before ``now_s``
+        (then this one is counted); at most 1024 cameras are remembered (the least recent go first)."""
+        times = self._camera_frames.get(camera_id)
+        if times is None:
+            if len(self._camera_frames) >= 1024:
+                oldest = min(self._camera_frames, key=lambda c: self._camera_frames[c][-1]
+                             if self._camera_frames[c] else -math.inf)
+                del self._camera_frames[oldest]
+            times = self._camera_frames[camera_id] = deque()
+        while times and (times[0] <= now_s - 1.0 or times[0] > now_s + 1.0):
+            times.popleft()
+        if len(times) >= self.config.max_camera_rate_hz:
+            return False
+        times.append(now_s)
+        return True
 
     def tick(self, now_s: float) -> None:
         """Advance time without a frame (tracks time out, released faces are saved)."""
@@ -482,11 +530,15 @@ class MasterCore:
             return *tracker_input, embeddings, person_index
         stacked = np.stack([v for _, _, v in good_len])
         finite = np.isfinite(stacked).all(axis=1)
+        plausible = np.zeros_like(finite)
+        plausible[finite] = plausible_norms(stacked[finite], cfg.embedding_space)
+        st.embeddings_rejected_norm += int(np.count_nonzero(finite & ~plausible))
+        stacked = self.likelihood.scale(stacked)
         quality = np.array([people[i].face_quality for _, i, _ in good_len], dtype=np.float64)
         good_quality = quality >= cfg.min_face_quality
         st.embeddings_rejected_nonfinite += int(np.count_nonzero(~finite))
-        st.embeddings_skipped_quality += int(np.count_nonzero(finite & ~good_quality))
-        for row in np.flatnonzero(finite & good_quality):
+        st.embeddings_skipped_quality += int(np.count_nonzero(plausible & ~good_quality))
+        for row in np.flatnonzero(plausible & good_quality):
             eye = float(people[good_len[row][1]].face_eye_distance_px)
             embeddings[good_len[row][0]] = (stacked[row], np.array([eye if math.isfinite(eye) and eye > 0 else 0.0]))
         return *tracker_input, embeddings, person_index
@@ -543,7 +595,8 @@ class MasterCore:
                                  "cameras' body_projection_path and face-reid-fit-body)")
 
     def _in_space(self, person: Any, camera_id: str) -> NDArray[np.float32] | None:
-        """The person's embedding in the master's space (part of a joint one is fine); None: another space.
+        """The person's embedding in the master's space (part of a joint one is fine; not yet weighted by the
+        likelihood's component scale); None: another space.
 
         An empty array for a length that does not match its space. The first embedding of a space the master
         cannot use, per camera, becomes a notice for the node to log."""
@@ -553,9 +606,7 @@ class MasterCore:
         try:
             if space != want and values.size != space_dim(space):
                 return np.zeros(0, dtype=np.float32)
-            part = extract_space(values, space, want)
-            if part is not None:
-                part = self.likelihood.scale(part)
+            part = extract_space(values, space, want)  # scaled by the likelihood's weights once checked
             why = f"its face embeddings are of space {space[:64]!r}, this master compares {want!r}"
         except ValueError as exc:
             part, why = None, f"its face embeddings are unusable ({exc})"

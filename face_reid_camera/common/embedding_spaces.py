@@ -7,6 +7,7 @@ that order (what ``embedder: both`` sends), so a master of one component can sti
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -23,27 +24,32 @@ __all__ = [
     "embedder_space",
     "extract_space",
     "parse_space",
+    "plausible_norms",
     "space_dim",
 ]
 
 
 @dataclass(frozen=True)
 class EmbeddingSpace:
-    """One embedder's output space: ``space_id`` (network + version), length, whether rows are unit vectors."""
+    """One embedder's output space: ``space_id`` (network + version), length, whether rows are unit vectors,
+    and the range of lengths (L2 norms) its rows can plausibly have (others are forged or broken)."""
 
     space_id: str
     dim: int
     unit_norm: bool
     description: str
+    norm_range: tuple[float, float] = (0.0, math.inf)
 
 
 DLIB_SPACE = "dlib_resnet_v1"
 SFACE_SPACE = "sface_2021dec"
 SPACES: dict[str, EmbeddingSpace] = {
     DLIB_SPACE: EmbeddingSpace(DLIB_SPACE, 128, False,
-                               "dlib_face_recognition_resnet_model_v1, raw 128-d (same person: L2 < ~0.6)"),
+                               "dlib_face_recognition_resnet_model_v1, raw 128-d (same person: L2 < ~0.6)",
+                               (0.5, 3.0)),  # real faces: 1.2-1.65 (test photos and simulated camera views)
     SFACE_SPACE: EmbeddingSpace(SFACE_SPACE, 128, True,
-                                "OpenCV Zoo SFace 2021dec, 128-d scaled to unit length (L2 = sqrt(2 - 2 cos))"),
+                                "OpenCV Zoo SFace 2021dec, 128-d scaled to unit length (L2 = sqrt(2 - 2 cos))",
+                                (0.9, 1.1)),  # unit length; the simulator's noisy views: 0.98-1.04
 }
 # The camera's ``embedder`` parameter: which networks run, in the order their values are concatenated.
 EMBEDDER_CHOICES: dict[str, tuple[str, ...]] = {
@@ -82,6 +88,18 @@ def parse_space(space: str) -> tuple[EmbeddingSpace, ...]:
     if len(set(names)) != len(names):
         raise ValueError(f"embedding space {space[:128]!r} repeats a component")
     return tuple(SPACES[n] for n in names)
+
+
+def plausible_norms(rows: NDArray[np.floating], space: str) -> NDArray[np.bool_]:
+    """Per row of ``rows`` (n, dim) of ``space``: whether every component's length lies in its embedder's
+    :attr:`EmbeddingSpace.norm_range`."""
+    ok = np.ones(rows.shape[0], dtype=bool)
+    start = 0
+    for part in parse_space(space):
+        norms = np.linalg.norm(rows[:, start:start + part.dim], axis=1)
+        ok &= (norms >= part.norm_range[0]) & (norms <= part.norm_range[1])
+        start += part.dim
+    return ok
 
 
 def space_dim(space: str) -> int:

@@ -270,7 +270,8 @@ class MasterNode(ManagedNode):
             "camera_topics": len(self._subscribed),
             "frames_applied": stats["frames_applied"],
         }
-        extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "embeddings_rejected",
+        extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
+                                                                       "embeddings_rejected",
                                                                        "detections_rejected", "bodies_", "body_"))})
         extra.update({f"{k}_calls": v for k, v in self._service_calls.items()})
         extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})

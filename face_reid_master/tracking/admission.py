@@ -50,8 +50,10 @@ class Clock:
         self._reject_run = 0
         self._reject_dir = 0  # +1 future, -1 late
 
-    def admit(self, stamp: float) -> Admission:
-        """Classify ``stamp``; does not move the clock (see :meth:`follow`)."""
+    def admit(self, stamp: float, resync_backward: bool = True) -> Admission:
+        """Classify ``stamp``; does not move the clock (see :meth:`follow`). ``resync_backward`` False: late
+        stamps never re-base the clock (the caller checks stamps against a clock of its own: a camera that
+        lags is refused, it cannot make the tracker start afresh)."""
         if self.now is None:
             self._reject_run = 0
             return _APPLIED
@@ -64,7 +66,7 @@ class Clock:
             return _APPLIED_LATE if stamp < self.now else _APPLIED
         self._reject_run = self._reject_run + 1 if direction == self._reject_dir else 1
         self._reject_dir = direction
-        if self._resync_frames and self._reject_run >= self._resync_frames:
+        if self._resync_frames and self._reject_run >= self._resync_frames and (direction > 0 or resync_backward):
             self._reject_run = 0
             # forward: an idle gap, time simply passed (lifecycle timeouts apply normally);
             # backward: time went back, start afresh

@@ -129,17 +129,19 @@ class Tracker:
 
     def update_arrays(
         self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str,
-        appearance: NDArray[np.float32] | None = None,
+        appearance: NDArray[np.float32] | None = None, resync_backward: bool = True,
     ) -> UpdateResult:
         """Fuse one camera frame seen by ``camera_id`` at ``stamp_s`` (seconds).
 
         ``positions`` (N, 2) world ground-plane positions, ``stds`` (N,) their isotropic stds,
         ``heights`` (N,) head heights (nan = unknown), all validated by the caller; ``appearance`` (N, r):
         body-appearance embeddings in the learned metric's space (NaN rows = not described; None = none).
-        Detection indices in the result are rows of these arrays.  ValueError on a non-finite stamp.
+        ``resync_backward`` False: a run of late frames is refused, never taken for a clock jump back (which
+        deletes every track). Detection indices in the result are rows of these arrays.  ValueError on a
+        non-finite stamp.
         """
         stamp = check_stamp(stamp_s)
-        status, resync, deleted_by_reset = self._admit(stamp)
+        status, resync, deleted_by_reset = self._admit(stamp, resync_backward)
         if status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             return UpdateResult(stamp, camera_id, status)
         stats = self._stats
@@ -248,9 +250,9 @@ class Tracker:
         return out
 
     # ------------------------------------------------------------------ steps of update_arrays
-    def _admit(self, stamp: float) -> tuple[FrameStatus, bool, tuple[int, ...]]:
+    def _admit(self, stamp: float, resync_backward: bool = True) -> tuple[FrameStatus, bool, tuple[int, ...]]:
         """Admit the stamp (admission.Clock), count it; on a backward clock jump delete everything."""
-        verdict = self._clock.admit(stamp)
+        verdict = self._clock.admit(stamp, resync_backward)
         stats = self._stats
         if verdict.status is FrameStatus.REJECTED_FUTURE:
             stats.frames_rejected_future += 1

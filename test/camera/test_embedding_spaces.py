@@ -49,3 +49,17 @@ def test_extract_takes_the_wanted_component_of_a_joint_embedding() -> None:
     # a single-network embedding cannot give another network's values, nor the joint space
     assert extract_space(joint[:128], DLIB_SPACE, SFACE_SPACE) is None
     assert extract_space(joint[:128], DLIB_SPACE, JOINT) is None
+
+
+def test_plausible_norms_checks_each_component_of_a_joint_space() -> None:
+    from face_reid_camera.common.embedding_spaces import plausible_norms
+
+    rng = np.random.default_rng(0)
+    dlib = rng.normal(size=128)
+    dlib *= 1.4 / np.linalg.norm(dlib)
+    sface = rng.normal(size=128)
+    sface /= np.linalg.norm(sface)
+    rows = np.stack([np.concatenate([dlib, sface]), np.concatenate([dlib * 100, sface]),
+                     np.concatenate([dlib, sface * 0.5]), np.zeros(256)])
+    assert plausible_norms(rows, JOINT).tolist() == [True, False, False, False]
+    assert plausible_norms(rows[:, :128], DLIB_SPACE).tolist() == [True, False, True, False]
