@@ -14,6 +14,7 @@ Bad input never raises: malformed frames and detections are rejected, counted in
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from collections import deque
@@ -62,6 +63,8 @@ def _derived(name: str, configured: float, derived: float | None) -> float:
     return derived
 
 
+_PAIRS_SAVE_INTERVAL_S = 30.0  # the online body update's pairs are stored at most this often (s)
+
 @dataclass(frozen=True)
 class MasterConfig:
     """Parameters of the master core (units in the names).
@@ -96,7 +99,8 @@ class MasterConfig:
         low=1.0, high=100000.0)
     min_face_quality: float = param(0.0, "Embeddings with lower face quality are ignored (0..1).", low=0.0, high=1.0)
     publish_tentative: bool = param(False, "Also publish tracks not confirmed yet (bool).")
-    save_interval_s: float = param(30.0, "Faces with new embeddings are saved at least this often (s).",
+    save_interval_s: float = param(1.0, "Faces with new embeddings are saved at least this often (s; a kill -9 "
+                                   "loses at most this much learning).",
                                    low=0.0, high=86400.0)
     name_update_interval_s: float = 0.5
     prune_interval_s: float = 60.0
@@ -674,11 +678,12 @@ class MasterCore:
             self._pairs_saved = (online.pool.version, -math.inf)
 
     def _save_body_pairs(self, stamp: float, force: bool = False) -> None:
-        """Persist the online update's pairs when they changed (at most every save_interval_s unless forced)."""
+        """Persist the online update's pairs when they changed (at most every _PAIRS_SAVE_INTERVAL_S or
+        save_interval_s, the longer, unless forced: pairs can be mined again, faces cannot)."""
         online, save = self.online_metric, getattr(self.store, "save_body_pairs", None)
         if online is None or save is None or online.pool.version == self._pairs_saved[0]:
             return
-        if not force and stamp - self._pairs_saved[1] < self.config.save_interval_s:
+        if not force and stamp - self._pairs_saved[1] < max(self.config.save_interval_s, _PAIRS_SAVE_INTERVAL_S):
             return
         self._pairs_saved = (online.pool.version, stamp)
         try:
@@ -692,9 +697,9 @@ class MasterCore:
         if self.store is not None and stamp - self._last_prune_s >= cfg.prune_interval_s:
             self._last_prune_s = stamp
             self._prune_unnamed(stamp)
-        for fid, since in list(self._dirty_faces.items()):
-            if stamp - since >= cfg.save_interval_s:
-                self._save_face(fid)
+        due = [fid for fid, since in self._dirty_faces.items() if stamp - since >= cfg.save_interval_s]
+        if due:
+            self._save_faces(due)
         for fid in set(self.identity.assigned_tracks().values()):
             if stamp - self._name_checked.get(fid, -math.inf) >= cfg.name_update_interval_s:
                 self._name_checked[fid] = stamp
@@ -712,15 +717,19 @@ class MasterCore:
                 self._save_face(fid)
 
     def _save_face(self, face_id: int) -> None:
-        self._dirty_faces.pop(face_id, None)
-        if self.store is None:
+        self._save_faces([face_id])
+
+    def _save_faces(self, face_ids: list[int]) -> None:
+        """Write faces to the store in one transaction (one fsync however many)."""
+        faces = []
+        for fid in face_ids:
+            self._dirty_faces.pop(fid, None)
+            with contextlib.suppress(KeyError):
+                faces.append(self.identity.export_face(fid))
+        if self.store is None or not faces:
             return
         try:
-            face = self.identity.export_face(face_id)
-        except KeyError:
-            return
-        try:
-            self.store.save_face(face)
+            self.store.save_faces(faces)
         except Exception:  # the store logs; identity keeps working in memory
             self.stats.store_errors += 1
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import errno
 import fcntl
 import logging
 import math
@@ -58,6 +59,8 @@ SCHEMA_VERSION = 1
 _FILE_MODE = 0o600
 _DIR_MODE = 0o700
 _SIDECARS = ("-wal", "-shm")
+_LEDGER_SUFFIX = ".ids"  # face ids ever saved (no biometric data): lost rows are detected, ids never reused
+_LEDGER_FORMAT = "face_reid_ids/1"
 _DEFAULT_DIM = 128
 _LEGACY_SPACE = "dlib_resnet_v1"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -167,6 +170,7 @@ class FaceStore:
         embedding_space: str | None = "dlib_resnet_v1",
         synchronous: str = "FULL",
         create: bool = True,
+        read_only: bool = False,
     ) -> None:
         if not isinstance(path, (str, Path)) or str(path) in ("", ":memory:"):
             raise ValueError(f"path must be a file path, got {path!r}")
@@ -189,16 +193,24 @@ class FaceStore:
             raise ValueError(f"embedding_space must be a non-empty str or None, got {embedding_space!r}")
         self.embedding_space: str = embedding_space or ""  # "": take the store's
         self.synchronous = synchronous
+        self.read_only = bool(read_only)
         self.recovered_from: Path | None = None  # set when a corrupt file was moved aside at open
+        self.lost_face_ids: list[int] = []  # saved once, missing from the database at open (reported loudly)
+        self._ledger_ids: set[int] = set()
+        self._ledger_max = 0
         self._lock_fd: int | None = None
         self._conn: sqlite3.Connection | None = None
-        if not create and not self.path.exists():
+        if (not create or self.read_only) and not os.path.lexists(self.path):
             raise FaceStoreError(f"no face store at {self.path}")
         self._ensure_parent()
         self._open_locked_file()
         try:
             self._conn = self._connect_and_validate()
         except _CorruptStore as exc:
+            if self.read_only:
+                self._release_lock()
+                raise FaceStoreError(f"face store {self.path} is damaged ({exc}); left as it is (the master moves "
+                                     "it aside when it starts)") from None
             try:
                 self._recover(str(exc))
             except OSError as exc2:
@@ -214,28 +226,47 @@ class FaceStore:
         except BaseException:
             self._release_lock()
             raise
-        self._secure_sidecars()
+        if not self.read_only:
+            self._secure_sidecars()
+        self._check_ledger()
 
     # ------------------------------------------------------------------------------ opening
     def _ensure_parent(self) -> None:
         parent = self.path.parent
-        if not parent.exists():
+        if not parent.exists() and not self.read_only:
             parent.mkdir(mode=_DIR_MODE, parents=True, exist_ok=True)
             os.chmod(parent, _DIR_MODE)  # mkdir's mode is filtered by the umask
+        with contextlib.suppress(FileNotFoundError):
+            mode = stat.S_IMODE(os.stat(parent).st_mode)
+            if mode & 0o022:
+                raise FaceStoreError(
+                    f"face store directory {parent} can be written by other users (mode {mode:o}): they could "
+                    "replace or link the database and its -wal; keep it in a private directory (e.g. mode 700)")
 
     def _open_locked_file(self) -> None:
-        """Create (0600) or open the file, fix broader permissions, take the exclusive process lock."""
-        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0)
+        """Create (0600) or open the file (never through a symlink, only our own), fix broader permissions, take
+        the process lock (exclusive; shared when read-only)."""
+        flags = os.O_RDONLY if self.read_only else os.O_RDWR | os.O_CREAT
+        flags |= os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
         try:
             fd = os.open(self.path, flags, _FILE_MODE)
         except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise FaceStoreError(f"face store {self.path} is a symbolic link: give the real path (a link "
+                                     "could send the biometric data anywhere)") from None
             raise FaceStoreError(f"cannot open face store {self.path}: {exc}") from exc
         try:
             info = os.fstat(fd)
             if not stat.S_ISREG(info.st_mode):
                 raise FaceStoreError(f"face store {self.path} is not a regular file")
+            if info.st_uid != os.geteuid():
+                raise FaceStoreError(f"face store {self.path} belongs to user id {info.st_uid}, not to this user "
+                                     f"({os.geteuid()}): refused")
             mode = stat.S_IMODE(info.st_mode)
-            if mode & ~_FILE_MODE:
+            if mode & ~_FILE_MODE and self.read_only:
+                _LOG.warning("face store %s has permissions %o, broader than 600 for biometric data (left as "
+                             "they are: read-only)", self.path, mode)
+            elif mode & ~_FILE_MODE:
                 try:
                     os.fchmod(fd, _FILE_MODE)
                 except OSError as exc:
@@ -248,7 +279,7 @@ class FaceStore:
                     mode,
                 )
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, (fcntl.LOCK_SH if self.read_only else fcntl.LOCK_EX) | fcntl.LOCK_NB)
             except BlockingIOError as exc:
                 raise FaceStoreLockedError(
                     f"face store {self.path} is in use by another process (is the master node running?)"
@@ -272,7 +303,10 @@ class FaceStore:
             # (An empty file is fine: a new store, or one whose whole content is still in the WAL.)
             raise _CorruptStore("not an SQLite database (bad header)")
         try:
-            conn = sqlite3.connect(self.path, isolation_level=None, timeout=5.0)
+            if self.read_only:
+                conn = sqlite3.connect(f"{self.path.as_uri()}?mode=ro", uri=True, isolation_level=None, timeout=5.0)
+            else:
+                conn = sqlite3.connect(self.path, isolation_level=None, timeout=5.0)
         except sqlite3.Error as exc:
             raise FaceStoreError(f"cannot open face store {self.path}: {exc}") from exc
         try:
@@ -281,8 +315,9 @@ class FaceStore:
             conn.execute("PRAGMA foreign_keys=ON")
             conn.execute("PRAGMA trusted_schema=OFF")
             self._validate_or_init(conn)
-            self._enable_wal(conn)
-            conn.execute(f"PRAGMA synchronous={self.synchronous}")
+            if not self.read_only:
+                self._enable_wal(conn)
+                conn.execute(f"PRAGMA synchronous={self.synchronous}")
         except BaseException:
             conn.close()
             raise
@@ -306,6 +341,8 @@ class FaceStore:
                 for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
                 if not str(r[0]).startswith("sqlite_")
             }
+            if not tables and self.read_only:
+                raise _CorruptStore("an empty file, not a face store")
             if not tables:
                 if not self.embedding_dim:
                     self.embedding_dim = _DEFAULT_DIM
@@ -323,7 +360,7 @@ class FaceStore:
             dim = meta.get("embedding_dim")
             if not self.embedding_dim:  # embedding_dim=None: adopt the store's (tools such as the CLI)
                 self.embedding_dim = int(dim) if dim is not None and dim.isdigit() and int(dim) > 0 else _DEFAULT_DIM
-            if dim is None:
+            if dim is None and not self.read_only:
                 self._set_meta(conn, "embedding_dim", str(self.embedding_dim))
             elif dim != str(self.embedding_dim):
                 raise FaceStoreError(
@@ -333,7 +370,7 @@ class FaceStore:
             space = meta.get("embedding_space")
             if space is None:  # written before spaces were recorded: the dlib embedder was the only one
                 space = _LEGACY_SPACE
-                if not self.embedding_space or self.embedding_space == space:
+                if (not self.embedding_space or self.embedding_space == space) and not self.read_only:
                     self._set_meta(conn, "embedding_space", space)
             if not self.embedding_space:
                 self.embedding_space = space
@@ -388,6 +425,77 @@ class FaceStore:
             with contextlib.suppress(FileNotFoundError):
                 if stat.S_IMODE(side.stat().st_mode) & ~_FILE_MODE:
                     os.chmod(side, _FILE_MODE)
+
+    # ------------------------------------------------------------------------------ id ledger
+    @property
+    def ledger_path(self) -> Path:
+        """The sidecar listing the face ids saved (ids only): lost database rows are detected with it and face
+        ids are never reused, even when the database lost its last writes or was replaced."""
+        return Path(str(self.path) + _LEDGER_SUFFIX)
+
+    def _check_ledger(self) -> None:
+        """Compare the database with the ledger: report faces it lost (loudly), keep the id high-water mark."""
+        ledger_max, ledger_ids = self._read_ledger()
+        stored = set(self.face_ids())
+        self.lost_face_ids = sorted(ledger_ids - stored)
+        self._ledger_max = max(ledger_max, self._meta_max_face_id(), max(stored, default=0))
+        if self.lost_face_ids:
+            _LOG.error(
+                "FACE STORE LOST FACES: %s: faces %s were saved but are not in the database (its last writes were "
+                "lost: a damaged or deleted -wal, or a replaced file); new faces get ids above %d, never these",
+                self.path, ", ".join(map(str, self.lost_face_ids[:50])), self._ledger_max)
+        self._ledger_ids = stored
+        if not self.read_only and (ledger_ids != stored or ledger_max != self._ledger_max):
+            self._write_ledger()
+
+    def _read_ledger(self) -> tuple[int, set[int]]:
+        try:
+            fd = os.open(self.ledger_path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+        except FileNotFoundError:
+            return 0, set()
+        except OSError as exc:
+            _LOG.error("face store %s: cannot read the id ledger %s (%s): lost faces cannot be detected",
+                       self.path, self.ledger_path, exc)
+            return 0, set()
+        with os.fdopen(fd, "r", encoding="ascii", errors="replace") as f:
+            lines = f.read(10_000_000).splitlines()
+        try:
+            if lines[0] != _LEDGER_FORMAT:
+                raise ValueError(f"unknown format {lines[0][:40]!r}")
+            return int(lines[1].split()[1]), {int(v) for v in lines[2].split()[1:]}
+        except (IndexError, ValueError) as exc:
+            _LOG.error("face store %s: the id ledger %s is damaged (%s): lost faces cannot be detected this time",
+                       self.path, self.ledger_path, exc)
+            return 0, set()
+
+    def _write_ledger(self) -> None:
+        """Replace the ledger atomically (temporary file, fsync, rename, directory fsync)."""
+        text = f"{_LEDGER_FORMAT}\nmax {self._ledger_max}\nids {' '.join(map(str, sorted(self._ledger_ids)))}\n"
+        tmp = Path(str(self.ledger_path) + ".tmp")
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0),
+                         _FILE_MODE)
+            with os.fdopen(fd, "w", encoding="ascii") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.ledger_path)
+            dfd = os.open(self.path.parent, os.O_RDONLY)
+            try:
+                os.fsync(dfd)
+            finally:
+                os.close(dfd)
+        except OSError as exc:
+            raise FaceStoreError(f"face store {self.path}: cannot write the id ledger: {exc}") from exc
+
+    def _note_saved(self, face_ids: Iterable[int]) -> None:
+        new = set(face_ids) - self._ledger_ids
+        if new:
+            self._ledger_ids |= new
+            self._ledger_max = max(self._ledger_max, *new)
+            self._write_ledger()
 
     # ------------------------------------------------------------------------------ helpers
     @property
@@ -453,6 +561,8 @@ class FaceStore:
             if self._has_body_pairs(conn):
                 conn.executemany("DELETE FROM body_pairs WHERE face_a = ? OR face_b = ?", [(f, f) for f in face_ids])
             conn.executemany("DELETE FROM faces WHERE face_id = ?", [(f,) for f in face_ids])
+        self._ledger_ids -= set(face_ids)
+        self._write_ledger()
         self._scrub_wal()
 
     @staticmethod
@@ -480,6 +590,7 @@ class FaceStore:
         rows = self._encode(face)
         with self._transaction() as conn:
             self._write_face(conn, face, rows)
+        self._note_saved([face.face_id])
 
     def save_body_pairs(self, rows: Iterable[tuple[Any, bool, int, int, float]], subspace: str) -> int:
         """Replace the stored body pairs of the online metric update with ``rows`` (difference vector,
@@ -527,6 +638,7 @@ class FaceStore:
         with self._transaction() as conn:
             for face, rows in batch:
                 self._write_face(conn, face, rows)
+        self._note_saved(ids)
         return len(batch)
 
     def load_faces(self) -> list[LearnedFace]:
@@ -570,7 +682,11 @@ class FaceStore:
         return [int(r[0]) for r in self._db.execute("SELECT face_id FROM faces ORDER BY face_id")]
 
     def max_face_id(self) -> int:
-        """Largest face id ever saved in this store (also after it was forgotten); 0 if none."""
+        """Largest face id ever saved in this store (also after it was forgotten, or lost: the ledger); 0 if
+        none."""
+        return max(self._meta_max_face_id(), self._ledger_max)
+
+    def _meta_max_face_id(self) -> int:
         row = self._db.execute("SELECT value FROM meta WHERE key = 'max_face_id'").fetchone()
         return 0 if row is None else int(row[0])
 
@@ -641,8 +757,9 @@ class FaceStore:
         """Checkpoint, close the database and release the process lock (idempotent)."""
         if self._conn is not None:
             try:
-                with contextlib.suppress(sqlite3.Error):
-                    self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                if not self.read_only:
+                    with contextlib.suppress(sqlite3.Error):
+                        self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
                 self._conn.close()
             finally:
                 self._conn = None

@@ -143,7 +143,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         logging.basicConfig(level=logging.WARNING, format=f"{PROG}: %(levelname)s: %(message)s")
     path = args.db if args.db is not None else default_db_path()
     try:
-        with FaceStore(path, create=False, embedding_dim=None) as store:
+        with FaceStore(path, create=False, embedding_dim=None, embedding_space=None,
+                       read_only=args.command == "list") as store:
             if store.recovered_from is not None:
                 print(
                     f"{PROG}: warning: the store was corrupt and has been moved to {store.recovered_from}; "

@@ -551,3 +551,72 @@ def test_cli_never_prints_raw_control_characters_and_refuses_them(db: Path,
         with pytest.raises(ValueError, match="more than 64"):
             store.set_name(2, "x" * 1_000_000)
         assert [s.name for s in store.list_faces()][1] is None
+
+
+# ------------------------------------------------------------------------------------------------ issue 12, item 5
+def test_a_symlinked_path_or_a_directory_others_can_write_is_refused(tmp_path: Path) -> None:
+    import os
+
+    target = tmp_path / "elsewhere.db"
+    target.write_bytes(b"")
+    os.chmod(target, 0o644)
+    private = tmp_path / "private"
+    private.mkdir(mode=0o700)
+    (private / "faces.db").symlink_to(target)
+    with pytest.raises(FaceStoreError, match="symbolic link"):
+        FaceStore(private / "faces.db")
+    assert (target.stat().st_mode & 0o777) == 0o644  # before: followed, and its target chmodded
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    os.chmod(shared, 0o777)
+    with pytest.raises(FaceStoreError, match="written by other users"):
+        FaceStore(shared / "faces.db")
+    assert not (shared / "faces.db").exists()
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "geteuid") or __import__("os").geteuid() != 0,
+                    reason="giving a file to another user needs root")
+def test_a_database_of_another_user_is_refused(db: Path) -> None:
+    import os
+
+    FaceStore(db).close()
+    os.chown(db, 12345, 12345)
+    with pytest.raises(FaceStoreError, match="belongs to user id 12345"):
+        FaceStore(db)
+
+
+def test_listing_never_moves_or_changes_a_damaged_database(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _cli_store(db)
+    data = bytearray(db.read_bytes())
+    data[100:4096] = b"\xa5" * (4096 - 100)  # the schema page is garbage now
+    db.write_bytes(bytes(data))
+    assert cli_main(["--db", str(db), "list"]) != 0
+    assert "damaged" in capsys.readouterr().err
+    assert db.read_bytes() == bytes(data)  # before: moved to faces.db.corrupt-<time> and a fresh store made
+    assert not [p for p in db.parent.iterdir() if "corrupt" in p.name]
+
+
+def test_faces_lost_with_the_wal_are_reported_and_their_ids_never_reused(tmp_path: Path,
+                                                                         caplog: pytest.LogCaptureFixture) -> None:
+    import shutil
+
+    live, crashed = tmp_path / "live", tmp_path / "crashed"
+    live.mkdir(mode=0o700)
+    crashed.mkdir(mode=0o700)
+    store = FaceStore(live / "faces.db")
+    for fid in range(1, 5):  # four faces, one commit each, all still in the WAL
+        store.save_face(LearnedFace(fid, _feats(fid, 3), None, 1.0 * fid, 1.0 * fid, 3))
+    for name in ("faces.db", "faces.db-wal", "faces.db.ids"):  # the files as a kill -9 leaves them
+        shutil.copy(live / name, crashed / name)
+    store.close()
+    wal = bytearray((crashed / "faces.db-wal").read_bytes())
+    cut = int(len(wal) * 0.6)
+    wal[cut:cut + 64] = bytes(64)  # 64 corrupt bytes: SQLite drops this frame and every later one, silently
+    (crashed / "faces.db-wal").write_bytes(bytes(wal))
+    with caplog.at_level("ERROR"), FaceStore(crashed / "faces.db") as damaged:
+        kept = damaged.face_ids()
+        assert kept and len(kept) < 4 and damaged.lost_face_ids == [f for f in range(1, 5) if f not in kept]
+        assert damaged.max_face_id() == 4  # before: the counter went back with the rows (ids reused)
+    assert "FACE STORE LOST FACES" in caplog.text and str(damaged.lost_face_ids[-1]) in caplog.text
+    with FaceStore(crashed / "faces.db") as reopened:  # reported once; the counter stays
+        assert reopened.lost_face_ids == [] and reopened.max_face_id() == 4
