@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.common.checks import check_real, is_finite_number
+from face_reid_camera.common.checks import check_real, is_finite_number, shown
 from face_reid_camera.common.embedding_spaces import (
     DLIB_SPACE,
     EMBEDDER_CHOICES,
@@ -388,7 +388,7 @@ class MasterCore:
             return FrameOutcome(False, "stamp is not a finite number", "bad_stamp")
         if cfg.known_camera_ids and frame.camera_id not in cfg.known_camera_ids:
             st.frames_rejected_unknown_camera += 1
-            return FrameOutcome(False, f"unknown camera id {frame.camera_id!r}", "unknown_camera")
+            return FrameOutcome(False, f"unknown camera id {shown(frame.camera_id, 64)}", "unknown_camera")
         if not isinstance(frame.camera_id, str) or not frame.camera_id:
             st.frames_rejected_unknown_camera += 1
             return FrameOutcome(False, "empty camera id" if frame.camera_id == "" else "camera id is not a str",
@@ -594,7 +594,8 @@ class MasterCore:
         space = space[:64]
         if self._body_space_noticed.get(camera_id) != space:
             self._body_space_noticed[camera_id] = space
-            self._notices.append(f"camera {camera_id!r} sends body descriptors of space {space!r}, the body metric "
+            self._notices.append(f"camera {shown(camera_id, 64)} sends body descriptors of space {space!r}, the body "
+                                 "metric "
                                  f"compares {self.body_metric.space!r}: its bodies are not used for tracking (see the "
                                  "cameras' body_projection_path and face-reid-fit-body)")
 

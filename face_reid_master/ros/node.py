@@ -208,18 +208,19 @@ class MasterNode(ManagedNode):
             self._reject("malformed", f"malformed CameraFrame: {exc}")
             return
         if record.frame_id != self.values["world_frame_id"]:
-            self._reject("frame_id", f"frame from {record.camera_id!r} is in frame {record.frame_id!r}, "
+            self._reject("frame_id", f"frame from {shown(record.camera_id, 64)} is in frame "
+                                     f"{shown(record.frame_id, 64)}, "
                                      f"expected {self.values['world_frame_id']!r}")
             return
         t0 = time.perf_counter()
         outcome = core.process_frame(record, now if self.values["check_stamps_against_clock"] else None)
         if not outcome.accepted:
-            self._reject(outcome.code, f"frame from {record.camera_id!r} rejected: {outcome.reason}")
+            self._reject(outcome.code, f"frame from {shown(record.camera_id, 64)} rejected: {outcome.reason}")
             return
         health.frame_processed((time.perf_counter() - t0) * 1e3, len(record.people),
                                sum(1 for p in record.people if p.embedding is not None))
         for notice in outcome.notices:
-            self.get_logger().warning(notice)
+            self.get_logger().warning(notice[:_MAX_LOG_CHARS])
         for ev in outcome.identity_events:
             self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")
         if self._min_publish_interval_s and now - self._last_publish_s < self._min_publish_interval_s:

@@ -108,7 +108,12 @@ class FaceStoreLockedError(FaceStoreError):
 
 
 class _CorruptStore(Exception):
-    """Internal: the file is not a usable face store (reason in args[0])."""
+    """Internal: the file is not a usable face store (reason in args[0]); ``damaged``: a face store whose file
+    was damaged (its readable faces are worth salvaging), not another format or schema."""
+
+    def __init__(self, reason: str, damaged: bool = False) -> None:
+        super().__init__(reason)
+        self.damaged = damaged
 
 
 @dataclass(frozen=True)
@@ -196,6 +201,7 @@ class FaceStore:
         self.read_only = bool(read_only)
         self.recovered_from: Path | None = None  # set when a corrupt file was moved aside at open
         self.lost_face_ids: list[int] = []  # saved once, missing from the database at open (reported loudly)
+        self.salvaged_face_ids: list[int] = []  # faces read back from a corrupt file moved aside
         self._ledger_ids: set[int] = set()
         self._ledger_max = 0
         self._lock_fd: int | None = None
@@ -204,6 +210,7 @@ class FaceStore:
             raise FaceStoreError(f"no face store at {self.path}")
         self._ensure_parent()
         self._open_locked_file()
+        salvaged: list[LearnedFace] = []
         try:
             self._conn = self._connect_and_validate()
         except _CorruptStore as exc:
@@ -223,12 +230,13 @@ class FaceStore:
             except _CorruptStore as exc2:  # a fresh file must work; anything else is an I/O problem
                 self._release_lock()
                 raise FaceStoreError(f"cannot create a fresh face store at {self.path}: {exc2}") from exc2
+            salvaged = self._salvage(self.recovered_from) if exc.damaged else []
         except BaseException:
             self._release_lock()
             raise
         if not self.read_only:
             self._secure_sidecars()
-        self._check_ledger()
+        self._check_ledger(salvaged)
 
     # ------------------------------------------------------------------------------ opening
     def _ensure_parent(self) -> None:
@@ -335,7 +343,7 @@ class FaceStore:
         try:
             check = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
             if check != ["ok"]:
-                raise _CorruptStore("integrity_check failed: " + "; ".join(str(c) for c in check[:5]))
+                raise _CorruptStore("integrity_check failed: " + "; ".join(str(c) for c in check[:5]), damaged=True)
             tables = {
                 r[0]
                 for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
@@ -382,7 +390,7 @@ class FaceStore:
                     "a joint one containing it), or give db_path another file to start a new memory"
                 )
         except sqlite3.DatabaseError as exc:
-            raise _CorruptStore(f"unreadable database ({exc})") from exc
+            raise _CorruptStore(f"unreadable database ({exc})", damaged=True) from exc
 
     @staticmethod
     def _set_meta(conn: sqlite3.Connection, key: str, value: str) -> None:
@@ -418,6 +426,46 @@ class FaceStore:
         self.recovered_from = backup
         self._open_locked_file()
 
+    def _salvage(self, backup: Path | None) -> list[LearnedFace]:
+        """Every face still readable from the corrupt file moved aside (saved into the fresh store by
+        :meth:`_check_ledger`), said loudly (a damaged index or page rarely takes every face with it)."""
+        if backup is None:
+            return []
+        faces: list[LearnedFace] = []
+        total: int | str = "?"
+        try:
+            conn = sqlite3.connect(f"{backup.as_uri()}?mode=ro", uri=True)
+        except sqlite3.Error:
+            return []
+        try:
+            conn.execute("PRAGMA trusted_schema=OFF")
+            rows = conn.execute("SELECT face_id, name, created_s, last_seen_s, n_observations FROM faces").fetchall()
+            total = len(rows)
+            width = self.embedding_dim * _VECTOR_DTYPE.itemsize
+            for face_id, name, created_s, last_seen_s, n_obs in rows:
+                try:
+                    blobs = [b for (b,) in conn.execute(
+                        "SELECT vector FROM features WHERE face_id = ? ORDER BY idx", (face_id,))]
+                    if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
+                        continue
+                    feats = np.frombuffer(b"".join(blobs), dtype=_VECTOR_DTYPE).reshape(len(blobs), -1)
+                    with contextlib.suppress(ValueError):
+                        name = check_person_name(name) if name is not None else None
+                    face = LearnedFace(int(face_id), feats.astype(np.float32), name if isinstance(name, str) and
+                                       name.isprintable() else None, float(created_s), float(last_seen_s), int(n_obs))
+                    self._encode(face)  # finite, right length
+                    faces.append(face)
+                except (sqlite3.Error, ValueError, TypeError, OverflowError):
+                    continue
+        except sqlite3.Error:
+            pass
+        finally:
+            conn.close()
+        self.salvaged_face_ids = sorted(f.face_id for f in faces)
+        _LOG.error("FACE STORE CORRUPT: %s: recovered %d of %s faces from %s (ids %s)", self.path, len(faces), total,
+                   backup, ", ".join(map(str, self.salvaged_face_ids[:50])) or "none")
+        return faces
+
     def _secure_sidecars(self) -> None:
         """SQLite gives -wal/-shm the database file's mode; enforce 0600 anyway."""
         for suffix in _SIDECARS:
@@ -433,9 +481,14 @@ class FaceStore:
         ids are never reused, even when the database lost its last writes or was replaced."""
         return Path(str(self.path) + _LEDGER_SUFFIX)
 
-    def _check_ledger(self) -> None:
-        """Compare the database with the ledger: report faces it lost (loudly), keep the id high-water mark."""
+    def _check_ledger(self, salvaged: list[LearnedFace]) -> None:
+        """Compare the database with the ledger: report faces it lost (loudly), keep the id high-water mark;
+        the ``salvaged`` faces of a corrupt file are written first."""
         ledger_max, ledger_ids = self._read_ledger()
+        if salvaged:
+            with self._transaction() as conn:
+                for face in salvaged:
+                    self._write_face(conn, face, self._encode(face))
         stored = set(self.face_ids())
         self.lost_face_ids = sorted(ledger_ids - stored)
         self._ledger_max = max(ledger_max, self._meta_max_face_id(), max(stored, default=0))

@@ -84,3 +84,9 @@ def test_crowds_floods_and_forged_embeddings_are_refused_and_counted() -> None:
     for k, emb in enumerate((real, *forged)):
         core.process_frame(CameraFrameRecord("cam_c", 3.0 + k, (_person(0.0, emb),)), now_s=3.0 + k)
     assert core.stats.embeddings_rejected_norm == 3 and core.stats.embeddings_used == 1
+
+
+def test_a_huge_camera_id_is_cut_and_escaped_in_what_is_logged() -> None:
+    core = _core(known_camera_ids=("cam_a",))
+    out = core.process_frame(CameraFrameRecord("\x1b[2J" + "x" * 100_000, 0.0, ()), now_s=0.0)
+    assert not out.accepted and len(out.reason) < 120 and "\x1b" not in out.reason  # before: 100,000 characters
