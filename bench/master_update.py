@@ -20,6 +20,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -30,7 +31,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from face_reid_camera.common.embedding_spaces import space_dim  # noqa: E402
+from face_reid_camera.common.embedding_spaces import parse_space, space_dim  # noqa: E402
 from face_reid_master.body.metric_file import default_body_metric  # noqa: E402
 from face_reid_master.core import MasterConfig, MasterCore  # noqa: E402
 from face_reid_master.identity.records import LearnedFace  # noqa: E402
@@ -40,26 +41,72 @@ from face_reid_master.records import BodyRecord, CameraFrameRecord, PersonRecord
 
 @dataclass(frozen=True)
 class _Space:
-    """The embeddings of one master space: people in its (weighted) space, sent as a camera would."""
+    """The embeddings of one master space, sent as a camera would: each component of a person's embedding has
+    the length its embedder gives (dlib ~1.4, SFace 1; the master refuses implausible lengths), people's
+    directions spread so that different people are ~1.33 times the decision distance apart in the master's
+    weighted space and one person's embeddings ~0.75 times."""
 
     name: str
     dim: int
     weights: np.ndarray  # what the master multiplies camera embeddings by
-    centre_scale: float  # different people 1.33 times the decision distance apart
-    noise_scale: float  # one person's embeddings 0.75 times the decision distance apart
+    parts: tuple[tuple[int, int, float], ...]  # (start, stop, length) of each component
+    base: np.ndarray  # the direction every person's component starts from (unit per component)
+    spread: float  # people's directions around the base
+    noise: float  # one person's embeddings around their direction
 
     @classmethod
     def of(cls, name: str) -> _Space:
         dim, model = space_dim(name), default_face_likelihood(name)
-        d = model.decision_distance / np.sqrt(2 * dim)
-        return cls(name, dim, model.scale(np.ones((1, dim), dtype=np.float32))[0], 1.33 * d, 0.75 * d)
+        parts, start = [], 0
+        for part in parse_space(name):
+            parts.append((start, start + part.dim, 1.0 if part.unit_norm else 1.4))
+            start += part.dim
+        rng = np.random.default_rng(1)
+        base = rng.normal(size=dim)
+        sp = cls(name, dim, model.scale(np.ones((1, dim), dtype=np.float32))[0], tuple(parts), base, 0.0, 0.0)
+        sp = dataclasses.replace(sp, base=sp._on_spheres(base[None, :])[0])
+        d = model.decision_distance
+        spread = _bisect(lambda x: sp._spread_distance(x, 0.0, rng), 1.33 * d)
+        noise = _bisect(lambda x: sp._spread_distance(spread, x, rng, same=True), 0.75 * d)
+        return dataclasses.replace(sp, spread=spread, noise=noise)
+
+    def _on_spheres(self, rows: np.ndarray) -> np.ndarray:
+        out = np.empty_like(rows, dtype=np.float32)
+        for a, b, length in self.parts:
+            out[:, a:b] = rows[:, a:b] * (length / np.linalg.norm(rows[:, a:b], axis=1, keepdims=True))
+        return out
+
+    def people(self, n: int, rng: np.random.Generator, spread: float | None = None) -> np.ndarray:
+        s = self.spread if spread is None else spread
+        return self._on_spheres(self.base + s * rng.normal(size=(n, self.dim)) / np.sqrt(self.dim))
+
+    def observe(self, centres: np.ndarray, rng: np.random.Generator, noise: float | None = None) -> np.ndarray:
+        z = self.noise if noise is None else noise
+        return self._on_spheres(centres + z * rng.normal(size=centres.shape) / np.sqrt(self.dim))
+
+    def _spread_distance(self, spread: float, noise: float, rng: np.random.Generator, same: bool = False) -> float:
+        """Mean weighted distance between two people (or two embeddings of one person when ``same``)."""
+        c = self.people(200, rng, spread)
+        a = self.observe(c, rng, noise)
+        b = self.observe(c if same else c[::-1], rng, noise)
+        return float(np.mean(np.linalg.norm((a - b) * self.weights, axis=1)))
+
+
+def _bisect(f, target: float, lo: float = 0.0, hi: float = 50.0) -> float:
+    """x in [lo, hi] with f(x) ~ target, f increasing."""
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) < target else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
 TARGET_MS = {(5, 20): 1.0, (20, 200): 2.0, (50, 2000): 10.0}
 CAMERAS = ("cam_0", "cam_1", "cam_2")
 
 
 def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator,
               body_space: tuple[str, int] | None = None) -> dict[str, float]:
-    centres = rng.normal(0.0, sp.centre_scale, (n_faces + n_tracks, sp.dim)).astype(np.float32)
+    centres = sp.people(n_faces + n_tracks, rng)
     core = MasterCore(MasterConfig(embedding_space=sp.name, body_appearance_tracking=body_space is not None))
     looks = None if body_space is None else rng.normal(0.0, 0.3, (n_tracks, body_space[1])).astype(np.float32)
     geometry = np.array([1.75, 0.25, 0.42, 0.38, 0.15, 0.36], dtype=np.float32)
@@ -71,7 +118,7 @@ def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.rand
                           geometry)
 
     core.identity.import_faces(
-        LearnedFace(j + 1, (centres[j] + rng.normal(0.0, sp.noise_scale, (50, sp.dim))).astype(np.float32))
+        LearnedFace(j + 1, sp.observe(np.repeat(centres[j:j + 1], 50, axis=0), rng) * sp.weights)
         for j in range(n_faces)
     )
     n_strangers = max(1, n_tracks // 10)
@@ -83,7 +130,7 @@ def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.rand
         people = tuple(
             PersonRecord(
                 np.array([*(grid[k] + rng.normal(0, 0.02, 2)), 0.0]), 0.05, 1.75,
-                ((centres[person[k]] + rng.normal(0.0, sp.noise_scale, sp.dim)) / sp.weights).astype(np.float32)
+                sp.observe(centres[person[k]][None, :], rng)[0]
                 if (k >= n_strangers or strangers_show_faces) else None,
                 0.9, 0.9, sp.name, body=body(k),
             )
@@ -123,8 +170,8 @@ def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.rand
 
 def _reference_ms(sp: _Space, n_features: int, rng: np.random.Generator) -> float:
     """Eq. 4 brute force for ONE observation against ``n_features`` stored features (numpy, median)."""
-    feats = rng.normal(0.0, sp.centre_scale, (n_features, sp.dim)).astype(np.float32)
-    obs = rng.normal(0.0, sp.centre_scale, sp.dim).astype(np.float32)
+    feats = sp.people(n_features, rng) * sp.weights
+    obs = sp.people(1, rng)[0] * sp.weights
     times = []
     for _ in range(30):
         t0 = time.perf_counter()
