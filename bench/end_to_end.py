@@ -71,17 +71,15 @@ def role_publisher(args: argparse.Namespace) -> int:
     qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     pubs = [node.create_publisher(CameraFrame, f"{args.prefix}/cam{c:02d}/face_reid/frames", qos)
             for c in range(args.cameras)]
-    from face_reid_camera.common.embedding_spaces import space_dim
+    from plausible_faces import FaceSpace
+
     from face_reid_master.core import MasterConfig
-    from face_reid_master.identity.size_likelihood import default_face_likelihood
 
     space = MasterConfig().embedding_space  # what the default master compares (cameras send it)
-    dim, model = space_dim(space), default_face_likelihood(space)
-    weights = model.scale(np.ones((1, dim), dtype=np.float32))[0]  # the master multiplies embeddings by these
-    unit = model.decision_distance / math.sqrt(2 * dim)  # in the master's space: different people 1.33,
-    rng = np.random.default_rng(0)  # one person's frames 0.6 times the decision distance apart
-    centres = (rng.normal(0.0, 1.33 * unit, (args.cameras, 2, dim)) / weights).astype(np.float32)
-    noise = (rng.normal(0.0, 0.6 * unit, (64, dim)) / weights).astype(np.float32)
+    faces = FaceSpace.of(space, within=0.6)  # different people 1.33, one person's frames 0.6 decision distances
+    rng = np.random.default_rng(0)
+    centres = faces.people(args.cameras * 2, rng)
+    views = faces.observe(np.repeat(centres, 64, axis=0), rng).reshape(args.cameras, 2, 64, -1)
     deadline = time.monotonic() + 60.0
     while min(p.get_subscription_count() for p in pubs) < 1:
         if time.monotonic() > deadline:
@@ -122,7 +120,7 @@ def role_publisher(args: argparse.Namespace) -> int:
                 obs.position_world.y = float(1.2 * math.sin(angle) + 3.0 * j)
                 obs.position_std_m, obs.height_m = 0.05, 1.75
                 obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
-                obs.embedding = (centres[c, j] + noise[(k + 7 * j + c) % len(noise)]).tolist()
+                obs.embedding = views[c, j, (k + 7 * j + c) % views.shape[2]].tolist()
                 obs.embedding_space = space
                 msg.people.append(obs)
             pub.publish(msg)

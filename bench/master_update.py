@@ -20,91 +20,27 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import dataclasses  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from face_reid_camera.common.embedding_spaces import parse_space, space_dim  # noqa: E402
+from plausible_faces import FaceSpace  # noqa: E402
+
 from face_reid_master.body.metric_file import default_body_metric  # noqa: E402
 from face_reid_master.core import MasterConfig, MasterCore  # noqa: E402
 from face_reid_master.identity.records import LearnedFace  # noqa: E402
-from face_reid_master.identity.size_likelihood import default_face_likelihood  # noqa: E402
 from face_reid_master.records import BodyRecord, CameraFrameRecord, PersonRecord  # noqa: E402
-
-
-@dataclass(frozen=True)
-class _Space:
-    """The embeddings of one master space, sent as a camera would: each component of a person's embedding has
-    the length its embedder gives (dlib ~1.4, SFace 1; the master refuses implausible lengths), people's
-    directions spread so that different people are ~1.33 times the decision distance apart in the master's
-    weighted space and one person's embeddings ~0.75 times."""
-
-    name: str
-    dim: int
-    weights: np.ndarray  # what the master multiplies camera embeddings by
-    parts: tuple[tuple[int, int, float], ...]  # (start, stop, length) of each component
-    base: np.ndarray  # the direction every person's component starts from (unit per component)
-    spread: float  # people's directions around the base
-    noise: float  # one person's embeddings around their direction
-
-    @classmethod
-    def of(cls, name: str) -> _Space:
-        dim, model = space_dim(name), default_face_likelihood(name)
-        parts, start = [], 0
-        for part in parse_space(name):
-            parts.append((start, start + part.dim, 1.0 if part.unit_norm else 1.4))
-            start += part.dim
-        rng = np.random.default_rng(1)
-        base = rng.normal(size=dim)
-        sp = cls(name, dim, model.scale(np.ones((1, dim), dtype=np.float32))[0], tuple(parts), base, 0.0, 0.0)
-        sp = dataclasses.replace(sp, base=sp._on_spheres(base[None, :])[0])
-        d = model.decision_distance
-        spread = _bisect(lambda x: sp._spread_distance(x, 0.0, rng), 1.33 * d)
-        noise = _bisect(lambda x: sp._spread_distance(spread, x, rng, same=True), 0.75 * d)
-        return dataclasses.replace(sp, spread=spread, noise=noise)
-
-    def _on_spheres(self, rows: np.ndarray) -> np.ndarray:
-        out = np.empty_like(rows, dtype=np.float32)
-        for a, b, length in self.parts:
-            out[:, a:b] = rows[:, a:b] * (length / np.linalg.norm(rows[:, a:b], axis=1, keepdims=True))
-        return out
-
-    def people(self, n: int, rng: np.random.Generator, spread: float | None = None) -> np.ndarray:
-        s = self.spread if spread is None else spread
-        return self._on_spheres(self.base + s * rng.normal(size=(n, self.dim)) / np.sqrt(self.dim))
-
-    def observe(self, centres: np.ndarray, rng: np.random.Generator, noise: float | None = None) -> np.ndarray:
-        z = self.noise if noise is None else noise
-        return self._on_spheres(centres + z * rng.normal(size=centres.shape) / np.sqrt(self.dim))
-
-    def _spread_distance(self, spread: float, noise: float, rng: np.random.Generator, same: bool = False) -> float:
-        """Mean weighted distance between two people (or two embeddings of one person when ``same``)."""
-        c = self.people(200, rng, spread)
-        a = self.observe(c, rng, noise)
-        b = self.observe(c if same else c[::-1], rng, noise)
-        return float(np.mean(np.linalg.norm((a - b) * self.weights, axis=1)))
-
-
-def _bisect(f, target: float, lo: float = 0.0, hi: float = 50.0) -> float:
-    """x in [lo, hi] with f(x) ~ target, f increasing."""
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if f(mid) < target else (lo, mid)
-    return 0.5 * (lo + hi)
-
 
 TARGET_MS = {(5, 20): 1.0, (20, 200): 2.0, (50, 2000): 10.0}
 CAMERAS = ("cam_0", "cam_1", "cam_2")
 
 
-def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator,
+def _scenario(sp: FaceSpace, n_tracks: int, n_faces: int, frames: int, rng: np.random.Generator,
               body_space: tuple[str, int] | None = None) -> dict[str, float]:
     centres = sp.people(n_faces + n_tracks, rng)
     core = MasterCore(MasterConfig(embedding_space=sp.name, body_appearance_tracking=body_space is not None))
@@ -168,7 +104,7 @@ def _scenario(sp: _Space, n_tracks: int, n_faces: int, frames: int, rng: np.rand
     }
 
 
-def _reference_ms(sp: _Space, n_features: int, rng: np.random.Generator) -> float:
+def _reference_ms(sp: FaceSpace, n_features: int, rng: np.random.Generator) -> float:
     """Eq. 4 brute force for ONE observation against ``n_features`` stored features (numpy, median)."""
     feats = sp.people(n_features, rng) * sp.weights
     obs = sp.people(1, rng)[0] * sp.weights
@@ -192,7 +128,7 @@ def main() -> int:
     if args.bodies:
         metric = default_body_metric()
         body_space = (metric.space, metric.length)
-    sp = _Space.of(args.space)
+    sp = FaceSpace.of(args.space)
     rng = np.random.default_rng(0)
     out: dict[str, object] = {"threads": 1, "features_per_face": 50, "embedding_space": sp.name}
     for (n_tracks, n_faces), target in TARGET_MS.items():

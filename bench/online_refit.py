@@ -28,11 +28,11 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from face_reid_camera.common.embedding_spaces import space_dim  # noqa: E402
+from plausible_faces import FaceSpace  # noqa: E402
+
 from face_reid_master.body.metric_file import default_body_metric  # noqa: E402
 from face_reid_master.core import MasterConfig, MasterCore  # noqa: E402
 from face_reid_master.identity.records import LearnedFace  # noqa: E402
-from face_reid_master.identity.size_likelihood import default_face_likelihood  # noqa: E402
 from face_reid_master.records import BodyRecord, CameraFrameRecord, PersonRecord  # noqa: E402
 
 N_TRACKS, N_FACES, GALLERY = 20, 200, 64
@@ -45,10 +45,8 @@ def main() -> int:
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     space = MasterConfig().embedding_space
-    dim, model = space_dim(space), default_face_likelihood(space)
-    weights = model.scale(np.ones((1, dim), dtype=np.float32))[0]
-    step = model.decision_distance / np.sqrt(2 * dim)
-    centres = rng.normal(0.0, 1.33 * step, (N_FACES, dim)).astype(np.float32)
+    faces = FaceSpace.of(space)  # different people 1.33, one person 0.75 times the decision distance apart
+    centres = faces.people(N_FACES, rng)
     metric = default_body_metric()
     looks = rng.normal(0.0, 0.3, (N_TRACKS, metric.length)).astype(np.float32)
     geometry = np.array([1.75, 0.25, 0.42, 0.38, 0.15, 0.36], dtype=np.float32)
@@ -58,7 +56,7 @@ def main() -> int:
         core = MasterCore(MasterConfig(embedding_space=space, body_online_update=online,
                                        body_online_interval_s=0.0, body_online_min_new_pairs=1))
         core.identity.import_faces(
-            LearnedFace(j + 1, (centres[j] + rng.normal(0.0, 0.75 * step, (50, dim))).astype(np.float32))
+            LearnedFace(j + 1, faces.observe(np.repeat(centres[j:j + 1], 50, axis=0), rng) * faces.weights)
             for j in range(N_FACES))
         body = core.identity.body_evidence
         assert body is not None
@@ -71,7 +69,7 @@ def main() -> int:
     def frame(i: int) -> CameraFrameRecord:
         people = tuple(
             PersonRecord(np.array([*(grid[k] + rng.normal(0, 0.02, 2)), 0.0]), 0.05, 1.75,
-                         ((centres[k] + rng.normal(0.0, 0.75 * step, dim)) / weights).astype(np.float32),
+                         faces.observe(centres[k][None, :], rng)[0],
                          0.9, 0.9, space,
                          body=BodyRecord((looks[k] + rng.normal(0.0, 0.02, metric.length)).astype(np.float32),
                                          metric.space, 0.9, geometry))
