@@ -65,6 +65,7 @@ def _derived(name: str, configured: float, derived: float | None) -> float:
 
 _PAIRS_SAVE_INTERVAL_S = 30.0  # the online body update's pairs are stored at most this often (s)
 
+
 @dataclass(frozen=True)
 class MasterConfig:
     """Parameters of the master core (units in the names).
@@ -462,8 +463,7 @@ class MasterCore:
         times = self._camera_frames.get(camera_id)
         if times is None:
             if len(self._camera_frames) >= 1024:
-                oldest = min(self._camera_frames, key=lambda c: self._camera_frames[c][-1]
-                             if self._camera_frames[c] else -math.inf)
+                oldest = min(self._camera_frames, key=lambda c: self._camera_frames[c][-1])  # never empty
                 del self._camera_frames[oldest]
             times = self._camera_frames[camera_id] = deque()
         while times and (times[0] <= now_s - 1.0 or times[0] > now_s + 1.0):
@@ -534,8 +534,7 @@ class MasterCore:
             return *tracker_input, embeddings, person_index
         stacked = np.stack([v for _, _, v in good_len])
         finite = np.isfinite(stacked).all(axis=1)
-        plausible = np.zeros_like(finite)
-        plausible[finite] = plausible_norms(stacked[finite], cfg.embedding_space)
+        plausible = finite & plausible_norms(stacked, cfg.embedding_space)  # NaN / Inf lengths fail the range
         st.embeddings_rejected_norm += int(np.count_nonzero(finite & ~plausible))
         stacked = self.likelihood.scale(stacked)
         quality = np.array([people[i].face_quality for _, i, _ in good_len], dtype=np.float64)
@@ -637,14 +636,14 @@ class MasterCore:
         for ev in events:
             if ev.kind == IdentityEventKind.NEW_FACE:
                 self.stats.faces_created += 1
-                self._save_face(ev.face_id)
+                self._save_faces([ev.face_id])
             elif ev.kind == IdentityEventKind.ASSIGNED_KNOWN:
                 self.stats.faces_reidentified += 1
-                self._save_face(ev.face_id)
+                self._save_faces([ev.face_id])
             elif ev.kind in (IdentityEventKind.RELEASED, IdentityEventKind.SWAPPED):
                 self.stats.faces_released += 1
                 self.stats.faces_released_swapped += ev.kind == IdentityEventKind.SWAPPED
-                self._save_face(ev.face_id)
+                self._save_faces([ev.face_id])
             self._name_checked.pop(ev.face_id, None)
         return events
 
@@ -715,10 +714,7 @@ class MasterCore:
         for fid, name in self._names.items():
             if self.identity.face_name(fid) != name:
                 self.identity.set_face_name(fid, name)
-                self._save_face(fid)
-
-    def _save_face(self, face_id: int) -> None:
-        self._save_faces([face_id])
+                self._save_faces([fid])
 
     def _save_faces(self, face_ids: list[int]) -> None:
         """Write faces to the store in one transaction (one fsync however many)."""
@@ -752,7 +748,7 @@ class MasterCore:
         """Write every face with unsaved features (and the online update's pairs) to the store, and stop the
         body-metric worker (call at shutdown)."""
         for fid in list(self._dirty_faces):
-            self._save_face(fid)
+            self._save_faces([fid])
         self._save_body_pairs(self._last_stamp, force=True)
         if self.online_metric is not None:
             self.online_metric.close()

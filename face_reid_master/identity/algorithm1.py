@@ -402,16 +402,20 @@ class IdentityManagerBase:
             body.add_face_bodies(fid, emb, newest, heights=heights)
         body.forget_track(tid)
 
+    def _face_distance(self, face_a: int, face_b: int) -> float:
+        """The smallest distance between the stored features of two learned faces (NaN if either is unknown)."""
+        a, b = self._faces.get(face_a), self._faces.get(face_b)
+        if a is None or b is None:
+            return math.nan
+        d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
+        return float(d.min()) if d.size else math.nan
+
     def _faces_differ(self, face_a: int, face_b: int) -> bool:
         """Whether two learned faces are confidently different people: no features of theirs closer than the
         body evidence's ``negative_face_distance`` (default: the decision distance)."""
         assert self.body_evidence is not None
         limit = self.body_evidence.negative_face_distance or self.feature_gate_distance
-        a, b = self._faces.get(face_a), self._faces.get(face_b)
-        if limit is None or a is None or b is None:
-            return False
-        d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
-        return bool(d.size) and float(d.min()) > limit
+        return limit is not None and self._face_distance(face_a, face_b) > limit  # NaN: False
 
     def _faces_alike(self, face_a: int, face_b: int) -> bool:
         """Whether two learned faces are one person: features of theirs closer than the body evidence's
@@ -420,11 +424,7 @@ class IdentityManagerBase:
         limit = self.body_evidence.alike_face_distance
         if limit is None and self.feature_gate_distance is not None:
             limit = 0.5 * self.feature_gate_distance
-        a, b = self._faces.get(face_a), self._faces.get(face_b)
-        if limit is None or a is None or b is None:
-            return False
-        d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
-        return bool(d.size) and float(d.min()) < limit
+        return limit is not None and self._face_distance(face_a, face_b) < limit  # NaN: False
 
     def _consistent(self, obs: F32Array, slot: int) -> npt.NDArray[np.bool_]:
         """Which observations lie within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""

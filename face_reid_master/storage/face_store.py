@@ -25,6 +25,7 @@ that created it (sqlite3's ``check_same_thread`` enforces it).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as _dt
 import errno
 import fcntl
@@ -441,20 +442,16 @@ class FaceStore:
             conn.execute("PRAGMA trusted_schema=OFF")
             rows = conn.execute("SELECT face_id, name, created_s, last_seen_s, n_observations FROM faces").fetchall()
             total = len(rows)
-            width = self.embedding_dim * _VECTOR_DTYPE.itemsize
-            for face_id, name, created_s, last_seen_s, n_obs in rows:
+            for row in rows:
                 try:
                     blobs = [b for (b,) in conn.execute(
-                        "SELECT vector FROM features WHERE face_id = ? ORDER BY idx", (face_id,))]
-                    if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
-                        continue
-                    feats = np.frombuffer(b"".join(blobs), dtype=_VECTOR_DTYPE).reshape(len(blobs), -1)
-                    with contextlib.suppress(ValueError):
-                        name = check_person_name(name) if name is not None else None
-                    face = LearnedFace(int(face_id), feats.astype(np.float32), name if isinstance(name, str) and
-                                       name.isprintable() else None, float(created_s), float(last_seen_s), int(n_obs))
-                    self._encode(face)  # finite, right length
-                    faces.append(face)
+                        "SELECT vector FROM features WHERE face_id = ? ORDER BY idx", (row[0],))]
+                    face = self._decode_face(row, blobs)
+                    try:
+                        name = _check_name(face.name)
+                    except ValueError:  # a name that is no longer accepted is dropped, not the face
+                        name = None
+                    faces.append(dataclasses.replace(face, name=name))
                 except (sqlite3.Error, ValueError, TypeError, OverflowError):
                     continue
         except sqlite3.Error:
@@ -707,20 +704,23 @@ class FaceStore:
         vectors: dict[int, list[bytes]] = {}
         for face_id, blob in conn.execute("SELECT face_id, vector FROM features ORDER BY face_id, idx"):
             vectors.setdefault(face_id, []).append(blob)
-        width = self.embedding_dim * _VECTOR_DTYPE.itemsize
         out: list[LearnedFace] = []
-        for face_id, name, created_s, last_seen_s, n_obs in meta_rows:
-            blobs = vectors.get(face_id, [])
+        for row in meta_rows:
             try:
-                if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
-                    raise ValueError(f"{len(blobs)} stored vectors, expected >= 1 of {width} bytes each")
-                feats = np.frombuffer(b"".join(blobs), dtype=_VECTOR_DTYPE).reshape(len(blobs), -1)
-                out.append(
-                    LearnedFace(face_id, feats.astype(np.float32), name, created_s, last_seen_s, n_obs)
-                )
+                out.append(self._decode_face(row, vectors.get(row[0], [])))
             except (ValueError, TypeError) as exc:
-                _LOG.error("face store %s: skipping invalid stored face %s: %s", self.path, face_id, exc)
+                _LOG.error("face store %s: skipping invalid stored face %s: %s", self.path, row[0], exc)
         return out
+
+    def _decode_face(self, row: tuple[Any, ...], blobs: list[Any]) -> LearnedFace:
+        """A face from its ``faces`` row (id, name, created, last seen, observations) and its vector blobs;
+        ValueError / TypeError when they are not a valid face of this store."""
+        width = self.embedding_dim * _VECTOR_DTYPE.itemsize
+        if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
+            raise ValueError(f"{len(blobs)} stored vectors, expected >= 1 of {width} bytes each")
+        feats = np.frombuffer(b"".join(blobs), dtype=_VECTOR_DTYPE).reshape(len(blobs), -1).astype(np.float32)
+        face_id, name, created_s, last_seen_s, n_obs = row
+        return LearnedFace(face_id, feats, name, created_s, last_seen_s, n_obs)
 
     def list_faces(self) -> list[FaceSummary]:
         """Summaries of all stored faces (no vectors), sorted by id."""

@@ -117,15 +117,13 @@ def _run(store: FaceStore, args: argparse.Namespace) -> int:
         return EXIT_OK
     # rename
     new_name = None if args.clear else args.name
-    if new_name is not None and not new_name.strip():
-        print(f"{PROG}: error: empty name (use --clear to remove a name)", file=sys.stderr)
-        return EXIT_USAGE
-    try:
-        if new_name is not None:
+    if new_name is not None:
+        try:
             check_person_name(new_name)
-    except ValueError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        except ValueError as exc:
+            hint = " (use --clear to remove a name)" if not new_name.strip() else ""
+            print(f"{PROG}: error: {exc}{hint}", file=sys.stderr)
+            return EXIT_USAGE
     if not store.set_name(args.face_id, new_name):
         print(f"{PROG}: no face {args.face_id}", file=sys.stderr)
         return EXIT_NOT_FOUND

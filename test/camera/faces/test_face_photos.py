@@ -241,7 +241,7 @@ def test_progress_bar_tty_redraws_one_line() -> None:
 
 
 # ---------------------------------------------------------------- photos from untrusted requests
-def test_image_size_reads_real_jpeg_and_png_headers(tmp_path: Path) -> None:
+def test_image_size_reads_real_jpeg_and_png_headers() -> None:
     from face_reid_camera.faces.photos import image_size
 
     photo = sorted((FACES_DIR / "deepface_id02").glob("*.jpg"))[0]
