@@ -3,8 +3,10 @@
 configure opens the face database, reads the gallery and the likelihood and builds
 :class:`~face_reid_master.core.MasterCore` (and the ``~/add_person``, ``~/forget_face``, ``~/list_faces``
 services); activate subscribes to the camera topics (a fixed list and/or every discovered topic matching a
-regex) and publishes ``face_reid_msgs/NamedTrackArray`` on ``/tracks_named`` after every update (plus RViz
-markers while someone looks) and ``/diagnostics``; deactivate / cleanup undo it (cleanup saves every face).
+regex) and, once per cycle, applies every frame received since the last cycle in stamp order (the oldest
+dropped and counted when more arrived than ``cycle_budget_ms`` allows) and publishes
+``face_reid_msgs/NamedTrackArray`` on ``/tracks_named`` (plus RViz markers while someone looks) and
+``/diagnostics``; deactivate / cleanup undo it (cleanup saves every face).
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ from visualization_msgs.msg import MarkerArray
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
+from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_master.core import MasterCore
+from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.convert import frame_from_msg, markers_for, tracks_to_msg
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray
@@ -58,8 +62,15 @@ class MasterNode(ManagedNode):
         self.tracks_pub: Any = None
         self.markers_pub: Any = None
         self._regex: re.Pattern[str] | None = None
-        self._last_publish_s = -float("inf")
+        self._tokens_counted_s = -float("inf")
         self._min_publish_interval_s = 0.0
+        self._unpublished_stamp: float | None = None  # newest frame applied but not published (rate cap)
+        self._publish_tokens = 2.0
+        self._intake: FrameIntake[Any] = FrameIntake()
+        self._budget = CycleBudget()
+        self._cycle_gc: Any = None
+        self._cycle_requested = False
+        self.frames_dropped_overload = 0
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -82,6 +93,7 @@ class MasterNode(ManagedNode):
         self._regex = regex
         rate = float(values["max_publish_rate_hz"])
         self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
+        self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
         self._services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
@@ -106,12 +118,15 @@ class MasterNode(ManagedNode):
         self.tracks_pub = self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos)
         markers_topic = str(values["markers_topic"])
         self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
+        self._cycle_gc = self.create_guard_condition(self._cycle)
         for topic in master_params.clean_list(values["camera_topics"]):
             self._subscribe(topic)
         if self._regex is not None:
             self._discover()
             self._timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
         self._timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
+        if self._min_publish_interval_s:
+            self._timers.append(self.create_timer(self._min_publish_interval_s, self._flush))
         self._timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
         assert self.health is not None
         self.health.start(self.now_s())
@@ -124,6 +139,10 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             self.destroy_subscription(sub)
         self._subscribed = {}
+        if self._cycle_gc is not None:
+            self.destroy_guard_condition(self._cycle_gc)
+            self._cycle_gc = None
+        self._intake.take(1 << 30)  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
                 self.destroy_publisher(pub)
@@ -197,35 +216,105 @@ class MasterNode(ManagedNode):
                 self._subscribe(name)
 
     def _on_frame(self, msg: Any) -> None:
+        """A camera message: queued for the next cycle (which the guard condition runs once the executor has
+        taken what is ready)."""
+        self._receive(msg, self.now_s())
+        if not self._cycle_requested and self._cycle_gc is not None:
+            self._cycle_requested = True
+            self._cycle_gc.trigger()
+
+    def _receive(self, msg: Any, now: float) -> None:
+        if self.health is not None:
+            self.health.frame_in(now)
+        try:
+            stamp = stamp_to_seconds(msg.header.stamp)
+        except (ValueError, TypeError, AttributeError):
+            stamp = float("nan")  # the core rejects it and counts it
+        self._intake.add(PendingFrame(str(msg.camera_id), stamp, now, msg))
+
+    def _drain(self, now: float) -> None:
+        """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
+        one cycle sees all of them and drops the oldest when they are too many."""
+        for sub in self._subscribed.values():
+            try:
+                with sub.handle:
+                    while (taken := sub.handle.take_message(CameraFrame, False)) is not None:
+                        self._receive(taken[0], now)
+            except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
+                self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
+                                   1, warn=True)
+
+    def _cycle(self) -> None:
+        """One master cycle: everything received since the last one, in stamp order, then one publish."""
+        self._cycle_requested = False
         core, health = self.core, self.health
         if core is None or health is None or self.tracks_pub is None:
             return
+        self._drain(self.now_s())
+        frames, dropped = self._intake.take(self._budget.frames())
+        if dropped:
+            self.frames_dropped_overload += dropped
+            self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
+                                           f"({len(frames)} applied, budget {self._budget.budget_ms:g} ms)",
+                               self.frames_dropped_overload, warn=True)
+        t_cycle = time.perf_counter()
+        newest = -float("inf")
+        for pending in frames:
+            stamp = self._apply(core, health, pending.payload)
+            if stamp is not None:
+                newest = max(newest, stamp)
+        self._budget.spent(len(frames), (time.perf_counter() - t_cycle) * 1e3)
+        if newest == -float("inf"):
+            return
         now = self.now_s()
-        health.frame_in(now)
+        if not self._publish_allowed(now):
+            self._unpublished_stamp = newest  # rate cap: _flush publishes it when a token is back
+            return
+        self._publish(newest, now)
+
+    def _publish_allowed(self, now: float) -> bool:
+        """Rate cap as a token bucket (max_publish_rate_hz, bursts of 2): a camera's jitter around the cap's
+        period does not delay every other message, and the average rate stays at the cap."""
+        if not self._min_publish_interval_s:
+            return True
+        elapsed = max(0.0, now - self._tokens_counted_s)
+        self._publish_tokens = min(2.0, self._publish_tokens + elapsed / self._min_publish_interval_s)
+        self._tokens_counted_s = now  # tokens are counted from here on (also when this cycle does not publish)
+        if self._publish_tokens >= 1.0:
+            self._publish_tokens -= 1.0
+            return True
+        return False
+
+    def _flush(self) -> None:
+        """Timer at max_publish_rate_hz: publish the state a capped cycle left unpublished."""
+        now = self.now_s()
+        if self._unpublished_stamp is not None and self._publish_allowed(now):
+            self._publish(self._unpublished_stamp, now)
+
+    def _apply(self, core: MasterCore, health: NodeHealth, msg: Any) -> float | None:
+        """One camera message into the core; its stamp when applied, None when refused (counted, logged)."""
         try:
             record = frame_from_msg(msg)
         except (ValueError, TypeError) as exc:
             self._reject("malformed", f"malformed CameraFrame: {exc}")
-            return
+            return None
         if record.frame_id != self.values["world_frame_id"]:
             self._reject("frame_id", f"frame from {shown(record.camera_id, 64)} is in frame "
                                      f"{shown(record.frame_id, 64)}, "
                                      f"expected {self.values['world_frame_id']!r}")
-            return
+            return None
         t0 = time.perf_counter()
-        outcome = core.process_frame(record, now if self.values["check_stamps_against_clock"] else None)
+        outcome = core.process_frame(record, self.now_s() if self.values["check_stamps_against_clock"] else None)
         if not outcome.accepted:
             self._reject(outcome.code, f"frame from {shown(record.camera_id, 64)} rejected: {outcome.reason}")
-            return
+            return None
         health.frame_processed((time.perf_counter() - t0) * 1e3, len(record.people),
                                sum(1 for p in record.people if p.embedding is not None))
         for notice in outcome.notices:
             self.get_logger().warning(notice[:_MAX_LOG_CHARS])
         for ev in outcome.identity_events:
             self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")
-        if self._min_publish_interval_s and now - self._last_publish_s < self._min_publish_interval_s:
-            return  # rate cap: the next frame or tick publishes the (then newer) state
-        self._publish(record.stamp_s, now)
+        return record.stamp_s
 
     def _tick(self) -> None:
         if self.core is None:
@@ -243,7 +332,7 @@ class MasterNode(ManagedNode):
         frame_id = str(self.values["world_frame_id"])
         msg = tracks_to_msg(tracks, stamp_s, frame_id)
         self.tracks_pub.publish(msg)
-        self._last_publish_s = now_s
+        self._unpublished_stamp = None
         if self.health is not None:
             self.health.published()
         # Markers are for a person looking at RViz: building them for nobody costs the master time.
@@ -257,6 +346,8 @@ class MasterNode(ManagedNode):
     def _log_stats(self) -> None:
         if self.core is not None:
             stats = {k: v for k, v in self.core.stats.as_dict().items() if v}
+            if self.frames_dropped_overload:
+                stats["frames_dropped_overload"] = self.frames_dropped_overload
             self.get_logger().info(f"stats: {stats}")
 
     def diagnostics(self, now_s: float) -> DiagnosticReport:
@@ -270,13 +361,16 @@ class MasterNode(ManagedNode):
             "tracks_identified": sum(1 for t in tracks if t.face_id),
             "camera_topics": len(self._subscribed),
             "frames_applied": stats["frames_applied"],
+            "frames_dropped_overload": self.frames_dropped_overload,
+            "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
+            "cycle_frame_cost_ms": self._budget.mean_cost_ms,
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
                                                                        "embeddings_rejected",
                                                                        "detections_rejected", "bodies_", "body_"))})
         extra.update({f"{k}_calls": v for k, v in self._service_calls.items()})
         extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
-        health.frames_dropped = stats["frames_received"] - stats["frames_applied"]
+        health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         warnings = [] if self._subscribed else ["no camera topic found yet"]
         return health.report(now_s, extra, warnings)
 

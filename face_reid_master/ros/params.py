@@ -35,9 +35,14 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("tracks_topic", "/tracks_named", "Where face_reid_msgs/NamedTrackArray is published."),
     ParamSpec("markers_topic", "/tracks_named/markers",
               "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off)."),
-    ParamSpec("max_publish_rate_hz", 0.0,
-              "Cap on /tracks_named messages per second (0 = one per camera frame; set e.g. 30 for large networks).",
+    ParamSpec("max_publish_rate_hz", 30.0,
+              "Cap on /tracks_named messages per second (0 = one per cycle, i.e. per batch of frames received; "
+              "a capped cycle's state goes out at most 1/rate later).",
               low=0.0, high=1000.0),
+    ParamSpec("cycle_budget_ms", 25.0,
+              "Time one cycle may spend applying frames (ms): frames beyond it (measured cost per frame) are "
+              "dropped oldest-first and counted, so an overloaded master keeps its latency bounded.",
+              low=1.0, high=10000.0),
     ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz).",
               low=0.1, high=1000.0),
     ParamSpec("check_stamps_against_clock", True, "Reject stale/future frames using the node clock (bool)."),

@@ -55,6 +55,12 @@ def _frame(stamp_s: float, camera: str = "cam_a", emb: np.ndarray | None = None,
     return frame_record_to_msg(CameraFrameRecord(camera, stamp_s, (person,), frame_id), stamp_s)
 
 
+def _feed(node: MasterNode, msg) -> None:
+    """One frame through the subscription callback and the cycle the executor would run next."""
+    node._on_frame(msg)
+    node._cycle()
+
+
 def test_lifecycle_subscribes_only_while_active_and_keeps_faces(ros_context, tmp_path: Path) -> None:
     node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
     try:
@@ -66,7 +72,7 @@ def test_lifecycle_subscribes_only_while_active_and_keeps_faces(ros_context, tmp
         assert {s.topic_name for s in node.subscriptions} == {CAM}
         assert node.tracks_pub.topic_name == "/tracks_named"
         for k in range(6):  # one person with the same face: a track and (after 3 observations) a face
-            node._on_frame(_frame(100.0 + 0.1 * k, emb=_unit(1)))
+            _feed(node, _frame(100.0 + 0.1 * k, emb=_unit(1)))
         assert node.core.identity.face_ids() == [1]
         assert node.trigger_deactivate() == OK
         assert not list(node.subscriptions) and node.tracks_pub is None
@@ -88,7 +94,7 @@ def test_corrupt_database_is_set_aside_and_a_fresh_one_started(ros_context, tmp_
         backups = list(tmp_path.glob("faces.db.corrupt-*"))
         assert len(backups) == 1 and backups[0].read_bytes().startswith(b"this is not a database")
         for k in range(6):
-            node._on_frame(_frame(100.0 + 0.1 * k, emb=_unit(5)))
+            _feed(node, _frame(100.0 + 0.1 * k, emb=_unit(5)))
         assert node.core.identity.face_ids() == [1] and [f.face_id for f in node.store.load_faces()] == [1]
     finally:
         node.destroy_node()
@@ -140,7 +146,7 @@ def test_services_add_list_forget_and_refuse_hostile_requests(ros_context, tmp_p
             reply = _call(executor, node, add, req)
             assert not reply.success and why in reply.message
         for k in range(8):  # Alice walks in and shows her face: a face, named from the gallery
-            node._on_frame(_frame(50.0 + 0.1 * k, emb=alice + 0.01 * _unit(100 + k)))
+            _feed(node, _frame(50.0 + 0.1 * k, emb=alice + 0.01 * _unit(100 + k)))
         faces = _call(executor, node, listing, ListFaces.Request())
         assert list(faces.face_ids) == [1] and list(faces.names) == ["Alice"] and faces.num_features[0] >= 3
         assert not _call(executor, node, forget, ForgetFace.Request()).success  # neither id nor name
@@ -228,15 +234,15 @@ def test_bad_frames_are_rejected_counted_and_reported(ros_context, tmp_path: Pat
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         now = node.now_s()
-        node._on_frame(_frame(now, camera="cam_zz"))  # unknown camera
-        node._on_frame(_frame(now, frame_id="map"))  # wrong world frame
-        node._on_frame(_frame(now - 3600.0))  # an hour old: skewed clock
-        node._on_frame(_frame(now + 3600.0))  # from the future
-        node._on_frame(_frame(now, emb=np.full(128, np.nan, np.float32)))  # accepted, embedding refused
+        _feed(node, _frame(now, camera="cam_zz"))  # unknown camera
+        _feed(node, _frame(now, frame_id="map"))  # wrong world frame
+        _feed(node, _frame(now - 3600.0))  # an hour old: skewed clock
+        _feed(node, _frame(now + 3600.0))  # from the future
+        _feed(node, _frame(now, emb=np.full(128, np.nan, np.float32)))  # accepted, embedding refused
         short = _frame(now)
         short.people[0].face_found = True
         short.people[0].embedding = [0.1] * 12
-        node._on_frame(short)  # accepted, embedding refused
+        _feed(node, short)  # accepted, embedding refused
         values = node.diagnostics(node.now_s()).values
         assert values["rejected_unknown_camera"] == "1" and values["rejected_frame_id"] == "1"
         assert values["rejected_stale_stamp"] == "1" and values["rejected_future_stamp"] == "1"
@@ -260,7 +266,7 @@ def test_publish_rate_cap_on_the_node_clock(ros_context, tmp_path: Path) -> None
             for k in range(60):
                 t = 1000.0 + k / 30.0
                 clock.set_ros_time_override(Time(seconds=t))
-                node._on_frame(_frame(t, camera="cam_a" if k % 2 else "cam_b"))
+                _feed(node, _frame(t, camera="cam_a" if k % 2 else "cam_b"))
             return node.health.messages_published
         finally:
             node.destroy_node()
@@ -268,6 +274,49 @@ def test_publish_rate_cap_on_the_node_clock(ros_context, tmp_path: Path) -> None
     assert published(0.0) == 60  # no cap: one message per frame
     capped = published(4.0)
     assert 7 <= capped <= 9, capped
+
+
+def test_a_cycle_applies_its_frames_in_stamp_order_and_publishes_once(ros_context, tmp_path: Path) -> None:
+    """Frames that arrived out of order (two cameras) are applied in stamp order, none refused as late, and
+    the cycle publishes one message stamped with the newest frame."""
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false", "persist_faces:=false",
+                   "tracker.max_detection_delay_s:=0.05")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        stamps = [10.0 + 0.1 * k for k in range(8)]
+        for k, t in enumerate(reversed(stamps)):  # newest first: one by one, all but the first would be late
+            node._on_frame(_frame(t, camera="cam_a" if k % 2 else "cam_b"))
+        published = node.health.messages_published
+        node._cycle()
+        stats = node.core.stats
+        assert stats.frames_applied == 8 and stats.frames_rejected_tracker_late == 0
+        assert node.health.messages_published == published + 1
+        assert len(node.core.tracks()) == 1  # one person seen 8 times, not 8 tracks
+    finally:
+        node.destroy_node()
+
+
+def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context, tmp_path: Path) -> None:
+    """More frames than the cycle budget allows: the oldest are dropped (each camera keeps its newest),
+    counted in the stats and /diagnostics, and what is applied is the newest."""
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false", "persist_faces:=false",
+                   "cycle_budget_ms:=1.0")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        node._budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
+        for k in range(30):  # camera a sends 20 frames, camera b 10, interleaved
+            node._on_frame(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"))
+        node._cycle()
+        assert node.frames_dropped_overload == 26 and node.core.stats.frames_applied == 4
+        values = node.diagnostics(node.now_s()).values
+        assert values["frames_dropped_overload"] == "26" and values["frames_in"] == "30"
+        assert float(values["frames_dropped_overload_fraction"]) == pytest.approx(26 / 30, abs=1e-3)
+        assert values["frames_dropped"] == "26"
+        assert node.core.stats.frames_received == 4
+        # fair: camera a (20 waiting) lost its 18 oldest, camera b (10) its 8 oldest; each applied its newest 2
+        assert {cam: len(times) for cam, times in node.core._camera_frames.items()} == {"cam_a": 2, "cam_b": 2}
+    finally:
+        node.destroy_node()
 
 
 def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path: Path) -> None:
@@ -283,7 +332,7 @@ def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path:
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         for k in range(5):
-            node._on_frame(_frame(10.0 + 0.1 * k, emb=_unit(3)))
+            _feed(node, _frame(10.0 + 0.1 * k, emb=_unit(3)))
         assert spin_until(executor, lambda: got and got[-1].status[0].name == "face_reid_master"
                           and any(kv.key == "frames_in" and kv.value == "5" for kv in got[-1].status[0].values))
         values = {kv.key: kv.value for kv in got[-1].status[0].values}
