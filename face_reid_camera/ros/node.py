@@ -25,6 +25,7 @@ from face_reid_camera.ros.convert import frame_to_msg, intrinsics_from_camera_in
 from face_reid_camera.ros.frame_sync import StampSynchronizer
 from face_reid_camera.ros.image_codec import ImageDecodeError, decode_image, depth_to_metres, to_bgr
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
+from face_reid_camera.ros.sealed import seal_message
 from face_reid_msgs.msg import CameraFrame
 
 USAGE = """usage: face-reid-camera [--ros-args --params-file config/camera.yaml -p name:=value ...]
@@ -48,6 +49,7 @@ class CameraNode(ManagedNode):
         self._intrinsics: CameraIntrinsics | None = None
         self._color_intrinsics: CameraIntrinsics | None = None
         self._sync: StampSynchronizer[Any, Any] | None = None
+        self._sealer: Any = None  # Sealer of this camera when the network has a key
         self._slot: tuple[float, Any, Any] | None = None
         self._cond = threading.Condition()
         self._running = False
@@ -92,6 +94,15 @@ class CameraNode(ManagedNode):
                                  float(values["no_input_warning_s"]))
         self._camera_frame_id = str(values["camera_frame_id"])
         self._sync = StampSynchronizer(float(values["sync_slop_s"]))
+        self._sealer = None
+        if values["network_key_path"]:
+            from face_reid_camera.common.sealing import Sealer, load_network_key
+
+            self._sealer = Sealer(load_network_key(str(values["network_key_path"])), config.camera_id)
+        else:
+            self.get_logger().warning(
+                "UNSECURED: no network_key_path: frames (positions and face embeddings, biometric data) go out "
+                "in clear and any participant of this DDS domain can read them or send frames as this camera")
 
     def activate(self) -> None:
         values = self.values
@@ -99,11 +110,14 @@ class CameraNode(ManagedNode):
             depth=2, history=HistoryPolicy.KEEP_LAST,
             reliability=ReliabilityPolicy.RELIABLE if values["image_qos_reliable"] else ReliabilityPolicy.BEST_EFFORT,
         )
+        frame_qos = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
         with self._pub_lock:
-            self.publisher = self.create_publisher(
-                CameraFrame, str(values["output_topic"]),
-                QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE),
-            )
+            if self._sealer is not None:
+                from face_reid_msgs.msg import Sealed
+
+                self.publisher = self.create_publisher(Sealed, str(values["sealed_output_topic"]), frame_qos)
+            else:
+                self.publisher = self.create_publisher(CameraFrame, str(values["output_topic"]), frame_qos)
         self._subs = [
             self.create_subscription(Image, str(values["color_topic"]), self._on_color, image_qos),
             self.create_subscription(Image, str(values["depth_topic"]), self._on_depth, image_qos),
@@ -248,6 +262,8 @@ class CameraNode(ManagedNode):
         self._floor_found = bool(result.ground_plane_found)
         msg = frame_to_msg(result, stamp_s, pipeline.config.camera_id, str(self.values["world_frame_id"]),
                            self._camera_frame_id, pipeline.camera_pose, self._new_drops())
+        if self._sealer is not None:
+            msg = seal_message(self._sealer, msg)
         with self._pub_lock:
             if self.publisher is None:
                 return

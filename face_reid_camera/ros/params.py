@@ -49,7 +49,14 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
         "CameraInfo of the colour image when it has its own resolution/intrinsics (e.g. 1920x1080 colour with "
         "512x424 depth, same optical frame); empty = colour has depth's aspect and scaled intrinsics.",
     ),
-    ParamSpec("output_topic", "face_reid/frames", "Where face_reid_msgs/CameraFrame messages are published."),
+    ParamSpec("output_topic", "face_reid/frames", "Where face_reid_msgs/CameraFrame messages are published "
+              "(unsecured network: no network_key_path)."),
+    ParamSpec("network_key_path", "",
+              "The camera network's key file (face-reid-keys new): frames are then sealed (encrypted and "
+              "authenticated) and published on sealed_output_topic only ('' = unsecured, in clear).",
+              read_only=True),
+    ParamSpec("sealed_output_topic", "face_reid/frames_sealed",
+              "Where sealed frames (face_reid_msgs/Sealed) are published when network_key_path is set."),
     ParamSpec(
         "image_qos_reliable", False,
         "Subscribe to images with RELIABLE QoS (true) or BEST_EFFORT (false, matches any publisher).",

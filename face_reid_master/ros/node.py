@@ -24,13 +24,15 @@ from visualization_msgs.msg import MarkerArray
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
+from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
+from face_reid_camera.ros.sealed import open_message, open_request
 from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.convert import frame_from_msg, markers_for, tracks_to_msg
-from face_reid_msgs.msg import CameraFrame, NamedTrackArray
+from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
 USAGE = """usage: face-reid-master [--ros-args --params-file config/master.yaml -p name:=value ...]
@@ -58,6 +60,7 @@ class MasterNode(ManagedNode):
         self._service_calls: dict[str, int] = {}
         self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
+        self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._timers: list[Any] = []
         self.tracks_pub: Any = None
         self.markers_pub: Any = None
@@ -90,7 +93,19 @@ class MasterNode(ManagedNode):
 
             body_metric = load_body_metric(str(values["body_metric_path"]))
         self.core = MasterCore(config, likelihood, self.store, gallery, body_metric)
-        self._regex = regex
+        self._regex = re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex
+        self._openers = {}
+        if values["network_key_path"]:
+            from face_reid_camera.common.sealing import Opener, load_network_key
+
+            key = load_network_key(str(values["network_key_path"]))
+            age = float(values["max_seal_age_s"])
+            self._openers = {purpose: Opener(key, purpose, age) for purpose in ("frames", "requests")}
+            self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted")
+        else:
+            self.get_logger().warning(
+                "UNSECURED: no network_key_path: camera frames (face embeddings, biometric data) travel in clear "
+                "and any participant of this DDS domain can read them or inject frames")
         rate = float(values["max_publish_rate_hz"])
         self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
         self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
@@ -99,9 +114,10 @@ class MasterNode(ManagedNode):
         if values["admin_services"]:
             self._services += [self.create_service(AddPerson, "~/add_person", self._add_person),
                                self.create_service(ForgetFace, "~/forget_face", self._forget_face)]
-            self.get_logger().warning(
-                "admin services on (admin_services: true): any participant of this DDS domain can call "
-                "~/add_person and ~/forget_face; there is no authentication yet")
+            if not values["network_key_path"]:
+                self.get_logger().warning(
+                    "admin services on (admin_services: true) without a network key: any participant of this "
+                    "DDS domain can call ~/add_person and ~/forget_face")
         else:
             self.get_logger().info("admin services off (admin_services: false): ~/add_person and ~/forget_face "
                                    "are not offered")
@@ -205,14 +221,18 @@ class MasterNode(ManagedNode):
     def _subscribe(self, topic: str) -> None:
         if topic in self._subscribed:
             return
-        self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos)
+        if self._openers:
+            self._subscribed[topic] = self.create_subscription(Sealed, topic, self._on_sealed, self._frame_qos)
+        else:
+            self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos)
         self.get_logger().info(f"subscribed to camera topic {topic}")
 
     def _discover(self) -> None:
         if self._regex is None:
             return
         for name, types in self.get_topic_names_and_types():
-            if "face_reid_msgs/msg/CameraFrame" in types and self._regex.search(name):
+            wanted = "face_reid_msgs/msg/Sealed" if self._openers else "face_reid_msgs/msg/CameraFrame"
+            if wanted in types and self._regex.search(name):
                 self._subscribe(name)
 
     def _on_frame(self, msg: Any) -> None:
@@ -222,6 +242,25 @@ class MasterNode(ManagedNode):
         if not self._cycle_requested and self._cycle_gc is not None:
             self._cycle_requested = True
             self._cycle_gc.trigger()
+
+    def _on_sealed(self, sealed: Any) -> None:
+        """A sealed camera message (secured network): opened, then queued like a plain one."""
+        frame = self._unseal(sealed, self.now_s())
+        if frame is not None:
+            self._on_frame(frame)
+
+    def _unseal(self, sealed: Any, now: float) -> Any:
+        """The CameraFrame inside a sealed message, or None (refused, counted by reason, logged)."""
+        try:
+            frame = open_message(self._openers["frames"], sealed, CameraFrame, time.time())
+        except SealError as exc:
+            self._reject(f"sealed_{exc.code}", f"sealed frame from {shown(str(sealed.sender_id), 64)} refused: {exc}")
+            return None
+        if frame.camera_id != sealed.sender_id:
+            self._reject("sealed_sender_mismatch", f"sealed by {shown(str(sealed.sender_id), 64)} but says camera "
+                                                   f"{shown(frame.camera_id, 64)}")
+            return None
+        return frame
 
     def _receive(self, msg: Any, now: float) -> None:
         if self.health is not None:
@@ -238,8 +277,10 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             try:
                 with sub.handle:
-                    while (taken := sub.handle.take_message(CameraFrame, False)) is not None:
-                        self._receive(taken[0], now)
+                    while (taken := sub.handle.take_message(sub.msg_type, False)) is not None:
+                        msg = taken[0] if not self._openers else self._unseal(taken[0], now)
+                        if msg is not None:
+                            self._receive(msg, now)
             except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
                 self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
                                    1, warn=True)
@@ -385,6 +426,11 @@ class MasterNode(ManagedNode):
         """Run a service handler: a refused request (ValueError) or any other error is reported in the
         response and logged (cut), never raised into the executor."""
         try:
+            if self._openers:  # secured: only what a holder of the network key sealed is done
+                try:
+                    request = open_request(self._openers["requests"], request, time.time())
+                except SealError as exc:
+                    raise ValueError(f"refused: {exc}") from exc
             handler(request, response)
         except ValueError as exc:
             response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]

@@ -29,6 +29,15 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "CameraFrame topics to subscribe to (list; [''] = none fixed, use camera_topic_regex)."),
     ParamSpec("camera_topic_regex", "^(/.*)?/face_reid/frames$",
               "Also subscribe to every discovered topic matching this regex ('' = off)."),
+    ParamSpec("network_key_path", "",
+              "The camera network's key file (face-reid-keys new): only sealed frames (sealed_topic_regex) and "
+              "sealed admin requests are then accepted ('' = unsecured: frames and requests in clear).",
+              read_only=True),
+    ParamSpec("sealed_topic_regex", "^(/.*)?/face_reid/frames_sealed$",
+              "With a network key: subscribe to every discovered face_reid_msgs/Sealed topic matching this regex."),
+    ParamSpec("max_seal_age_s", 30.0,
+              "With a network key: a sealed frame or request sealed further than this from the master's clock "
+              "is refused (s; replays, senders whose clock is off).", low=0.1, high=86400.0),
     ParamSpec("topic_discovery_period_s", 2.0, "How often new camera topics are looked for (s).",
               low=0.05, high=3600.0),
     ParamSpec("known_camera_ids", [""], "Accepted camera ids (list; [''] = accept any camera)."),

@@ -268,3 +268,50 @@ def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
         if spec.kind in ("int", "float", "float_list"):
             assert spec.low is not None and spec.high is not None, spec.name
         assert len(spec.description) > 20, spec.name
+
+
+def test_with_a_network_key_frames_go_out_sealed_only(ros_context, tmp_path: Path) -> None:
+    from face_reid_camera.common.sealing import Opener, load_network_key, write_network_key
+    from face_reid_camera.ros.sealed import open_message
+    from face_reid_msgs.msg import CameraFrame, Sealed
+
+    key = load_network_key(write_network_key(tmp_path / "network.key"))
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_sealed", "-p", "detect_faces:=false",
+                       "-p", f"network_key_path:={tmp_path / 'network.key'}"])
+    node = CameraNode(context=ctx)
+    probe = Node("probe", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    executor.add_node(probe)
+    sealed: list = []
+    plain: list = []
+    probe.create_subscription(Sealed, "/face_reid/frames_sealed", sealed.append, 10)
+    probe.create_subscription(CameraFrame, "/face_reid/frames", plain.append, 10)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        assert spin_until(executor, lambda: node.publisher.get_subscription_count() == 1)
+        stamp = node.get_clock().now().to_msg()
+        depth_mm = np.zeros((480, 640), np.uint16)
+        depth_mm[240:] = 2500
+        color, depth = _images(np.full((480, 640, 3), 90, np.uint8), "bgr8", depth_mm, "16UC1", stamp)
+        node._on_info(_camera_info(stamp))
+        node._on_color(color)
+        node._on_depth(depth)
+        assert spin_until(executor, lambda: len(sealed) == 1)
+        frame = open_message(Opener(key), sealed[0], CameraFrame)
+        assert frame.camera_id == "cam_sealed" and sealed[0].sender_id == "cam_sealed"
+        assert abs(frame.header.stamp.sec + frame.header.stamp.nanosec * 1e-9
+                   - (stamp.sec + stamp.nanosec * 1e-9)) < 1e-6  # the camera's stamp, through float seconds
+        assert plain == [] and node.publisher.topic_name == "/face_reid/frames_sealed"
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+    # a key file others can read is refused at configure, with the reason
+    (tmp_path / "network.key").chmod(0o644)
+    node = CameraNode(context=ros_context(["--ros-args", "-p", "detect_faces:=false",
+                                           "-p", f"network_key_path:={tmp_path / 'network.key'}"]))
+    try:
+        assert node.trigger_configure() != OK and "readable by others" in (node.failure or "")
+    finally:
+        node.destroy_node()

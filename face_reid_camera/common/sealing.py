@@ -1,0 +1,170 @@
+"""Sealed messages for a camera network nobody else can read or write: AES-256-GCM with a network key.
+
+The Fast DDS of the PyPI wheels has no security plugins (SROS2 fails), so face-reid secures its own traffic:
+every camera frame (and every admin request) is sealed with the network's 32-byte key, shared by the hosts of
+one network (``face-reid-keys new``). Sealing encrypts (embeddings are biometric data) and authenticates
+(the tag covers the sender id and a counter too): a participant without the key can neither read nor forge.
+Replays are refused: a sender's counter (its wall clock in ns, strictly increasing) must grow, and be within
+``max_age_s`` of the receiver's clock. Pure Python (the ``cryptography`` package), no rclpy.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import struct
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["KEY_BYTES", "Opener", "SealError", "Sealed", "Sealer", "load_network_key", "write_network_key"]
+
+KEY_BYTES = 32  # AES-256
+NONCE_BYTES = 12
+_MAGIC = b"face-reid-sealed-v1"  # domain separation: a seal made for one purpose is not valid for another
+_MAX_SENDER_CHARS = 256
+_MAX_SENDERS = 4096  # replay state kept for this many senders (least recently heard forgotten first)
+
+
+class SealError(ValueError):
+    """A sealed message that must not be used; ``code`` says why (for counters), the message in words."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True)
+class Sealed:
+    """What travels: who sealed it, its counter, the nonce and the ciphertext (with the 16-byte tag)."""
+
+    sender_id: str
+    counter: int
+    nonce: bytes
+    ciphertext: bytes
+
+
+def _aad(purpose: str, sender_id: str, counter: int) -> bytes:
+    sender = sender_id.encode("utf-8", "surrogatepass")
+    topic = purpose.encode("utf-8", "surrogatepass")
+    return _MAGIC + struct.pack("<HH Q", len(topic), len(sender), counter & 0xFFFF_FFFF_FFFF_FFFF) + topic + sender
+
+
+def _aead(key: bytes) -> Any:
+    from cryptography.hazmat.primitives.ciphers.aead import AESGCM
+
+    if len(key) != KEY_BYTES:
+        raise ValueError(f"a network key has {KEY_BYTES} bytes, got {len(key)}")
+    return AESGCM(key)
+
+
+@dataclass
+class Sealer:
+    """Seals payloads of one sender (a camera id, or a client's name) for one ``purpose`` (e.g. "frames")."""
+
+    key: bytes
+    sender_id: str
+    purpose: str = "frames"
+    _last_counter: int = 0
+    _aes: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.sender_id or len(self.sender_id) > _MAX_SENDER_CHARS:
+            raise ValueError(f"sender_id must have 1-{_MAX_SENDER_CHARS} characters, got {len(self.sender_id)}")
+        self._aes = _aead(self.key)
+
+    def seal(self, payload: bytes, purpose: str | None = None) -> Sealed:
+        """``payload`` sealed for ``purpose`` (default: the sealer's)."""
+        counter = max(self._last_counter + 1, time.time_ns())
+        self._last_counter = counter
+        nonce = os.urandom(NONCE_BYTES)
+        ct = self._aes.encrypt(nonce, payload, _aad(purpose or self.purpose, self.sender_id, counter))
+        return Sealed(self.sender_id, counter, nonce, ct)
+
+
+@dataclass
+class Opener:
+    """Checks and opens sealed payloads of one ``purpose``; remembers each sender's newest counter.
+
+    ``max_age_s``: a counter (the sender's clock) further than this from the receiver's clock, in either
+    direction, is refused (s, > 0): replays of old messages after a restart, and senders whose clock is off.
+    """
+
+    key: bytes
+    purpose: str = "frames"
+    max_age_s: float = 30.0
+    _newest: dict[str, int] = field(default_factory=dict, repr=False)
+    _aes: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not (self.max_age_s > 0):
+            raise ValueError(f"max_age_s must be > 0, got {self.max_age_s}")
+        self._aes = _aead(self.key)
+
+    def open(self, sealed: Sealed, now_s: float | None = None, purpose: str | None = None) -> bytes:
+        """The payload sealed for ``purpose`` (default: the opener's), or :class:`SealError` (``forged``,
+        ``replayed``, ``stale``, ``malformed``)."""
+        from cryptography.exceptions import InvalidTag
+
+        if not sealed.sender_id or len(sealed.sender_id) > _MAX_SENDER_CHARS:
+            raise SealError("malformed", f"sender id of {len(sealed.sender_id)} characters")
+        if len(sealed.nonce) != NONCE_BYTES or len(sealed.ciphertext) < 16:
+            raise SealError("malformed", "nonce or ciphertext of the wrong size")
+        if not 0 < sealed.counter < 1 << 64:
+            raise SealError("malformed", "counter out of range")
+        try:
+            payload = self._aes.decrypt(
+                sealed.nonce, sealed.ciphertext, _aad(purpose or self.purpose, sealed.sender_id, sealed.counter))
+        except (InvalidTag, ValueError, OverflowError) as exc:
+            raise SealError("forged", "not sealed with this network's key (or altered on the way)") from exc
+        now = time.time() if now_s is None else now_s
+        age = now - sealed.counter * 1e-9
+        if abs(age) > self.max_age_s:
+            raise SealError("stale", f"sealed {age:+.1f} s from this host's clock (more than {self.max_age_s:g} s)")
+        last = self._newest.pop(sealed.sender_id, 0)
+        if sealed.counter <= last:
+            self._newest[sealed.sender_id] = last
+            raise SealError("replayed", "a counter this sender already used (a replayed or reordered message)")
+        self._newest[sealed.sender_id] = sealed.counter  # most recently heard last
+        if len(self._newest) > _MAX_SENDERS:
+            del self._newest[next(iter(self._newest))]
+        return payload
+
+
+def write_network_key(path: str | Path, overwrite: bool = False) -> Path:
+    """A new random network key in ``path`` (mode 0600, parent 0700 if created); refuses to overwrite."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_TRUNC if overwrite else os.O_EXCL)
+    try:
+        fd = os.open(path, flags, 0o600)
+    except FileExistsError as exc:
+        raise ValueError(f"{path} exists: a network key is not overwritten (remove it first)") from exc
+    with os.fdopen(fd, "wb") as f:
+        os.fchmod(f.fileno(), 0o600)
+        f.write(os.urandom(KEY_BYTES).hex().encode() + b"\n")
+    return path
+
+
+def load_network_key(path: str | Path) -> bytes:
+    """The key in ``path``; refuses a missing, symlinked, group/other-readable or malformed file, with why."""
+    path = Path(path)
+    try:
+        st = os.lstat(path)
+    except OSError as exc:
+        raise ValueError(f"network key {path}: {exc.strerror} (make one with: face-reid-keys new {path})") from exc
+    if stat.S_ISLNK(st.st_mode) or not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"network key {path} is not a regular file (symlinks are refused)")
+    if st.st_mode & 0o077:
+        raise ValueError(f"network key {path} is readable by others (mode {st.st_mode & 0o777:o}): chmod 600 it")
+    if hasattr(os, "getuid") and st.st_uid != os.getuid():
+        raise ValueError(f"network key {path} belongs to another user (uid {st.st_uid})")
+    text = path.read_text(errors="replace").strip()
+    try:
+        key = bytes.fromhex(text)
+    except ValueError as exc:
+        raise ValueError(f"network key {path} is not {KEY_BYTES * 2} hex digits") from exc
+    if len(key) != KEY_BYTES:
+        raise ValueError(f"network key {path} is not {KEY_BYTES * 2} hex digits")
+    return key

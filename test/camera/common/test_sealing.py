@@ -1,0 +1,122 @@
+"""Sealing (AES-256-GCM with the network key): what a stranger cannot do, replays, clocks, key files."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from face_reid_camera.common.sealing import (
+    KEY_BYTES,
+    Opener,
+    Sealer,
+    SealError,
+    load_network_key,
+    write_network_key,
+)
+
+KEY = bytes(range(KEY_BYTES))
+OTHER = bytes(reversed(range(KEY_BYTES)))
+PAYLOAD = b"embedding \x00\x01\x02 of a person" * 10
+
+
+def _code(opener: Opener, sealed, now_s: float | None = None) -> str:
+    with pytest.raises(SealError) as info:
+        opener.open(sealed, now_s)
+    return info.value.code
+
+
+def test_a_holder_of_the_key_opens_what_another_holder_sealed_and_nobody_reads_it_on_the_way() -> None:
+    sealed = Sealer(KEY, "cam_a").seal(PAYLOAD)
+    assert b"embedding" not in sealed.ciphertext and PAYLOAD[:16] not in sealed.ciphertext
+    assert Opener(KEY).open(sealed) == PAYLOAD
+
+
+def test_a_stranger_can_neither_open_nor_forge_nor_alter() -> None:
+    sealed = Sealer(KEY, "cam_a").seal(PAYLOAD)
+    assert _code(Opener(OTHER), sealed) == "forged"  # another key cannot read it
+    assert _code(Opener(KEY), Sealer(OTHER, "cam_a").seal(PAYLOAD)) == "forged"  # nor write one
+    flipped = bytearray(sealed.ciphertext)
+    flipped[3] ^= 1
+    assert _code(Opener(KEY), dataclasses.replace(sealed, ciphertext=bytes(flipped))) == "forged"
+    assert _code(Opener(KEY), dataclasses.replace(sealed, sender_id="cam_b")) == "forged"  # the sender is sealed too
+    assert _code(Opener(KEY), dataclasses.replace(sealed, counter=sealed.counter + 1)) == "forged"
+    # a seal made for frames is not an admin request
+    assert _code(Opener(KEY, purpose="forget_face"), sealed) == "forged"
+
+
+def test_replays_and_reordering_are_refused_per_sender() -> None:
+    a, b = Sealer(KEY, "cam_a"), Sealer(KEY, "cam_b")
+    first, second, other = a.seal(b"1"), a.seal(b"2"), b.seal(b"3")
+    assert second.counter > first.counter
+    opener = Opener(KEY)
+    assert opener.open(second) == b"2"
+    assert _code(opener, second) == "replayed"
+    assert _code(opener, first) == "replayed"  # older than what was seen
+    assert opener.open(other) == b"3"  # another sender has its own counter
+    assert opener.open(a.seal(b"4")) == b"4"
+
+
+def test_seals_far_from_the_receivers_clock_are_refused() -> None:
+    sealed = Sealer(KEY, "cam_a").seal(PAYLOAD)
+    opener = Opener(KEY, max_age_s=30.0)
+    assert _code(opener, sealed, time.time() + 60.0) == "stale"  # an old recording replayed to a fresh master
+    assert _code(opener, sealed, time.time() - 60.0) == "stale"  # a sender whose clock runs a minute ahead
+    assert opener.open(sealed, time.time() + 10.0) == PAYLOAD
+
+
+def test_malformed_seals_are_refused_with_a_reason() -> None:
+    sealed = Sealer(KEY, "cam_a").seal(PAYLOAD)
+    opener = Opener(KEY)
+    assert _code(opener, dataclasses.replace(sealed, nonce=b"short")) == "malformed"
+    assert _code(opener, dataclasses.replace(sealed, ciphertext=b"")) == "malformed"
+    assert _code(opener, dataclasses.replace(sealed, sender_id="")) == "malformed"
+    assert _code(opener, dataclasses.replace(sealed, sender_id="x" * 100_000)) == "malformed"
+    assert _code(opener, dataclasses.replace(sealed, counter=0)) == "malformed"
+
+
+def test_arguments_are_checked_by_name() -> None:
+    with pytest.raises(ValueError, match="32 bytes"):
+        Sealer(b"short", "cam_a")
+    with pytest.raises(ValueError, match="sender_id"):
+        Sealer(KEY, "")
+    with pytest.raises(ValueError, match="max_age_s"):
+        Opener(KEY, max_age_s=0.0)
+
+
+def test_key_files_are_private_and_checked(tmp_path: Path) -> None:
+    path = write_network_key(tmp_path / "keys" / "network.key")
+    assert path.stat().st_mode & 0o777 == 0o600
+    key = load_network_key(path)
+    assert len(key) == KEY_BYTES and key != load_network_key(write_network_key(tmp_path / "second.key"))
+    with pytest.raises(ValueError, match="not overwritten"):
+        write_network_key(path)
+    os.chmod(path, 0o644)
+    with pytest.raises(ValueError, match="readable by others"):
+        load_network_key(path)
+    os.chmod(path, 0o600)
+    link = tmp_path / "link.key"
+    link.symlink_to(path)
+    with pytest.raises(ValueError, match="not a regular file"):
+        load_network_key(link)
+    bad = tmp_path / "bad.key"
+    bad.write_text("not hex")
+    bad.chmod(0o600)
+    with pytest.raises(ValueError, match="hex digits"):
+        load_network_key(bad)
+    with pytest.raises(ValueError, match="face-reid-keys new"):
+        load_network_key(tmp_path / "missing.key")
+
+
+def test_face_reid_keys_makes_and_checks_a_key(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from face_reid_camera.tools.keys import main
+
+    path = tmp_path / "network.key"
+    assert main(["new", str(path)]) == 0 and path.stat().st_mode & 0o777 == 0o600
+    assert main(["check", str(path)]) == 0
+    assert main(["new", str(path)]) == 2 and "not overwritten" in capsys.readouterr().err
+    path.chmod(0o640)
+    assert main(["check", str(path)]) == 2 and "chmod 600" in capsys.readouterr().err
