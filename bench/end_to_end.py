@@ -10,7 +10,10 @@ Separate processes on a private ROS domain (discovery on loopback only), the rea
   (people stay in their camera's own area, each with a stable face): frames offered vs applied and dropped
   for overload (the master's stats log), /tracks_named messages per second, and camera-to-/tracks_named latency;
 - ``overload``: a deliberate overload (``--overload-cameras``, 60 by default): the latency must stay bounded,
-  the master drops the oldest frames and says what fraction.
+  the master drops the oldest frames and says what fraction;
+- ``latency_sealed`` / ``throughput_6_sealed``: the latency and 6-camera cases on a secured network (frames
+  sealed with a network key); ``secured_vs_unsecured`` sets them side by side [secured, unsecured] with the
+  in-process cost of sealing and opening one frame.
 
 The master runs on one core, the simulated cameras and the listener on the others (2+ CPUs). Send and receive
 times are ``time.time()`` in both processes (one machine clock). Each CameraFrame carries its send time in
@@ -83,8 +86,19 @@ def role_publisher(args: argparse.Namespace) -> int:
     rclpy.init()
     node = rclpy.create_node("bench_cameras")
     qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-    pubs = [node.create_publisher(CameraFrame, f"{args.prefix}/cam{c:02d}/face_reid/frames", qos)
-            for c in range(args.cameras)]
+    sealers = None
+    if args.key:  # a secured network: each camera seals its frames with the network key
+        from face_reid_camera.common.sealing import Sealer, load_network_key
+        from face_reid_camera.ros.sealed import seal_message
+        from face_reid_msgs.msg import Sealed
+
+        key = load_network_key(args.key)
+        sealers = [Sealer(key, f"cam{c:02d}") for c in range(args.cameras)]
+        pubs = [node.create_publisher(Sealed, f"{args.prefix}/cam{c:02d}/face_reid/frames_sealed", qos)
+                for c in range(args.cameras)]
+    else:
+        pubs = [node.create_publisher(CameraFrame, f"{args.prefix}/cam{c:02d}/face_reid/frames", qos)
+                for c in range(args.cameras)]
     from plausible_faces import FaceSpace
 
     from face_reid_master.core import MasterConfig
@@ -145,7 +159,7 @@ def role_publisher(args: argparse.Namespace) -> int:
                 angle = 0.3 * t_rel + j * 2.0
                 obs.position_world.x = float(10.0 * c + 1.2 * math.cos(angle))
                 obs.position_world.y = float(1.2 * math.sin(angle) + 3.0 * j)
-            pub.publish(msg)
+            pub.publish(msg if sealers is None else seal_message(sealers[c], msg))
             stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
         else:
             k += 1
@@ -275,10 +289,11 @@ def _pct(values: np.ndarray, q: float) -> float | None:
 
 
 def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_master: bool, domain_id: int,
-             work: Path, master_params: tuple[str, ...] = ()) -> dict[str, Any]:
+             work: Path, master_params: tuple[str, ...] = (), key: Path | None = None) -> dict[str, Any]:
     """One measurement with fresh processes; returns its JSON-ready results.
 
-    ``master_params``: extra ``name:=value`` parameters of the master node.
+    ``master_params``: extra ``name:=value`` parameters of the master node; ``key``: a network key file (the
+    cameras seal their frames, the master takes only sealed ones).
     """
     from face_reid_master.demo.children import child_env, start_child, stop_children
 
@@ -294,6 +309,8 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
                 "-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={logs / 'faces.db'}",
                 "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0", "-p", "tick_rate_hz:=0.2",
                 "-p", f"camera_topic_regex:=^{prefix}/.*/face_reid/frames$",
+                *(("-p", f"network_key_path:={key}", "-p", f"sealed_topic_regex:=^{prefix}/.*/face_reid/frames_sealed$")
+                  if key else ()),
                 *(a for p in master_params for a in ("-p", p))], env, logs))
             _pin(children[-1].proc.pid, MASTER_CPUS)
         listener = start_child("listener", [*me, "--role", "subscriber", "--kind",
@@ -303,7 +320,8 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
         _pin(listener.proc.pid, OTHER_CPUS)
         _events(listener, 60.0, "ready")
         publisher = start_child("cameras", [*me, "--role", "publisher", "--cameras", str(cameras), "--rate-hz",
-                                            str(rate_hz), "--duration-s", str(seconds + WARMUP_S), "--prefix", prefix],
+                                            str(rate_hz), "--duration-s", str(seconds + WARMUP_S), "--prefix", prefix,
+                                            *(("--key", str(key)) if key else ())],
                                 env, logs, talk=True)
         children.append(publisher)
         _pin(publisher.proc.pid, OTHER_CPUS)
@@ -370,6 +388,35 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
     return out
 
 
+def _sealing_cost(key: Path, frames: int = 300) -> dict[str, float]:
+    """Microseconds to seal a CameraFrame of PEOPLE faces (serialize + AES-GCM) and to open it (the reverse),
+    in this process, median over ``frames``."""
+    import rclpy  # noqa: F401 - the message types need the ROS libraries loaded
+
+    from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
+    from face_reid_camera.ros.sealed import open_message, seal_message
+    from face_reid_master.records import CameraFrameRecord, PersonRecord
+    from face_reid_master.ros.convert import frame_record_to_msg
+    from face_reid_msgs.msg import CameraFrame
+
+    secret = load_network_key(key)
+    sealer, opener = Sealer(secret, "cam00"), Opener(secret)
+    rng = np.random.default_rng(0)
+    people = tuple(PersonRecord(np.zeros(3), 0.05, 1.75, rng.normal(size=256).astype(np.float32), 0.9, 0.8)
+                   for _ in range(PEOPLE))
+    msg = frame_record_to_msg(CameraFrameRecord("cam00", time.time(), people), time.time())
+    seal_t, open_t = [], []
+    for _ in range(frames):
+        t0 = time.perf_counter()
+        sealed = seal_message(sealer, msg)
+        t1 = time.perf_counter()
+        open_message(opener, sealed, CameraFrame)
+        t2 = time.perf_counter()
+        seal_t.append(t1 - t0)
+        open_t.append(t2 - t1)
+    return {"seal": round(float(np.median(seal_t)) * 1e6, 1), "open": round(float(np.median(open_t)) * 1e6, 1)}
+
+
 def _frame_latencies(sent: np.ndarray, pairs: np.ndarray, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
     """Per sent frame (stamp in [t0, t1)): seconds until the first /tracks_named message stamped at or after it
     arrived (the master applies frames in stamp order and stamps a message with the newest frame applied);
@@ -397,6 +444,7 @@ def main() -> int:
     parser.add_argument("--duration-s", type=float, default=10.0)
     parser.add_argument("--prefix", default="/bench")
     parser.add_argument("--kind", choices=("tracks", "frames"), default="tracks")
+    parser.add_argument("--key", default="", help="publisher: seal the frames with this network key file")
     args = parser.parse_args()
     if args.role == "publisher":
         return role_publisher(args)
@@ -413,6 +461,12 @@ def main() -> int:
         six = run_case("throughput_6", 6, 30.0, args.seconds, True, domain_id, work)
         twenty = run_case("throughput_20", 20, 30.0, args.seconds, True, domain_id, work)
         overload = run_case("overload", args.overload_cameras, 30.0, args.seconds, True, domain_id, work)
+        from face_reid_camera.common.sealing import write_network_key
+
+        key = write_network_key(work / "network.key")
+        latency_sealed = run_case("latency_sealed", 1, 30.0, 5.0, True, domain_id, work, key=key)
+        six_sealed = run_case("throughput_6_sealed", 6, 30.0, args.seconds, True, domain_id, work, key=key)
+        sealing = _sealing_cost(key)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     base_med = baseline["latency_ms"]["median"]
@@ -433,8 +487,18 @@ def main() -> int:
             "overload_p99_ms": overload["latency_ms"]["p99"], "overload_p99_target_ms": TARGET_P99_MS["overload"],
             "overload_dropped_fraction": overload.get("master_dropped_fraction"),
         },
+        "secured_vs_unsecured": {
+            "seal_plus_open_us_per_frame": sealing,
+            "latency_1cam_median_ms": [latency_sealed["latency_ms"]["median"], lat_med],
+            "latency_1cam_p99_ms": [latency_sealed["latency_ms"]["p99"], latency["latency_ms"]["p99"]],
+            "master_cpu_6cams_cores": [six_sealed["cpu_cores_used"].get("master"), six["cpu_cores_used"].get("master")],
+            "6cams_frames_applied_per_s": [six_sealed.get("master_frames_applied_per_s"),
+                                           six.get("master_frames_applied_per_s")],
+            "6cams_p99_ms": [six_sealed["latency_ms"]["p99"], six["latency_ms"]["p99"]],
+        },
         "cases": {"baseline_raw_dds": baseline, "latency_1cam": latency, "throughput_6cams": six,
-                  "throughput_20cams": twenty, f"overload_{args.overload_cameras}cams": overload},
+                  "throughput_20cams": twenty, f"overload_{args.overload_cameras}cams": overload,
+                  "latency_1cam_sealed": latency_sealed, "throughput_6cams_sealed": six_sealed},
         "run_time_s": round(time.monotonic() - t0, 1),
     }
     print(json.dumps(result))

@@ -248,7 +248,11 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
         print(f"[{prog}] FATAL: cannot start: {message}", file=sys.stderr, flush=True)
         return 2
 
-    rclpy.init(args=argv)
+    try:
+        rclpy.init(args=argv)
+    except Exception as exc:  # rcl's own parser (e.g. "-p name:=" without a value): one line, not a traceback
+        return fatal(f"bad --ros-args ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
+                     "an empty string value is written name:=''")
     try:
         node = make_node()
     except (ParamError, ValueError) as exc:

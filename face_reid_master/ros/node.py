@@ -389,6 +389,9 @@ class MasterNode(ManagedNode):
             stats = {k: v for k, v in self.core.stats.as_dict().items() if v}
             if self.frames_dropped_overload:
                 stats["frames_dropped_overload"] = self.frames_dropped_overload
+            if self.health is not None:
+                stats.update({f"rejected_{k}": v for k, v in sorted(self.health.rejected.items())})
+            stats.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
             self.get_logger().info(f"stats: {stats}")
 
     def diagnostics(self, now_s: float) -> DiagnosticReport:

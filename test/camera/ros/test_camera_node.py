@@ -256,11 +256,19 @@ def test_shipped_yaml_applies_to_any_node_name(ros_context, tmp_path: Path) -> N
     ("camera_pose_xyz_m:=[1, 2, 2]", "parameter 'camera_pose_xyz_m' must be a list of 3 floats"),
     ("head_roi_size_m:=7.0", "parameter 'head_roi_size_m' must be in [0.05, 2], got 7.0"),
     ("person.voxel_size_m:=0.0", "parameter 'person.voxel_size_m' must be in (0, 1], got 0.0"),
+    ("network_key_path:=/nonexistent/network.key", "make one with: face-reid-keys new /nonexistent/network.key"),
 ])
 def test_bad_parameter_is_one_fatal_line(ros_domain_id: int, override: str, expected: str) -> None:
     status, lines = start_up_output("face_reid_camera.ros.node", "-p", override)
     assert status == 2 and len(lines) == 1, lines
     assert lines[0].startswith("[face-reid-camera] FATAL: cannot start: ") and expected in lines[0]
+
+
+def test_arguments_rcl_cannot_parse_are_a_fatal_line_not_a_traceback(ros_domain_id: int) -> None:
+    status, lines = start_up_output("face_reid_camera.ros.node", "-p", "network_key_path:=")
+    assert status == 2 and not any("Traceback" in line for line in lines), lines
+    assert any(line.startswith("[face-reid-camera] FATAL: cannot start: bad --ros-args") and "name:=''" in line
+               for line in lines), lines
 
 
 def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
