@@ -281,6 +281,22 @@ class FaceStoreLike:
         raise NotImplementedError
 
 
+_MAX_NOTICED_CAMERAS = 1024  # cameras whose unusable spaces are remembered (hostile ids cannot grow it)
+
+
+def _first_notice(seen: dict[str, str], camera_id: str, space: str) -> bool:
+    """True the first time ``camera_id`` sends ``space`` (cut to 64 characters); remembers at most
+    _MAX_NOTICED_CAMERAS cameras, the least recently noticed forgotten first."""
+    camera_id, space = camera_id[:256], space[:64]
+    if seen.get(camera_id) == space:
+        return False
+    seen.pop(camera_id, None)
+    seen[camera_id] = space
+    while len(seen) > _MAX_NOTICED_CAMERAS:
+        del seen[next(iter(seen))]
+    return True
+
+
 class MasterCore:
     """Tracking + face identities + names + persistence, frame by frame."""
 
@@ -591,8 +607,7 @@ class MasterCore:
         assert self.body_metric is not None
         self.stats.bodies_rejected_space += 1
         space = space[:64]
-        if self._body_space_noticed.get(camera_id) != space:
-            self._body_space_noticed[camera_id] = space
+        if _first_notice(self._body_space_noticed, camera_id, space):
             self._notices.append(f"camera {shown(camera_id, 64)} sends body descriptors of space {space!r}, the body "
                                  "metric "
                                  f"compares {self.body_metric.space!r}: its bodies are not used for tracking (see the "
@@ -614,8 +629,7 @@ class MasterCore:
             why = f"its face embeddings are of space {space[:64]!r}, this master compares {want!r}"
         except ValueError as exc:
             part, why = None, f"its face embeddings are unusable ({exc})"
-        if part is None and self._space_noticed.get(camera_id) != space:
-            self._space_noticed[camera_id] = space
+        if part is None and _first_notice(self._space_noticed, camera_id, space):
             self._notices.append(f"camera {camera_id[:64]!r}: {why}: they are not used for identity (its "
                                  "positions still are); see the embedder / embedding_space parameters")
         return part

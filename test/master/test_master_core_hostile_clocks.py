@@ -90,3 +90,19 @@ def test_a_huge_camera_id_is_cut_and_escaped_in_what_is_logged() -> None:
     core = _core(known_camera_ids=("cam_a",))
     out = core.process_frame(CameraFrameRecord("\x1b[2J" + "x" * 100_000, 0.0, ()), now_s=0.0)
     assert not out.accepted and len(out.reason) < 120 and "\x1b" not in out.reason  # before: 100,000 characters
+
+
+def test_cameras_with_unusable_spaces_cannot_grow_what_the_master_remembers() -> None:
+    """Each new camera id sending an unusable space is noticed once; 5,000 of them (random ids) keep at most
+    1,024 remembered, and a camera noticed again after being forgotten is simply noticed again."""
+    core = _core()
+    emb = np.full(128, 0.1, np.float32)
+    notices = 0
+    for k in range(5000):
+        person = PersonRecord(np.array([0.0, 1.0, 0.0]), 0.05, 1.75, emb, 0.9, 0.8, "some_space_" + "z" * 1000)
+        out = core.process_frame(CameraFrameRecord(f"cam_{k}", 0.01 * k, (person,)), now_s=0.01 * k)
+        notices += len(out.notices)
+    assert notices == 5000 and len(core._space_noticed) == 1024  # before: 5,000 entries, each a 1,000-char space
+    assert all(len(space) <= 64 for space in core._space_noticed.values())
+    again = core.process_frame(CameraFrameRecord("cam_4999", 50.0, (person,)), now_s=50.0)
+    assert not again.notices  # still remembered: not said twice
