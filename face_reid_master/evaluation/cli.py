@@ -356,7 +356,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
         "gallery": gallery.as_json(),
         **metrics,
         "frames": transport["frames_sent"],
-        "frames_rejected": transport["frames_sent"] - transport["frames_answered"],
+        "frames_rejected": transport["master_frames_not_applied"],
         "detections": transport["detections_sent"],
         "attribution": {"match_radius_m": MATCH_RADIUS_M, "published_track_samples": int(run.det_gt.size),
                         "samples_near_nobody": int((run.det_gt < 0).sum())},

@@ -84,6 +84,39 @@ class LiveRun:
     transport: dict[str, Any]
 
 
+def _last_stats(log_path: Path) -> dict[str, int] | None:
+    """The counters of the master's last 'stats: {...}' log line (None: no such line)."""
+    import ast
+
+    try:
+        lines = log_path.read_text(errors="replace").splitlines()
+    except OSError:
+        return None
+    for line in reversed(lines):
+        if "stats: {" in line:
+            try:
+                return dict(ast.literal_eval(line.split("stats: ", 1)[1]))
+            except (ValueError, SyntaxError):
+                return None
+    return None
+
+
+def _frame_latencies(sent: dict[int, float], first_reply: dict[int, float]) -> tuple[list[float], int]:
+    """Per sent frame: seconds from sending it to the first /tracks_named message stamped with it or a later
+    frame (the master applies a cycle's frames in stamp order and stamps its message with the newest), and how
+    many frames got one."""
+    if not sent or not first_reply:
+        return [], 0
+    stamps = np.array(sorted(first_reply), dtype=np.int64)
+    recv = np.array([first_reply[q] for q in stamps.tolist()])
+    earliest = np.minimum.accumulate(recv[::-1])[::-1]  # first arrival among messages stamped >= stamps[i]
+    qs = np.array(sorted(sent), dtype=np.int64)
+    idx = np.searchsorted(stamps, qs)
+    has = idx < stamps.size
+    lat = earliest[idx[has]] - np.array([sent[q] for q in qs[has].tolist()])
+    return lat.tolist(), int(np.count_nonzero(has))
+
+
 def _segments_to_scene(segments: Sequence[tuple[float, float]]) -> Any:
     """Wall time -> scene time: each day's frames were played from wall time ``w0`` with scene = wall + offset."""
     starts = np.array([w0 for w0, _ in segments])
@@ -119,7 +152,8 @@ def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], g
     work.mkdir(parents=True, exist_ok=True)
     say(f"live: work folder {work} (face database, gallery, master log; deleted at the end)")
     master_args = ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={work / 'faces.db'}",
-                   "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=5.0", "-p", f"method:={method}",
+                   "-p", "max_publish_rate_hz:=0.0",  # every cycle's state: the evaluation samples them all
+                   "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0", "-p", f"method:={method}",
                    "-p", f"embedding_space:={embedding_space}",
                    "-p", f"body_appearance_tracking:={'true' if body_appearance_tracking else 'false'}"]
     if gallery:
@@ -159,6 +193,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
     executor.add_node(node)
     received: list[tuple[float, Any]] = []  # (receive wall time, message)
     got_any = [False]
+    master_stats: dict[str, int] | None = None
     try:
         qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -223,6 +258,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
                 say(f"  live: {i + 1}/{len(frames)} frames sent, {len(received)} /tracks_named received")
         spin_until(time.time() + _TAIL_S)
         check_master()
+        master_stats = _last_stats(master.log_path)
     finally:
         executor.shutdown()
         node.destroy_node()
@@ -230,15 +266,14 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
 
     to_scene = _segments_to_scene(segments) if segments else (lambda s: s)
     messages: list[TrackMessage] = []
-    latencies: list[float] = []
-    answered: set[int] = set()
+    first_reply: dict[int, float] = {}  # a sent frame's quantized stamp -> when a message with that stamp arrived
     for recv, msg in received:
         wall = stamp_to_seconds(msg.header.stamp)
         q = round(wall / _STAMP_QUANTUM_S)
-        if q in sent and q not in answered:
-            answered.add(q)
-            latencies.append(recv - wall)
+        if q in sent and q not in first_reply:
+            first_reply[q] = recv
         messages.append(TrackMessage(to_scene(wall), tuple(track_from_msg(t, to_scene) for t in msg.tracks)))
+    latencies, answered = _frame_latencies(sent, first_reply)
     lag = np.asarray(lags) if lags else np.zeros(1)
     lat = np.asarray(latencies) * 1e3
 
@@ -249,7 +284,11 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
         "startup_s": round(startup_s, 2),
         "frames_sent": len(sent),
         "detections_sent": detections,
-        "frames_answered": len(answered),
+        "frames_answered": answered,
+        # what the master refused or dropped (its stats line, logged every second)
+        "master_frames_not_applied": None if master_stats is None else
+        master_stats.get("frames_received", 0) - master_stats.get("frames_applied", 0)
+        + master_stats.get("frames_dropped_overload", 0),
         "tracks_named_messages": len(received),
         "send_lag_ms": {"median": round(float(np.median(lag)) * 1e3, 2), "max": round(float(lag.max()) * 1e3, 2)},
         "frames_sent_late_50ms": int(np.sum(lag > 0.05)),

@@ -295,8 +295,10 @@ class IdentityManagerBase:
         bank = self._bank
         single_slots: list[int] = []  # one new feature into a full feature set: batched below
         single_obs: list[F32Array] = []
+        rows = {tid: _rows(chunks) for tid, chunks in pending.items()}
+        near = self._near_own_face(rows)
         for tid, chunks in pending.items():
-            obs = _rows(chunks)
+            obs = rows[tid]
             track = self._tracks[tid]
             track.n_observations += obs.shape[0]
             if track.face_id is not None:
@@ -304,8 +306,8 @@ class IdentityManagerBase:
                 slot: int | None = face.slot
                 face.n_observations += obs.shape[0]
                 face.last_seen_s = max(face.last_seen_s, stamp)
-                if self.feature_gate_distance is not None:
-                    keep = self._consistent(obs, face.slot)
+                if tid in near:
+                    keep = near[tid]
                     swapped = self._swapped_rows(track, chunks, keep)
                     obs = obs if keep.all() else obs[keep]
                     if swapped is not None:  # the face keeps what was its person's, then lets the track go
@@ -426,13 +428,20 @@ class IdentityManagerBase:
             limit = 0.5 * self.feature_gate_distance
         return limit is not None and self._face_distance(face_a, face_b) < limit  # NaN: False
 
-    def _consistent(self, obs: F32Array, slot: int) -> npt.NDArray[np.bool_]:
-        """Which observations lie within ``feature_gate_distance`` of a stored feature of the face in ``slot``."""
-        assert self.feature_gate_distance is not None
-        d = self._bank.exact_min_distances(obs, np.array([slot], dtype=np.intp))[:, 0]
-        keep = d <= self.feature_gate_distance
+    def _near_own_face(self, rows: dict[int, F32Array]) -> dict[int, npt.NDArray[np.bool_]]:
+        """For each identified track's new observations: which lie within ``feature_gate_distance`` of a stored
+        feature of its face (all tracks in one batched product; {} when the gate is off)."""
+        gate = self.feature_gate_distance
+        ident = [tid for tid in rows if self._tracks[tid].face_id is not None] if gate is not None else []
+        if not ident:
+            return {}
+        obs = np.concatenate([rows[tid] for tid in ident])
+        slots = np.concatenate([np.full(rows[tid].shape[0], self._faces[self._tracks[tid].face_id].slot, np.intp)
+                                for tid in ident])
+        keep = self._bank.own_min_distances(obs, slots) <= gate
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
-        return keep
+        bounds = np.cumsum([rows[tid].shape[0] for tid in ident])[:-1]
+        return dict(zip(ident, np.split(keep, bounds), strict=True))
 
     def _swapped_rows(self, track: TrackEntry, chunks: list[Chunk], keep: npt.NDArray[np.bool_]
                       ) -> list[Chunk] | None:

@@ -61,6 +61,7 @@ class MasterNode(ManagedNode):
         self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
+        self._track_msgs: dict[int, Any] = {}  # track id -> its NamedTrack, refilled on every publish
         self._timers: list[Any] = []
         self.tracks_pub: Any = None
         self.markers_pub: Any = None
@@ -371,7 +372,7 @@ class MasterNode(ManagedNode):
             return
         tracks = self.core.tracks()
         frame_id = str(self.values["world_frame_id"])
-        msg = tracks_to_msg(tracks, stamp_s, frame_id)
+        msg = tracks_to_msg(tracks, stamp_s, frame_id, self._track_msgs)
         self.tracks_pub.publish(msg)
         self._unpublished_stamp = None
         if self.health is not None:

@@ -68,12 +68,13 @@ def test_live_evaluation_matches_offline(ros_domain_id: int, tmp_path: Path, cap
     assert not procs.run_pids(ros_domain_id), "the master node outlived the evaluation"
     assert wall_s < 40 + 30
 
-    # every recorded frame was sent over DDS in real time, and each got its /tracks_named reply
+    # every recorded frame was sent over DDS in real time, and each was answered by a /tracks_named message
+    # stamped with it or a later frame (the master applies a cycle's frames together)
     t = live["transport"]
     assert t["frames_sent"] == live["frames"] == offline["frames"] == live["scenario"]["frames"]
     assert t["detections_sent"] == offline["detections"]
     assert t["frames_answered"] == t["frames_sent"] and live["frames_rejected"] == 0
-    assert t["tracks_named_messages"] >= t["frames_sent"] + 4 * 40  # plus the 5 Hz timer
+    assert t["tracks_named_messages"] >= 0.5 * t["frames_sent"]  # cycles of a frame or two, uncapped
     assert t["frames_sent_late_50ms"] <= 0.02 * t["frames_sent"]
     assert t["frame_to_tracks_latency_ms"]["median"] < 100
 

@@ -89,3 +89,21 @@ def test_bank_distances_match_float64_reference_in_exact_and_shortlist_modes() -
     assert np.all(np.isfinite(d).sum(axis=1) == 8)
     np.testing.assert_allclose(d[np.isfinite(d)] ** 2, ref[np.isfinite(d)] ** 2, atol=2e-6)
     assert np.all(np.argmin(d, axis=1) == np.argmin(ref, axis=1))  # the nearest face is always shortlisted
+
+
+def test_own_face_distances_match_the_float64_reference_for_full_and_part_filled_slots() -> None:
+    """Each observation against its own face's features only (the identified tracks' consistency check):
+    padding rows of a part-filled slot never count."""
+    from face_reid_master.identity.feature_bank import FeatureBank
+
+    rng = np.random.default_rng(5)
+    faces = [(c + rng.normal(0, 0.02, (n, DIM))).astype(np.float32)
+             for c, n in zip(rng.normal(0, 0.06, (4, DIM)), (1, 3, 8, 8), strict=True)]
+    bank = FeatureBank(DIM, 8)
+    slots = [bank.new_slot(f) for f in faces]
+    obs = rng.normal(0, 0.06, (6, DIM)).astype(np.float32)
+    own = np.array([0, 1, 2, 3, 0, 2])
+    ref = min_distances_to_faces(obs, faces)[np.arange(6), own]
+    got = bank.own_min_distances(obs, np.array([slots[i] for i in own], dtype=np.intp))
+    np.testing.assert_allclose(got**2, ref**2, atol=2e-6)
+    assert bank.own_min_distances(obs[:0], np.zeros(0, dtype=np.intp)).shape == (0,)
