@@ -72,8 +72,6 @@ class MasterNode(ManagedNode):
         self._publish_tokens = 2.0
         self._intake: FrameIntake[Any] = FrameIntake()
         self._budget = CycleBudget()
-        self._cycle_gc: Any = None
-        self._cycle_requested = False
         self.frames_dropped_overload = 0
 
     # ------------------------------------------------------------------ lifecycle
@@ -135,7 +133,6 @@ class MasterNode(ManagedNode):
         self.tracks_pub = self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos)
         markers_topic = str(values["markers_topic"])
         self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
-        self._cycle_gc = self.create_guard_condition(self._cycle)
         for topic in master_params.clean_list(values["camera_topics"]):
             self._subscribe(topic)
         if self._regex is not None:
@@ -156,9 +153,6 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             self.destroy_subscription(sub)
         self._subscribed = {}
-        if self._cycle_gc is not None:
-            self.destroy_guard_condition(self._cycle_gc)
-            self._cycle_gc = None
         self._intake.take(1 << 30)  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
@@ -237,12 +231,10 @@ class MasterNode(ManagedNode):
                 self._subscribe(name)
 
     def _on_frame(self, msg: Any) -> None:
-        """A camera message: queued for the next cycle (which the guard condition runs once the executor has
-        taken what is ready)."""
+        """A camera message: a cycle with it and everything else already waiting (the cycle drains every camera
+        subscription, so the executor finds nothing left for the messages that came meanwhile)."""
         self._receive(msg, self.now_s())
-        if not self._cycle_requested and self._cycle_gc is not None:
-            self._cycle_requested = True
-            self._cycle_gc.trigger()
+        self._cycle()
 
     def _on_sealed(self, sealed: Any) -> None:
         """A sealed camera message (secured network): opened, then queued like a plain one."""
@@ -288,7 +280,6 @@ class MasterNode(ManagedNode):
 
     def _cycle(self) -> None:
         """One master cycle: everything received since the last one, in stamp order, then one publish."""
-        self._cycle_requested = False
         core, health = self.core, self.health
         if core is None or health is None or self.tracks_pub is None:
             return

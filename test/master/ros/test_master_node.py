@@ -56,9 +56,8 @@ def _frame(stamp_s: float, camera: str = "cam_a", emb: np.ndarray | None = None,
 
 
 def _feed(node: MasterNode, msg) -> None:
-    """One frame through the subscription callback and the cycle the executor would run next."""
+    """One frame through the subscription callback (which runs a cycle)."""
     node._on_frame(msg)
-    node._cycle()
 
 
 def test_lifecycle_subscribes_only_while_active_and_keeps_faces(ros_context, tmp_path: Path) -> None:
@@ -285,7 +284,7 @@ def test_a_cycle_applies_its_frames_in_stamp_order_and_publishes_once(ros_contex
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         stamps = [10.0 + 0.1 * k for k in range(8)]
         for k, t in enumerate(reversed(stamps)):  # newest first: one by one, all but the first would be late
-            node._on_frame(_frame(t, camera="cam_a" if k % 2 else "cam_b"))
+            node._receive(_frame(t, camera="cam_a" if k % 2 else "cam_b"), node.now_s())  # waiting together
         published = node.health.messages_published
         node._cycle()
         stats = node.core.stats
@@ -304,8 +303,8 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         node._budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
-        for k in range(30):  # camera a sends 20 frames, camera b 10, interleaved
-            node._on_frame(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"))
+        for k in range(30):  # camera a sends 20 frames, camera b 10, interleaved, all waiting together
+            node._receive(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"), node.now_s())
         node._cycle()
         assert node.frames_dropped_overload == 26 and node.core.stats.frames_applied == 4
         values = node.diagnostics(node.now_s()).values
