@@ -1,0 +1,1 @@
+"""Calibration of a camera network (pure algorithms; the tools call them)."""
