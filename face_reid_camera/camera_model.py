@@ -103,6 +103,31 @@ class CameraPose:
         return cls(world_from_body @ _BODY_FROM_OPTICAL, np.array([x, y, z], dtype=np.float64))
 
     @classmethod
+    def from_position_quaternion(cls, xyz: tuple[float, float, float],
+                                 xyzw: tuple[float, float, float, float]) -> CameraPose:
+        """The pose a geometry_msgs/Pose of the optical frame describes (the inverse of :meth:`quaternion_xyzw`)."""
+        x, y, z, w = (float(v) for v in xyzw)
+        n = math.sqrt(x * x + y * y + z * z + w * w)
+        if not (math.isfinite(n) and n > 1e-9):
+            raise ValueError("camera pose quaternion must be finite and non-zero")
+        x, y, z, w = x / n, y / n, z / n, w / n
+        rot = np.array([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ])
+        return cls(rot, np.asarray(xyz, dtype=np.float64))
+
+    def xyz_rpy(self) -> tuple[float, float, float, float, float, float]:
+        """(x, y, z, roll, pitch, yaw) of the camera body (the inverse of :meth:`from_xyz_rpy`; radians)."""
+        body = self.rotation @ _BODY_FROM_OPTICAL.T
+        pitch = math.asin(max(-1.0, min(1.0, -float(body[2, 0]))))
+        roll = math.atan2(float(body[2, 1]), float(body[2, 2]))
+        yaw = math.atan2(float(body[1, 0]), float(body[0, 0]))
+        x, y, z = (float(v) for v in self.translation)
+        return x, y, z, roll, pitch, yaw
+
+    @classmethod
     def looking_at(cls, position: FloatArray, target: FloatArray) -> CameraPose:
         """Camera at ``position`` (world, m) whose optical axis points at ``target``; image 'up' is world +z."""
         pos = np.asarray(position, dtype=np.float64)

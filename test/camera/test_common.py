@@ -70,3 +70,16 @@ def test_health_report_percentiles_rates_and_warnings() -> None:
     assert v["frames_in"] == "4" and v["frames_processed"] == "4" and v["rejected_stale"] == "2"
     assert v["processing_time_p50_ms"] == "25.000" and v["people_per_frame"] == "2.000"
     assert v["faces_per_frame"] == "0.500" and v["publish_rate_hz"] == "1.000" and v["tracks"] == "3"
+
+
+@pytest.mark.parametrize("xyz_rpy", [(1.0, -2.0, 2.5, 0.0, 0.35, 0.0), (0.3, 4.0, 1.2, 0.05, 0.6, 2.8),
+                                     (-3.0, 0.0, 3.0, -0.1, 0.2, -1.9)])
+def test_camera_pose_round_trips_through_rpy_and_the_message_quaternion(xyz_rpy: tuple[float, ...]) -> None:
+    from face_reid_camera.camera_model import CameraPose
+
+    pose = CameraPose.from_xyz_rpy(*xyz_rpy)
+    np.testing.assert_allclose(pose.xyz_rpy(), xyz_rpy, atol=1e-9)
+    again = CameraPose.from_position_quaternion(tuple(pose.translation), pose.quaternion_xyzw())
+    np.testing.assert_allclose(again.rotation, pose.rotation, atol=1e-9)
+    with pytest.raises(ValueError, match="quaternion"):
+        CameraPose.from_position_quaternion((0, 0, 0), (0, 0, 0, 0))

@@ -3,6 +3,7 @@ detections, outliers, a camera that does not overlap the anchor; recovered withi
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -30,7 +31,7 @@ def _walk(seconds: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndar
     points = [np.array([6.0, 3.0])]
     while len(points) < 200:
         points.append(np.array([rng.uniform(1.0, 13.0), rng.uniform(0.5, 5.5)]))
-    seg = np.cumsum([0.0] + [float(np.linalg.norm(b - a)) for a, b in zip(points, points[1:], strict=False)])
+    seg = np.cumsum([0.0] + [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(points)])
     s = t * 1.0
     xy = np.stack([np.interp(s, seg, [p[k] for p in points]) for k in (0, 1)], axis=1)
     return t, xy
@@ -110,3 +111,55 @@ def test_rigid_fit_is_exact_on_exact_data_and_arguments_are_checked() -> None:
         calibrate_cameras([*tracks, tracks[0]], anchor="A")
     with pytest.raises(ValueError, match="2 stamps but 1"):
         CameraTrack("x", np.zeros(2), np.zeros((1, 2)))
+
+
+def _recording(path, rng: np.random.Generator, drop: str = "") -> None:
+    """A face-reid-calibrate recording of the simulated network: each camera at its configured (wrong) pose."""
+    import json
+
+    from face_reid_camera.camera_model import CameraPose
+
+    with open(path, "w") as f:
+        for track in _tracks(rng):
+            if track.camera_id == drop:
+                continue
+            x, y, heading = TRUE[track.camera_id]
+            wrong = WRONG[track.camera_id].inverse()
+            cx, cy = wrong.apply(np.array([[x, y]]))[0]
+            pose = CameraPose.from_xyz_rpy(cx, cy, 2.5, 0.0, 0.35, heading + wrong.yaw_rad)
+            for t, (px, py) in zip(track.stamps_s, track.xy, strict=True):
+                people = [[px, py], [px + 4.0, py - 3.0]] if t % 5 < 0.2 else [[px, py]]  # a second person at times
+                f.write(json.dumps({"camera_id": track.camera_id, "stamp": t,
+                                    "pose": [*pose.translation, *pose.quaternion_xyzw()], "people": people}) + "\n")
+            f.write("not json\n")  # a damaged line is skipped
+
+
+def test_face_reid_calibrate_solve_writes_params_files_with_the_true_poses(tmp_path, capsys) -> None:
+    import yaml
+
+    from face_reid_master.tools.calibrate import main
+
+    _recording(tmp_path / "walk.jsonl", np.random.default_rng(1))
+    assert main(["solve", str(tmp_path / "walk.jsonl"), "--anchor", "A", "--out-dir", str(tmp_path / "poses")]) == 0
+    table = capsys.readouterr().out
+    assert "residual cm" in table and all(cam in table for cam in TRUE)
+    for cam, (x, y, heading) in TRUE.items():
+        params = yaml.safe_load((tmp_path / "poses" / f"{cam}.yaml").read_text())["/**"]["ros__parameters"]
+        px, py, pz = params["camera_pose_xyz_m"]
+        roll, pitch, yaw = params["camera_pose_rpy_rad"]
+        assert math.hypot(px - x, py - y) <= 0.05 and pz == pytest.approx(2.5)
+        assert abs(math.degrees((yaw - heading + math.pi) % (2 * math.pi) - math.pi)) <= 1.0
+        assert roll == pytest.approx(0.0, abs=1e-4) and pitch == pytest.approx(0.35, abs=1e-4)
+
+
+def test_face_reid_calibrate_solve_says_what_it_could_not_do(tmp_path, capsys) -> None:
+    from face_reid_master.tools.calibrate import main
+
+    _recording(tmp_path / "no_c.jsonl", np.random.default_rng(2), drop="C")  # D then overlaps nobody solved
+    assert main(["solve", str(tmp_path / "no_c.jsonl"), "--anchor", "A"]) == 1
+    assert "not linked" in capsys.readouterr().out
+    assert main(["solve", str(tmp_path / "no_c.jsonl"), "--anchor", "Z"]) == 2
+    assert "anchor 'Z' saw nobody" in capsys.readouterr().err
+    (tmp_path / "empty.jsonl").write_text("")
+    assert main(["solve", str(tmp_path / "empty.jsonl"), "--anchor", "A"]) == 2
+    assert main(["solve", str(tmp_path / "missing.jsonl"), "--anchor", "A"]) == 2
