@@ -24,7 +24,7 @@ from face_reid_camera.faces.detector import FaceDetection, YuNetDetector
 from face_reid_camera.faces.embedder import CombinedEmbedder, FaceEmbedder
 from face_reid_camera.faces.embedding_schedule import EmbeddingScheduler
 from face_reid_camera.faces.head_roi import head_roi_px
-from face_reid_camera.people.detector import PersonCandidate, PersonDetector, PersonDetectorConfig
+from face_reid_camera.people.detector import FloorCheck, PersonCandidate, PersonDetector, PersonDetectorConfig
 from face_reid_camera.people.ground_plane import GroundPlane
 
 
@@ -140,6 +140,7 @@ class FrameResult:
     timings_ms: dict[str, float]
     ground_plane: GroundPlane | None = None
     ground_plane_source: str = "none"
+    floor_check: FloorCheck | None = None  # the pose checked against the floor measured without it (this frame)
 
     @property
     def num_faces(self) -> int:
@@ -268,8 +269,12 @@ class CameraPipeline:
                                       people)
             timings["body_ms"] = (time.perf_counter() - t_body) * 1e3
         timings["total_ms"] = (time.perf_counter() - t0) * 1e3
+        # found: seen in the data (now or in a previous frame); the pose's floor alone counts only when trusted
+        found = detection.ground_plane is not None and (
+            detection.ground_plane_source != "pose" or self.person_detector.config.people_on_pose_floor)
         return FrameResult(
-            people, detection.ground_plane is not None, timings, detection.ground_plane, detection.ground_plane_source
+            people, found, timings, detection.ground_plane, detection.ground_plane_source,
+            detection.floor_check,
         )
 
     def _add_bodies(

@@ -49,6 +49,7 @@ from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.people.ground_plane import GroundPlane, fit_ground_plane
 
 __all__ = [
+    "FloorCheck",
     "PersonCandidate",
     "PersonDetectionResult",
     "PersonDetector",
@@ -154,6 +155,18 @@ class PersonDetectorConfig:
     random_seed: int = param(
         0, "Seed of the floor RANSAC generator (count; -1 = a different random seed every start).",
         low=-1, high=2**31 - 1)
+    people_on_pose_floor: bool = param(
+        False, "With a camera pose: also detect people when no floor is seen in the data and only the pose's floor "
+        "is left (bool; false: such frames report nobody, since a wrong pose would put people in an empty room).")
+    pose_check_height_tolerance_m: float = param(
+        0.2, "With a camera pose: the floor measured without the pose disagrees with it beyond this camera height "
+        "difference (m).", low=0.0, high=10.0, low_open=True)
+    pose_check_tilt_tolerance_deg: float = param(
+        8.0, "With a camera pose: ... or beyond this angle between the two floors (deg).",
+        low=0.0, high=90.0, low_open=True)
+    pose_check_every_frames: int = param(
+        10, "With a camera pose: while the pose-seeded floor search fails, the floor is measured without the pose "
+        "every this many frames to check the pose (count).", low=1, high=100_000)
 
     def __post_init__(self) -> None:
         validate_fields(self)
@@ -189,12 +202,38 @@ class PersonCandidate:
     num_points: int
 
 
+@dataclass(frozen=True)
+class FloorCheck:
+    """The configured pose's floor against the floor measured without it: camera heights (m), downward tilts of
+    the optical axis (deg), the angle between the two floors (deg) and whether they agree within tolerance."""
+
+    pose_height_m: float
+    pose_tilt_deg: float
+    floor_height_m: float
+    floor_tilt_deg: float
+    angle_deg: float
+    agrees: bool
+
+    def describe(self) -> str:
+        verdict = "agrees with" if self.agrees else "DISAGREES with"
+        return (f"the configured pose (camera {self.pose_height_m:.2f} m high, tilted {self.pose_tilt_deg:.1f} deg "
+                f"down) {verdict} the floor measured in the depth data (camera {self.floor_height_m:.2f} m high, "
+                f"tilted {self.floor_tilt_deg:.1f} deg down; floors {self.angle_deg:.1f} deg apart)")
+
+
+def _tilt_down_deg(plane: GroundPlane) -> float:
+    """Angle (deg) of the optical axis (0, 0, 1) below the horizon of ``plane``."""
+    return math.degrees(math.asin(max(-1.0, min(1.0, -float(plane.normal[2])))))
+
+
 @dataclass
 class PersonDetectionResult:
     """People found in one frame plus diagnostics.
 
     ``ground_plane_source`` is "ransac" (estimated now), "previous" (last frame's floor reused),
-    "pose" (the configured camera pose's floor) or "none". ``num_points`` counts the valid input
+    "pose" (the configured camera pose's floor; people are then only detected with ``people_on_pose_floor``) or
+    "none". ``floor_check``: set on frames where the pose was checked against the floor measured without it.
+    ``num_points`` counts the valid input
     points after striding and range limits, ``num_voxels`` the voxels above the floor, ``num_clusters``
     their 2-D clusters on the floor plane. ``timings_ms`` breaks down the latency by stage.
     """
@@ -206,6 +245,7 @@ class PersonDetectionResult:
     num_voxels: int = 0
     num_clusters: int = 0
     timings_ms: dict[str, float] = field(default_factory=dict)
+    floor_check: FloorCheck | None = None
 
 
 @dataclass
@@ -260,6 +300,8 @@ class PersonDetector:
         self._pose_plane = GroundPlane.from_camera_pose(camera_pose) if camera_pose is not None else None
         self._previous_plane: GroundPlane | None = None
         self._rng = np.random.default_rng(None if self.config.random_seed < 0 else self.config.random_seed)
+        self._frames_unseen = 0  # frames in a row whose pose-seeded floor search failed
+        self.floor_check: FloorCheck | None = None  # the latest check of the pose against the measured floor
         # Height-map geometry (cells of voxel_size_m): peak footprint, head ring offsets, gap bridging.
         cell = self.config.voxel_size_m
         reach = math.ceil(self.config.head_annulus_outer_m / cell)
@@ -336,9 +378,10 @@ class PersonDetector:
         # The floor is fitted on the strided points themselves; only what stands on it is voxelised.
         plane, source = self._ground_plane(points)
         result.ground_plane, result.ground_plane_source = plane, source
+        result.floor_check = self._check_pose(points, source)
         t2 = time.perf_counter()
         timings["ground"] = (t2 - t1) * 1e3
-        if plane is None:
+        if plane is None or (source == "pose" and not cfg.people_on_pose_floor):
             timings["total"] = (t2 - t0) * 1e3
             return result
         # Floor removal: within the threshold, or within 3 sigma of depth noise (sigma = c z^2), or below;
@@ -365,6 +408,33 @@ class PersonDetector:
         timings["people"] = (t4 - t3) * 1e3
         timings["total"] = (t4 - t0) * 1e3
         return result
+
+    def _check_pose(self, points: FloatArray, source: str) -> FloorCheck | None:
+        """While the pose-seeded floor search fails, measure the floor without the pose every
+        ``pose_check_every_frames`` frames and compare (a wrong height or tilt is why it fails)."""
+        cfg, pose_plane = self.config, self._pose_plane
+        if pose_plane is None or source == "ransac":  # found within the pose's seed window: it agrees
+            self._frames_unseen = 0
+            self.floor_check = None
+            return None
+        self._frames_unseen += 1
+        if (self._frames_unseen - 1) % cfg.pose_check_every_frames:
+            return None
+        fit = fit_ground_plane(
+            points, max_tilt_deg=cfg.ground_max_tilt_deg, distance_threshold_m=cfg.ground_distance_threshold_m,
+            iterations=cfg.ransac_iterations, min_inliers=cfg.min_ground_points,
+            max_below_fraction=cfg.ground_max_below_fraction, min_camera_height_m=cfg.min_camera_height_m,
+            max_sample_points=cfg.ransac_max_sample_points,
+            depth_noise_coefficient_per_m=cfg.depth_noise_coefficient_per_m, rng=self._rng, assume_finite=True)
+        if fit is None:
+            return None
+        floor = fit.plane
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, float(floor.normal @ pose_plane.normal)))))
+        agrees = (abs(floor.offset - pose_plane.offset) <= cfg.pose_check_height_tolerance_m
+                  and angle <= cfg.pose_check_tilt_tolerance_deg)
+        self.floor_check = FloorCheck(pose_plane.offset, _tilt_down_deg(pose_plane), floor.offset,
+                                      _tilt_down_deg(floor), angle, agrees)
+        return self.floor_check
 
     def _ground_plane(self, points: FloatArray) -> tuple[GroundPlane | None, str]:
         cfg = self.config

@@ -61,6 +61,7 @@ class CameraNode(ManagedNode):
         self._superseded = 0
         self._dropped_reported = 0
         self._floor_found: bool | None = None
+        self._floor_check: Any = None  # FloorCheck of the last frame the pose was checked on
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -260,6 +261,12 @@ class CameraNode(ManagedNode):
             return
         result = pipeline.process(color, depth, intr, color_intr, stamp_s)
         self._floor_found = bool(result.ground_plane_found)
+        if result.floor_check is not None or result.ground_plane_source == "ransac":
+            self._floor_check = result.floor_check  # None again once the pose's floor is seen in the data
+        if result.floor_check is not None and not result.floor_check.agrees:
+            self.log_throttled("pose_check", f"camera {pipeline.config.camera_id}: {result.floor_check.describe()}: "
+                               "fix camera_pose_xyz_m (z) / camera_pose_rpy_rad (roll, pitch); until then no people "
+                               "are published from the configured floor", warn=True)
         msg = frame_to_msg(result, stamp_s, pipeline.config.camera_id, str(self.values["world_frame_id"]),
                            self._camera_frame_id, pipeline.camera_pose, self._new_drops())
         if self._sealer is not None:
@@ -295,6 +302,9 @@ class CameraNode(ManagedNode):
         warnings = []
         if self._floor_found is False:
             warnings.append("floor lost: no ground plane in the last frame")
+        check = self._floor_check
+        if check is not None and not check.agrees:
+            warnings.append(check.describe())
         extra: dict[str, object] = {
             "frames_superseded": self._superseded,
             "unpaired_color": sync.stats.dropped_color if sync else 0,
@@ -303,7 +313,11 @@ class CameraNode(ManagedNode):
             "camera_info_received": self._intrinsics is not None,
             "floor_found": self._floor_found if self._floor_found is not None else "no frame yet",
             "body_errors": self.pipeline.body_errors if self.pipeline is not None else 0,
+            "pose_agrees_with_floor": "not checked" if check is None else check.agrees,
         }
+        if check is not None:
+            extra.update({"pose_camera_height_m": check.pose_height_m, "floor_camera_height_m": check.floor_height_m,
+                          "pose_tilt_deg": check.pose_tilt_deg, "floor_tilt_deg": check.floor_tilt_deg})
         for reason in REJECT_REASONS:
             extra.setdefault(f"rejected_{reason}", health.rejected.get(reason, 0))
         return health.report(now_s, extra, warnings)

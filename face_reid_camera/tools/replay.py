@@ -118,6 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--camera-pose", nargs=6, type=float, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
                         help="camera pose in the world (m, rad); seeds the floor search. Without it (and "
                              "without --params) the floor is found unseeded and world = camera pose 0")
+    parser.add_argument("--trust-pose-floor", action="store_true",
+                        help="detect people on the given pose's floor when the data shows none (e.g. a cloud "
+                             "without floor; by default such frames report nobody: a wrong pose would invent people)")
     parser.add_argument("--no-faces", action="store_true", help="people only (no face models needed)")
     parser.add_argument("--no-bodies", action="store_true", help="no body description (no projection needed)")
     return parser
@@ -131,6 +134,8 @@ def main(argv: list[str] | None = None) -> int:
             values["detect_faces"] = False
         if args.no_bodies:
             values["describe_bodies"] = False
+        if args.trust_pose_floor:
+            values["person.people_on_pose_floor"] = True
         config = camera_params.pipeline_config(values)
         seeded = args.params is not None or args.camera_pose is not None
         pose = (
@@ -165,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     frames = errors = people_total = 0
+    last_check = None
     try:
         files = list_frame_files(args.inputs)
     except FileNotFoundError as exc:
@@ -193,10 +199,16 @@ def main(argv: list[str] | None = None) -> int:
             continue
         frames += 1
         people_total += len(result.people)
+        last_check = result.floor_check or last_check
         line = {
             "frame": frame.name,
             "ground_plane_found": result.ground_plane_found,
             "floor": _floor_summary(result),
+            "pose_check": None if result.floor_check is None else {
+                "agrees": result.floor_check.agrees, "pose_camera_height_m": round(result.floor_check.pose_height_m, 3),
+                "floor_camera_height_m": round(result.floor_check.floor_height_m, 3),
+                "pose_tilt_down_deg": round(result.floor_check.pose_tilt_deg, 1),
+                "floor_tilt_down_deg": round(result.floor_check.floor_tilt_deg, 1)},
             "num_people": len(result.people),
             "num_faces": result.num_faces,
             "people": [p.to_json() for p in result.people],
@@ -204,7 +216,13 @@ def main(argv: list[str] | None = None) -> int:
         }
         print(json.dumps(line), flush=True)
     print(f"face-reid-replay: {frames} frames, {people_total} detections, {errors} skipped", file=sys.stderr)
-    return 0 if frames > 0 or errors == 0 else 1
+    if last_check is not None:
+        print(f"face-reid-replay: {last_check.describe()}", file=sys.stderr)
+    if frames == 0:
+        print("face-reid-replay: no frame could be read: give folders or files of *_depth_mm.png (16-bit depth in "
+              "mm, with *_rgb.png colour) or *.pcd clouds", file=sys.stderr)
+        return 1
+    return 0
 
 
 if __name__ == "__main__":

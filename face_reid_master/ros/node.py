@@ -28,6 +28,7 @@ from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.ros.sealed import open_message, open_request
+from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.ros import params as master_params
@@ -62,6 +63,7 @@ class MasterNode(ManagedNode):
         self._subscribed: dict[str, Any] = {}
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._track_msgs: dict[int, Any] = {}  # track id -> its NamedTrack, refilled on every publish
+        self._clocks = ClockOffsets()
         self._timers: list[Any] = []
         self.tracks_pub: Any = None
         self.markers_pub: Any = None
@@ -263,6 +265,10 @@ class MasterNode(ManagedNode):
         except (ValueError, TypeError, AttributeError):
             stamp = float("nan")  # the core rejects it and counts it
         self._intake.add(PendingFrame(str(msg.camera_id), stamp, now, msg))
+        try:
+            self._clocks.observe(str(msg.camera_id), stamp, time.time(), float(msg.processing_time_ms) * 1e-3)
+        except (TypeError, ValueError):
+            pass
 
     def _drain(self, now: float) -> None:
         """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
@@ -408,6 +414,17 @@ class MasterNode(ManagedNode):
         extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         warnings = [] if self._subscribed else ["no camera topic found yet"]
+        limit = float(self.values["clock_offset_warning_s"])
+        off = self._clocks.beyond(limit)
+        extra["cameras_clock_off"] = len(off)
+        for cam, offset in list(off.items())[:5]:
+            extra[f"clock_offset_ms_{shown(cam, 64)}"] = round(offset * 1e3, 1)
+        if off:
+            cam, offset = next(iter(off.items()))
+            warnings.append(f"{len(off)} camera clock(s) off by more than {limit:g} s, e.g. {shown(cam, 64)}: frames "
+                            f"arrive {offset:+.2f} s after their capture stamp (+ behind, - ahead of this host's "
+                            "clock; transport included): synchronise the hosts' clocks (chrony / NTP)")
+            self.log_throttled("clock_offset", warnings[-1], len(off), warn=True)
         return health.report(now_s, extra, warnings)
 
     # ------------------------------------------------------------------ services

@@ -75,6 +75,10 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
     ParamSpec("body_metric_path", "", "Body metric JSON from face-reid-fit-body ('' = the installed "
               "models/body_metric.json); used when body_appearance_tracking is on."),
+    ParamSpec("clock_offset_warning_s", 0.2,
+              "/diagnostics and the log warn when a camera's frames arrive more than this after (or before) their "
+              "capture stamp, its own processing time deducted (s; median of its last 50 frames): clocks not "
+              "synchronised.", low=0.001, high=3600.0),
     ParamSpec("no_input_warning_s", 5.0, "/diagnostics warns when no camera frame arrived for this long (s).",
               low=0.0, high=3600.0, low_open=True),
     ParamSpec("stats_log_period_s", 30.0, "Counters are logged this often (s).", low=0.1, high=86400.0),

@@ -8,7 +8,7 @@ from conftest import RGBD_DIR
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.faces.head_roi import head_roi_px
-from face_reid_camera.people.detector import PersonDetector
+from face_reid_camera.people.detector import PersonDetector, PersonDetectorConfig
 from face_reid_camera.tools.pcd_io import read_pcd
 
 KINECT = CameraIntrinsics.kinect_default()
@@ -100,7 +100,9 @@ def test_real_person_roi_covers_the_head() -> None:
     """person.pcd: the ROI from the detected head holds the head at ~0.8 m, background above it."""
     cloud = read_pcd(DATA / "person.pcd")
     pose = CameraPose.from_xyz_rpy(0.0, 0.0, 1.5, 0.0, -0.05, 0.0)
-    (person,) = PersonDetector(camera_pose=pose).detect_points(cloud).people
+    # the cloud shows no floor: the person stands on the given pose's floor
+    (person,) = PersonDetector(PersonDetectorConfig(people_on_pose_floor=True), camera_pose=pose).detect_points(
+        cloud).people
     x, y, w, h = head_roi_px(person.head_cam, KINECT, 0.3)
     roi = cloud[y : y + h, x : x + w, 2]
     near = np.isfinite(roi) & (roi < 1.2)

@@ -336,18 +336,42 @@ def test_floor_falls_back_to_previous_frame_then_to_pose(three_people_depth: np.
     result = detector.detect_depth(floorless, KINECT)
     assert result.ground_plane_source == "none" and result.people == []
 
+    # with a pose but no floor in the data: nobody by default (a wrong pose would invent people) ...
     seeded = PersonDetector(camera_pose=HIGH_POSE).detect_depth(floorless, KINECT)
+    assert seeded.ground_plane_source == "pose" and seeded.people == []
+    # ... unless the pose's floor is trusted
+    seeded = PersonDetector(PersonDetectorConfig(people_on_pose_floor=True), camera_pose=HIGH_POSE).detect_depth(
+        floorless, KINECT)
     assert seeded.ground_plane_source == "pose" and len(seeded.people) == 3
     for det, _, (_, _, h) in match_people(seeded, HIGH_POSE, THREE_PEOPLE):
         assert det.height_m == pytest.approx(h, abs=0.1)
 
 
 def test_seeded_mode_rejects_a_floor_at_the_wrong_height(three_people_depth: np.ndarray) -> None:
-    """A pose 0.6 m too high: the real floor is outside the seed tolerance, so the pose floor is used."""
+    """A pose 0.6 m too high: the real floor is outside the seed tolerance, so only the pose floor is left;
+    the floor measured without the pose says so (both heights), and nobody is reported from the wrong floor."""
     wrong = CameraPose(HIGH_POSE.rotation, HIGH_POSE.translation + np.array([0.0, 0.0, 0.6]))
     result = PersonDetector(camera_pose=wrong).detect_depth(three_people_depth, KINECT)
-    assert result.ground_plane_source == "pose"
+    assert result.ground_plane_source == "pose" and result.people == []
     assert result.ground_plane.camera_height_m == pytest.approx(3.1)
+    check = result.floor_check
+    assert check is not None and not check.agrees
+    assert check.pose_height_m == pytest.approx(3.1) and check.floor_height_m == pytest.approx(2.5, abs=0.05)
+    assert "DISAGREES" in check.describe() and "3.10 m" in check.describe()
+
+
+def test_a_wrongly_tilted_pose_is_caught_and_a_right_one_is_not(three_people_depth: np.ndarray) -> None:
+    x, y, z, roll, pitch, yaw = HIGH_POSE.xyz_rpy()
+    tilted = CameraPose.from_xyz_rpy(x, y, z, roll, pitch + math.radians(25), yaw)
+    detector = PersonDetector(camera_pose=tilted)
+    first = detector.detect_depth(three_people_depth, KINECT)
+    assert first.people == [] and first.floor_check is not None and not first.floor_check.agrees
+    assert first.floor_check.angle_deg == pytest.approx(25.0, abs=2.0)
+    # checked again only every pose_check_every_frames frames; the verdict stays on the detector
+    assert detector.detect_depth(three_people_depth, KINECT).floor_check is None
+    assert detector.floor_check is first.floor_check
+    right = PersonDetector(camera_pose=HIGH_POSE).detect_depth(three_people_depth, KINECT)
+    assert right.ground_plane_source == "ransac" and right.floor_check is None and len(right.people) == 3
 
 
 # --------------------------------------------------------------------------------------- real data
@@ -385,7 +409,10 @@ def person_cloud() -> np.ndarray:
 
 
 def test_real_person_cloud_gives_exactly_one_person(person_cloud: np.ndarray) -> None:
-    result = PersonDetector(camera_pose=PCD_POSE).detect_points(person_cloud)
+    # the cloud shows no floor: nobody unless the pose's floor is trusted
+    assert PersonDetector(camera_pose=PCD_POSE).detect_points(person_cloud).people == []
+    result = PersonDetector(PersonDetectorConfig(people_on_pose_floor=True), camera_pose=PCD_POSE).detect_points(
+        person_cloud)
     assert result.ground_plane_source == "pose"
     assert len(result.people) == 1
     (det,) = result.people

@@ -30,13 +30,31 @@ def test_desk_frames_have_no_people_and_a_floor(capsys: pytest.CaptureFixture[st
 
 
 def test_person_pcd_has_one_person(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main([str(RGBD / "person.pcd"), "--no-faces", "--camera-pose", "0", "0", "1.5", "0", "-0.05", "0"]) == 0
+    pose = ["--camera-pose", "0", "0", "1.5", "0", "-0.05", "0"]
+    assert main([str(RGBD / "person.pcd"), "--no-faces", *pose]) == 0  # no floor in the cloud: nobody ...
+    (line,) = _lines(capsys.readouterr().out)
+    assert line["num_people"] == 0 and line["ground_plane_found"] is False
+    assert main([str(RGBD / "person.pcd"), "--no-faces", *pose, "--trust-pose-floor"]) == 0  # ... unless trusted
     (line,) = _lines(capsys.readouterr().out)
     assert line["num_people"] == 1
     (person,) = line["people"]
     assert person["height_m"] == pytest.approx(1.64, abs=0.06)
     assert person["position_world"][0] == pytest.approx(0.8, abs=0.15)  # ~0.8 m in front of the camera
     assert person["head_roi"] is not None
+
+
+def test_a_wrong_pose_is_reported_and_an_unreadable_folder_fails(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    desk = sorted((RGBD / "pcl_desk").glob("*_depth_mm.png"))[0]
+    assert main([str(desk), "--no-faces", "--no-bodies", "--camera-pose", "0", "0", "2.5", "0", "0.8", "0"]) == 0
+    captured = capsys.readouterr()
+    (line,) = _lines(captured.out)
+    assert line["pose_check"]["agrees"] is False and line["num_people"] == 0
+    assert line["pose_check"]["floor_camera_height_m"] == pytest.approx(0.71, abs=0.05)
+    assert "DISAGREES" in captured.err and "2.50 m" in captured.err
+    (tmp_path / "notes.txt").write_text("not a frame")
+    assert main([str(tmp_path), "--no-faces", "--no-bodies"]) == 1
+    assert "no frame could be read" in capsys.readouterr().err
 
 
 def test_corrupt_frame_is_reported_and_the_rest_processed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

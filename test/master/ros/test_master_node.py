@@ -8,6 +8,7 @@ leave and return, kill -9) is test_master_node_dds.py.
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -374,3 +375,21 @@ def test_config_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
     master_params.write_defaults_yaml(regenerated)
     assert regenerated.read_text() == shipped.read_text(), "regenerate config/master.yaml from the declarations"
     assert master_params.master_config(master_params.defaults()) == master_params.MasterConfig()
+
+
+def test_a_camera_whose_clock_is_behind_is_reported(ros_context, tmp_path: Path) -> None:
+    """Frames of cam_b arrive 1.5 s after their stamp (its clock behind; still within max_stamp_age_s, so
+    applied): /diagnostics warns and names it; cam_a, on time, is not named."""
+    node = _master(ros_context, tmp_path, "persist_faces:=false")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        for _ in range(10):
+            now = time.time()
+            _feed(node, _frame(now, camera="cam_a"))
+            _feed(node, _frame(now - 1.5, camera="cam_b"))
+        report = node.diagnostics(node.now_s())
+        assert report.values["cameras_clock_off"] == "1"
+        assert float(report.values["clock_offset_ms_'cam_b'"]) == pytest.approx(1500.0, abs=100.0)
+        assert "chrony" in report.message and "'cam_b'" in report.message and report.level == 1
+    finally:
+        node.destroy_node()
