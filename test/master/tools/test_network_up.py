@@ -1,0 +1,129 @@
+"""face-reid-up: the network file (checked, turned into node commands), the supervisor (restart with back-off,
+clean stop), and a real run: this host's master and camera from one file, stopped with Ctrl-C."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from conftest import REPO_ROOT
+
+from face_reid_master.tools.network_file import NodeSpec, load_network_file, node_specs
+from face_reid_master.tools.up import main, supervise
+
+EXAMPLE = REPO_ROOT / "config" / "network" / "network.yaml"
+
+
+def test_the_example_network_gives_each_host_its_nodes() -> None:
+    net = load_network_file(EXAMPLE)
+    entrance = node_specs(net, "pc-entrance")
+    assert [s.name for s in entrance] == ["camera cam1", "camera cam2"]
+    args = entrance[0].args
+    assert args[:3] == ("-m", "face_reid_camera.ros.node", "--ros-args")
+    assert "__ns:=/cam1" in args and "camera_id:=cam1" in args
+    files = [args[i + 1] for i, a in enumerate(args) if a == "--params-file"]
+    assert files == [str(REPO_ROOT / "config" / "camera.yaml"), str(REPO_ROOT / "config" / "network" / "cam1.yaml")]
+    assert all(Path(f).exists() for f in files)
+    assert dict(entrance[0].env) == {"ROS_DOMAIN_ID": "7"}
+    hall = node_specs(net, "pc-hall")[0].args
+    assert "embedder:=sface" in hall and "color/image_raw:=/hall_camera/color/image_raw" in hall
+    (master,) = node_specs(net, "pc-master")
+    assert master.args[:2] == ("-m", "face_reid_master.ros.node")
+    assert node_specs(net, "pc-master", ("camera",)) == []
+    with pytest.raises(ValueError, match="host 'nowhere' is not in the network file"):
+        node_specs(net, "nowhere")
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("hosts: {}", "needs a 'hosts' mapping"),
+    ("hosts: {a: {cameras: [{id: cam1}]}, b: {cameras: [{id: cam1}]}}", "appears twice"),
+    ("hosts: {a: {master: {}}, b: {master: {}}}", "2 masters"),
+    ("hosts: {a: {cameras: [{id: cam1, colour: x}]}}", "unknown keys"),
+    ("hosts: {a: {cameras: [{id: 'cam 1'}]}}", "letters, digits"),
+    ("hosts: {a: {cameras: [{id: cam1, namespace: kitchen}]}}", "namespace"),
+    ("domain_id: 500\nhosts: {a: {master: {}}}", "domain_id"),
+    ("hosts: {a: {robots: []}}", "cameras"),
+    ("hosts: [", "not YAML"),
+])
+def test_bad_network_files_are_refused_with_the_place(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "net.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        load_network_file(path)
+
+
+def test_dry_run_prints_runnable_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([str(EXAMPLE), "--host", "pc-hall", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("# camera cam3\nROS_DOMAIN_ID=7 ") and "face_reid_camera.ros.node" in out
+    assert main([str(EXAMPLE), "--host", "pc-hall", "--role", "master", "--dry-run"]) == 2
+    assert main([str(EXAMPLE), "--host", "nowhere"]) == 2
+
+
+def test_a_crashing_node_is_restarted_with_growing_back_off_and_all_stop(tmp_path: Path) -> None:
+    said: list[str] = []
+    stop = [False]
+    specs = [NodeSpec("flaky", ("-c", "import sys; sys.exit(3)")),
+             NodeSpec("steady", ("-c", "import time; time.sleep(60)"))]
+    runner = threading.Thread(target=supervise, args=(specs, tmp_path, 30.0, stop, said.append))
+    runner.start()
+    time.sleep(4.0)  # flaky: starts at 0, again at ~1 s, ~3 s (back-off 1, 2, then 4)
+    stop[0] = True
+    runner.join(timeout=30)
+    assert not runner.is_alive()
+    exits = [line for line in said if "flaky exited with status 3" in line]
+    assert 2 <= len(exits) <= 4, said
+    assert "restarting in 1 s" in exits[0] and "restarting in 2 s" in exits[1]
+    assert not any("steady exited" in line for line in said) and said[-1] == "face-reid-up: stopped 2 nodes"
+    pids = [int(m.group(1)) for line in said if (m := re.search(r"steady \(pid (\d+)", line))]
+    assert len(pids) == 1
+    with pytest.raises(ProcessLookupError):
+        os.kill(pids[0], 0)  # stopped with the supervisor
+
+
+def test_face_reid_up_runs_this_hosts_master_and_camera_and_stops_on_ctrl_c(ros_domain_id: int,
+                                                                            tmp_path: Path) -> None:
+    net = tmp_path / "net.yaml"
+    net.write_text(f"""domain_id: {ros_domain_id}
+hosts:
+  testhost:
+    cameras:
+      - id: cam_up
+        set: {{detect_faces: false, describe_bodies: false}}
+    master:
+      set: {{db_path: {tmp_path / 'faces.db'}}}
+""")
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    up = subprocess.Popen([sys.executable, "-m", "face_reid_master.tools.up", str(net), "--host", "testhost",
+                           "--log-dir", str(tmp_path / "logs")], cwd=REPO_ROOT, env=env, stderr=subprocess.PIPE,
+                          text=True, start_new_session=True)
+    try:
+        logs = tmp_path / "logs"
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            master_log = (logs / "master.log").read_text() if (logs / "master.log").exists() else ""
+            camera_log = (logs / "camera_cam_up.log").read_text() if (logs / "camera_cam_up.log").exists() else ""
+            if "publishing /tracks_named" in master_log and "camera 'cam_up'" in camera_log:
+                break
+            assert up.poll() is None, up.stderr.read()
+            time.sleep(0.3)
+        else:
+            raise AssertionError(f"nodes not up:\n{master_log[-1500:]}\n{camera_log[-1500:]}")
+        assert "/cam_up/face_reid/frames" in camera_log  # its own namespace
+        os.killpg(up.pid, signal.SIGINT)
+        _, err = up.communicate(timeout=30)
+    finally:
+        if up.poll() is None:
+            os.killpg(up.pid, signal.SIGKILL)
+    assert up.returncode == 0, err
+    assert "stopped 2 nodes" in err and "exited with status" not in err
+    for pid in (int(p) for p in re.findall(r"\(pid (\d+)", err)):
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
