@@ -1,8 +1,9 @@
 """face-reid-replay: run the camera pipeline over recorded frames, one JSON line per frame.
 
 Input: a folder (or single files) of ``*_rgb.png`` + ``*_depth_mm.png`` pairs (16-bit depth in
-millimetres, registered to colour) and/or organized ``.pcd`` clouds (ascii, binary or
-binary_compressed; XYZ only, so people only). Users check their camera placement with it:
+millimetres, registered to colour), organized ``.pcd`` clouds (ascii, binary or binary_compressed; XYZ
+only, so people only) and/or recordings of a camera driver's topics (rosbag2 / MCAP / ROS 1 bag;
+``bag_frames.py``). Users check their camera placement with it:
 every detected person is printed with world/camera position, height, head ROI and face.
 """
 
@@ -12,6 +13,7 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +26,7 @@ from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.errors import ModelLoadError
 from face_reid_camera.pipeline import CameraPipeline, FrameResult
 from face_reid_camera.ros import params as camera_params
+from face_reid_camera.tools.bag_frames import BagTopics, bag_frames, is_bag
 from face_reid_camera.tools.pcd_io import intrinsics_from_organized_cloud, read_pcd
 
 
@@ -60,12 +63,35 @@ def list_frame_files(inputs: list[Path]) -> list[Path]:
     files: list[Path] = []
     for path in inputs:
         if path.is_dir():
-            files.extend(sorted(p for p in path.iterdir() if p.name.endswith(("_depth_mm.png", ".pcd"))))
+            if is_bag(path):
+                files.append(path)
+                continue
+            files.extend(sorted(p for p in path.iterdir() if p.name.endswith(("_depth_mm.png", ".pcd"))
+                                or (p.is_file() and is_bag(p))))
         elif path.exists():
             files.append(path)
         else:
             raise FileNotFoundError(f"no such file or folder: {path}")
     return files
+
+
+def _frames(files: list[Path], topics: BagTopics, errors: list[str]) -> Iterator[ReplayFrame | None]:
+    """Every frame of the inputs (None for one that could not be read, after saying why on stderr)."""
+    for path in files:
+        if is_bag(path):
+            try:
+                yield from bag_frames(path, topics)
+            except Exception as exc:  # rosbags raises its own errors for damaged recordings
+                errors.append(str(path))
+                print(f"face-reid-replay: recording {path}: {type(exc).__name__}: {exc}", file=sys.stderr)
+                yield None
+            continue
+        try:
+            yield load_frame(path)
+        except (ValueError, OSError) as exc:
+            errors.append(str(path))
+            print(f"face-reid-replay: skipped {path.name}: {exc}", file=sys.stderr)
+            yield None
 
 
 def load_frame(path: Path) -> ReplayFrame:
@@ -110,7 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="face-reid-replay",
         description="Run the face-reid camera pipeline over recorded RGB-D frames; one JSON line per frame.",
     )
-    parser.add_argument("inputs", nargs="+", type=Path, help="folders or files (*_depth_mm.png with *_rgb.png, *.pcd)")
+    parser.add_argument("inputs", nargs="+", type=Path,
+                        help="folders or files (*_depth_mm.png with *_rgb.png, *.pcd) or recordings of the driver's "
+                             "topics (a rosbag2 folder, .mcap, .db3, ROS 1 .bag)")
     parser.add_argument("--intrinsics", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"),
                         help="pinhole intrinsics in pixels (default: from --intrinsics-yaml, the PCD, or Kinect)")
     parser.add_argument("--intrinsics-yaml", type=Path, help="YAML with fx fy cx cy width height, or camera_info")
@@ -118,6 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--camera-pose", nargs=6, type=float, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
                         help="camera pose in the world (m, rad); seeds the floor search. Without it (and "
                              "without --params) the floor is found unseeded and world = camera pose 0")
+    parser.add_argument("--color-topic", default="", help="recordings: the colour Image topic (default: found by type)")
+    parser.add_argument("--depth-topic", default="", help="recordings: the registered depth Image topic")
+    parser.add_argument("--info-topic", default="", help="recordings: the depth image's CameraInfo topic")
     parser.add_argument("--trust-pose-floor", action="store_true",
                         help="detect people on the given pose's floor when the data shows none (e.g. a cloud "
                              "without floor; by default such frames report nobody: a wrong pose would invent people)")
@@ -170,18 +201,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     frames = errors = people_total = 0
+    errors_seen: list[str] = []
     last_check = None
     try:
         files = list_frame_files(args.inputs)
     except FileNotFoundError as exc:
         print(f"face-reid-replay: error: {exc}", file=sys.stderr)
         return 2
-    for path in files:
-        try:
-            frame = load_frame(path)
-        except (ValueError, OSError) as exc:
+    for frame in _frames(files, BagTopics(args.color_topic, args.depth_topic, args.info_topic), errors_seen):
+        if frame is None:
             errors += 1
-            print(f"face-reid-replay: skipped {path.name}: {exc}", file=sys.stderr)
             continue
         h, w = frame.depth_m.shape
         if args.intrinsics:
