@@ -18,13 +18,19 @@ RGBD_DIR = DATA_DIR / "rgbd"
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 _domain_counter = [0]
+# the domain a developer's own system runs on (any valid id): the tests never use it
+_USERS_DOMAIN = os.environ.get("ROS_DOMAIN_ID", "").strip()
 
 
 @pytest.fixture
 def ros_domain_id(monkeypatch: pytest.MonkeyPatch) -> int:
-    """A ROS_DOMAIN_ID of this test only (derived from the pytest process id), set in the environment."""
+    """A ROS_DOMAIN_ID of this test only (derived from the pytest process id, never the environment's own
+    ROS_DOMAIN_ID, so a running system there is not disturbed), set in the environment."""
     _domain_counter[0] += 1
     domain = 1 + (os.getpid() * 7 + _domain_counter[0]) % 100
+    if str(domain) == _USERS_DOMAIN:
+        _domain_counter[0] += 1
+        domain = 1 + (os.getpid() * 7 + _domain_counter[0]) % 100
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return domain

@@ -12,11 +12,12 @@ import ctypes.util
 import json
 import os
 import queue
+import random
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,6 +63,24 @@ class ChildProcess:
         except OSError:
             return ""
         return "\n".join(f"    {line}" for line in text[-lines:])
+
+
+MAX_DOMAIN_ID = 232  # the largest ROS_DOMAIN_ID (DDS ports above it overflow); 102-214 need few participants
+
+
+def domain_id_for_run(given: int | None, environ: Mapping[str, str] = os.environ) -> int:
+    """The ROS domain of a run: ``given`` (e.g. --domain-id), else the environment's ROS_DOMAIN_ID, else a
+    random one in 1..100; ValueError (with the valid range) for an id outside 0..232 or a malformed one."""
+    if given is None and environ.get("ROS_DOMAIN_ID", "").strip():
+        text = environ["ROS_DOMAIN_ID"].strip()
+        if not text.isdigit():
+            raise ValueError(f"ROS_DOMAIN_ID must be an integer in 0..{MAX_DOMAIN_ID}, got {text!r}")
+        given = int(text)
+    if given is None:
+        return random.randint(1, 100)
+    if not 0 <= given <= MAX_DOMAIN_ID:
+        raise ValueError(f"the ROS domain id must be in 0..{MAX_DOMAIN_ID}, got {given}")
+    return given
 
 
 def child_env(domain_id: int, run_id: str | None = None) -> dict[str, str]:

@@ -16,7 +16,6 @@ import argparse
 import json
 import math
 import os
-import random
 import shutil
 import signal
 import sys
@@ -29,7 +28,14 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from face_reid_camera.common.stamps import stamp_to_seconds
-from face_reid_master.demo.children import ChildProcess, child_env, read_events, start_child, stop_children
+from face_reid_master.demo.children import (
+    ChildProcess,
+    child_env,
+    domain_id_for_run,
+    read_events,
+    start_child,
+    stop_children,
+)
 from face_reid_master.demo.report import format_summary, format_table, summarize
 from face_reid_master.demo.scenario import DEFAULT_SEED, DemoScenario, build_scenario
 from face_reid_master.evaluation.published_tracks import TrackMessage, track_from_msg
@@ -231,7 +237,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"scenario seed (default {DEFAULT_SEED})")
     p.add_argument("--method", choices=("bayes", "threshold"), default="bayes", help="master face classification")
     p.add_argument("--domain-id", type=int, default=None,
-                   help="ROS_DOMAIN_ID for all the demo's processes (default: random in 1..100)")
+                   help="ROS_DOMAIN_ID for all the demo's processes, 0..232 (default: the environment's "
+                        "ROS_DOMAIN_ID, else random in 1..100)")
     p.add_argument("--faces", type=Path, default=None,
                    help="face photo folder, one sub-folder per person (default: the licensed photos shipped)")
     p.add_argument("--keep-db", action="store_true",
@@ -250,8 +257,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
     signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C works even if started with SIGINT ignored
     out = sys.stdout
-    if args.domain_id is not None and not 0 <= args.domain_id <= 101:
-        print(f"face-reid-demo: --domain-id must be in 0..101, got {args.domain_id}", file=sys.stderr)
+    try:
+        domain_id = domain_id_for_run(args.domain_id)
+    except ValueError as exc:
+        print(f"face-reid-demo: {exc}", file=sys.stderr)
         return 2
     if not (math.isfinite(args.rate_hz) and 0.5 <= args.rate_hz <= 30):
         print(f"face-reid-demo: --rate-hz must be in [0.5, 30], got {args.rate_hz}", file=sys.stderr)
@@ -270,7 +279,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
-    domain_id = args.domain_id if args.domain_id is not None else random.randint(1, 100)
     run_id = uuid.uuid4().hex[:12]
     # this process joins the same private, loopback-only domain before rclpy is imported
     os.environ["ROS_DOMAIN_ID"] = str(domain_id)

@@ -88,7 +88,8 @@ def _parser() -> argparse.ArgumentParser:
                         "on /tracks_named (each track attributed to the nearest true person; no MOT metrics). "
                         "Later days are replayed after a 5 s pause with the master kept running")
     p.add_argument("--domain-id", type=int, default=None,
-                   help="--live: ROS_DOMAIN_ID of the run (default: random in 1..100; discovery on localhost only)")
+                   help="--live: ROS_DOMAIN_ID of the run, 0..232 (default: the environment's ROS_DOMAIN_ID, else "
+                        "random in 1..100; discovery on localhost only)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 
@@ -153,8 +154,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
     log = None if args.quiet else sys.stderr
-    if args.domain_id is not None and not 0 <= args.domain_id <= 101:
-        print(f"face-reid-eval: error: --domain-id must be in 0..101, got {args.domain_id}", file=sys.stderr)
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        print(f"face-reid-eval: error: --domain-id must be in 0..232, got {args.domain_id}", file=sys.stderr)
         return 2
     if args.live and args.method == "both":
         print("face-reid-eval: error: --live runs one method: use --method bayes or threshold", file=sys.stderr)
@@ -302,14 +303,18 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     """``--live``: the scenario through the master node over DDS; the metrics of what it published."""
     likelihood = model
     import os
-    import random
     import signal
     import uuid
 
+    from face_reid_master.demo.children import domain_id_for_run
     from face_reid_master.evaluation.live import LiveError, run_live, scenario_truth
     from face_reid_master.evaluation.published_tracks import MATCH_RADIUS_M, run_log_from_messages
 
-    domain_id = args.domain_id if args.domain_id is not None else random.randint(1, 100)
+    try:
+        domain_id = domain_id_for_run(args.domain_id)
+    except ValueError as exc:
+        print(f"face-reid-eval: error: {exc}", file=sys.stderr)
+        return 2
     # this process joins the same private, loopback-only domain before rclpy is imported
     os.environ["ROS_DOMAIN_ID"] = str(domain_id)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"

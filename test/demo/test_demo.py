@@ -291,3 +291,23 @@ def test_demo_faces_dir_lookup(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) 
     assert demo_faces_dir() == FACES_DIR.resolve()  # a source checkout: the test fixtures
     monkeypatch.setenv("FACE_REID_DEMO_FACES_DIR", str(tmp_path))
     assert demo_faces_dir() == tmp_path
+
+
+def test_the_domain_of_a_run_honours_the_environment_and_any_valid_id() -> None:
+    from face_reid_master.demo.children import domain_id_for_run
+
+    assert domain_id_for_run(7, {"ROS_DOMAIN_ID": "150"}) == 7  # --domain-id wins
+    assert domain_id_for_run(None, {"ROS_DOMAIN_ID": "150"}) == 150  # above 101 is fine
+    assert domain_id_for_run(None, {"ROS_DOMAIN_ID": "0"}) == 0
+    assert 1 <= domain_id_for_run(None, {}) <= 100 and 1 <= domain_id_for_run(None, {"ROS_DOMAIN_ID": " "}) <= 100
+    with pytest.raises(ValueError, match=r"0\.\.232"):
+        domain_id_for_run(233, {})
+    with pytest.raises(ValueError, match="ROS_DOMAIN_ID must be an integer"):
+        domain_id_for_run(None, {"ROS_DOMAIN_ID": "kitchen"})
+
+
+def test_a_bad_domain_is_refused_before_anything_starts(capsys: pytest.CaptureFixture[str]) -> None:
+    from face_reid_master.demo.run import main
+
+    assert main(["--domain-id", "300"]) == 2
+    assert "0..232" in capsys.readouterr().err
