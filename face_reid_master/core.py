@@ -775,6 +775,16 @@ class MasterCore:
         for fid in self.identity.face_ids():
             self._refresh_name(fid, self.identity.face_features(fid))
 
+    def forget_person(self, name: str) -> bool:
+        """Remove a predefined person (gallery) at run time; the faces named after them lose the name.
+        True if there was one."""
+        if name not in self.people.names():
+            return False
+        self.people.remove_person(name)
+        for fid in self.identity.face_ids():
+            self._refresh_name(fid, self.identity.face_features(fid))
+        return True
+
     def forget_face(self, face_id: int) -> bool:
         """Delete a learned face everywhere (memory, names, store). True if it existed."""
         found = bool(self.identity.forget_face(face_id))

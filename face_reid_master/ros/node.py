@@ -501,9 +501,12 @@ class MasterNode(ManagedNode):
             fid for fid in core.identity.face_ids() if core.face_name(fid) == request.name
         ]
         forgotten = [fid for fid in ids if core.forget_face(fid)]
+        person = bool(request.name) and not request.face_id and core.forget_person(request.name)
         response.forgotten_face_ids = forgotten
-        response.success = bool(forgotten)
-        response.message = f"forgot faces {forgotten}" if forgotten else "no such face"
+        response.success = bool(forgotten) or person
+        said = ([f"forgot faces {forgotten}"] if forgotten else []) + (
+            [f"removed the predefined person {shown(request.name, 64)}"] if person else [])
+        response.message = "; ".join(said) if said else "no such face or person"
 
     def _list_faces(self, request: Any, response: Any) -> Any:
         core = self._core()

@@ -1,10 +1,11 @@
 """``face-reid-faces``: inspect and edit the master's persistent face memory (list, forget, rename).
 
 The data never leaves the store: there is no export of vectors, ``list --json`` prints summaries only.
-The store is locked while the master node runs (edits would be overwritten by it): stop the node first.
+The store is locked while the master node runs (edits would be overwritten by it): stop the node first, or
+use ``--master NODE`` to list / forget / add through the running master's services (faces_remote.py).
 
-Exit codes: 0 done, 1 nothing matched (unknown face id / name), 2 usage error, 3 store in use by another
-process, 4 store unusable (missing file, I/O or configuration error).
+Exit codes: 0 done, 1 nothing matched (unknown face id / name) or the master refused, 2 usage error, 3 store
+in use by another process, 4 store unusable (missing file, I/O or configuration error), 5 no master answered.
 """
 
 from __future__ import annotations
@@ -48,6 +49,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="face store file (default: $FACE_REID_DB or ~/.local/share/face_reid/faces.db)",
     )
+    parser.add_argument("--master", default="", metavar="NODE",
+                        help="work on a running master through its services instead of the store, e.g. "
+                             "/face_reid_master (add and forget need its admin_services: true)")
+    parser.add_argument("--key", default="", help="with --master: seal the requests with this network key file")
+    parser.add_argument("--timeout-s", type=float, default=20.0, help="with --master: how long to wait for it (s)")
     sub = parser.add_subparsers(dest="command", required=True)
     p_list = sub.add_parser("list", help="list stored faces (no feature vectors)")
     p_list.add_argument("--json", action="store_true", help="one JSON array of summaries")
@@ -60,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
     name = p_rename.add_mutually_exclusive_group(required=True)
     name.add_argument("name", nargs="?", help="new name")
     name.add_argument("--clear", action="store_true", help="remove the name")
+    p_add = sub.add_parser("add", help="with --master: add a named person from photos (embedded here)")
+    p_add.add_argument("name")
+    p_add.add_argument("photos", nargs="+", help="face photos (JPEG/PNG) of that person")
+    p_add.add_argument("--space", default="", help="the master's embedding space (default: the master's default)")
     return parser
 
 
@@ -139,6 +149,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exc.code) if isinstance(exc.code, int) else EXIT_USAGE
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.WARNING, format=f"{PROG}: %(levelname)s: %(message)s")
+    if args.master:
+        from face_reid_master.tools.faces_remote import run_remote
+
+        if args.command == "add" and not args.space:
+            from face_reid_master.core import MasterConfig
+
+            args.space = MasterConfig().embedding_space
+        try:
+            return run_remote(args, PROG)
+        except ValueError as exc:  # e.g. an unusable key file
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+    if args.command == "add":
+        print(f"{PROG}: add works on a running master: give --master NODE", file=sys.stderr)
+        return EXIT_USAGE
     path = args.db if args.db is not None else default_db_path()
     try:
         with FaceStore(path, create=False, embedding_dim=None, embedding_space=None,

@@ -1,0 +1,113 @@
+"""``face-reid-faces --master NODE``: the same list / forget, plus add, on a running master through its
+services (~/list_faces, ~/forget_face, ~/add_person; the last two need ``admin_services: true`` on the master).
+With ``--key`` the admin requests are sealed with the network key (a secured master takes nothing else).
+Photos given to ``add`` are turned into embeddings here (the images never leave this process).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Any
+
+from face_reid_camera.common.checks import shown
+
+EXIT_OK, EXIT_NOT_FOUND, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
+
+
+def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
+    import rclpy
+
+    client = node.create_client(srv_type, name)
+    deadline = time.monotonic() + timeout_s
+    while not client.service_is_ready():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no service {name} within {timeout_s:g} s (is the master running, with "
+                               "admin_services: true for add / forget, on this ROS_DOMAIN_ID?)")
+        rclpy.spin_once(node, timeout_sec=0.1)
+    future = client.call_async(request)
+    while not future.done():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{name} did not answer within {timeout_s:g} s")
+        rclpy.spin_once(node, timeout_sec=0.1)
+    return future.result()
+
+
+def _embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
+    from face_reid_camera.common.embedding_spaces import embedder_for_space
+    from face_reid_camera.faces.embedder import load_embedder
+    from face_reid_camera.faces.photos import PhotoEmbedder
+
+    embedder = PhotoEmbedder(embedder=load_embedder(embedder_for_space(space)))
+    values: list[float] = []
+    notes: list[str] = []
+    for path in photos:
+        try:
+            found = embedder.embed_photo(path)
+        except (OSError, ValueError) as exc:
+            notes.append(f"skipped {shown(path)}: {exc}")
+            continue
+        if found is None:
+            notes.append(f"skipped {shown(path)}: no face found")
+        else:
+            values.extend(float(v) for v in found.embedding)
+    return values, notes
+
+
+def run_remote(args: argparse.Namespace, prog: str) -> int:
+    """One command against the master node ``args.master``; exit codes as face-reid-faces (5: no master)."""
+    import rclpy
+
+    from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
+
+    if args.command == "rename":
+        print(f"{prog}: rename needs the store itself (the master offers no rename service): stop the master "
+              "and run without --master", file=sys.stderr)
+        return EXIT_USAGE
+    sealer = None
+    if args.key:
+        from face_reid_camera.common.sealing import Sealer, load_network_key
+
+        sealer = Sealer(load_network_key(args.key), f"{prog}-{time.time_ns() % 10**9}")
+    master = args.master.rstrip("/")
+    rclpy.init()
+    node = rclpy.create_node("face_reid_faces_client")
+
+    def sealed(request: Any) -> Any:
+        if sealer is None:
+            return request
+        from face_reid_camera.ros.sealed import seal_request
+
+        return seal_request(sealer, request)
+
+    try:
+        if args.command == "list":
+            reply = _call(node, ListFaces, f"{master}/list_faces", ListFaces.Request(), args.timeout_s)
+            rows = list(zip(reply.face_ids, reply.names, reply.num_features, reply.last_seen_s, strict=False))
+            print(f"{'id':>6}  {'name':<24} {'features':>8}  last seen (s)")
+            for fid, name, n, seen in rows:
+                print(f"{fid:>6}  {shown(name, 20) if name else '-':<24} {n:>8}  {seen:.1f}")
+            print(f"{len(rows)} face(s) on {master}")
+            return EXIT_OK
+        if args.command == "forget":
+            request = ForgetFace.Request(face_id=args.face_id or 0, name=args.name or "")
+            reply = _call(node, ForgetFace, f"{master}/forget_face", sealed(request), args.timeout_s)
+        else:  # add
+            values, notes = _embeddings(args.photos, args.space)
+            for note in notes:
+                print(f"{prog}: {note}", file=sys.stderr)
+            if not values:
+                print(f"{prog}: no usable face in the photos", file=sys.stderr)
+                return EXIT_NOT_FOUND
+            request = AddPerson.Request(name=args.name, embeddings=values)
+            reply = _call(node, AddPerson, f"{master}/add_person", sealed(request), args.timeout_s)
+    except TimeoutError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return EXIT_UNREACHABLE
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print(reply.message if reply.success else f"{prog}: refused: {reply.message}",
+          file=sys.stdout if reply.success else sys.stderr)
+    return EXIT_OK if reply.success else EXIT_NOT_FOUND

@@ -1,0 +1,63 @@
+"""face-reid-faces --master: list / add / forget through a running (secured) master's services, over real DDS
+(the master in this process, the command-line tool as its own process, loopback)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+from conftest import FACES_DIR, REPO_ROOT
+from ros_procs import procs
+
+pytest.importorskip("rclpy")
+pytest.importorskip("face_reid_msgs.srv")
+
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import TransitionCallbackReturn
+
+from face_reid_camera.common.sealing import write_network_key
+from face_reid_master.ros.node import MasterNode
+
+
+def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_context, tmp_path: Path) -> None:
+    key = write_network_key(tmp_path / "network.key")
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
+                       "-p", f"network_key_path:={key}", "-p", "admin_services:=true",
+                       "-p", "body_appearance_tracking:=false"])
+    master = MasterNode(context=ctx)
+    assert master.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert master.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(master)
+    spinning = threading.Thread(target=executor.spin, daemon=True)
+    spinning.start()
+
+    def faces(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--master",
+                               "/face_reid_master", "--timeout-s", str(timeout), *args], cwd=REPO_ROOT,
+                              env=procs.ros_env(ros_domain_id), capture_output=True, text=True, timeout=120)
+
+    try:
+        photos = [str(p) for p in sorted((FACES_DIR / "deepface_id01").glob("*.jpg"))[:3]]
+        run = faces("--key", str(key), "add", "Alice", *photos, "--space", "dlib_resnet_v1")
+        assert run.returncode == 0 and "added Alice with 3 embeddings" in run.stdout, run.stderr
+        assert master.core.people.names() == ["Alice"]
+        run = faces("list")
+        assert run.returncode == 0 and "on /face_reid_master" in run.stdout
+        run = faces("add", "Mallory", *photos, "--space", "dlib_resnet_v1")  # no key: a secured master refuses
+        assert run.returncode == 1 and "must be sealed" in run.stderr and master.core.people.names() == ["Alice"]
+        run = faces("--key", str(key), "forget", "--name", "Alice")
+        assert run.returncode == 0 and "removed the predefined person 'Alice'" in run.stdout, run.stderr
+        assert master.core.people.names() == []
+        assert faces("rename", "1", "Bob").returncode == 2
+        nobody = subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--master", "/nobody",
+                                 "--timeout-s", "2", "list"], cwd=REPO_ROOT, env=procs.ros_env(ros_domain_id),
+                                capture_output=True, text=True, timeout=60)
+        assert nobody.returncode == 5 and "no service /nobody/list_faces" in nobody.stderr
+    finally:
+        executor.shutdown()
+        spinning.join(timeout=10)
+        master.destroy_node()
