@@ -56,6 +56,7 @@ class CameraNode(ManagedNode):
         self._busy = False  # the worker is processing a pair
         self._worker: threading.Thread | None = None
         self._subs: list[Any] = []
+        self._qos_timer: Any = None
         self.publisher: Any = None
         self._pub_lock = threading.Lock()
         self._superseded = 0
@@ -107,10 +108,7 @@ class CameraNode(ManagedNode):
 
     def activate(self) -> None:
         values = self.values
-        image_qos = QoSProfile(
-            depth=2, history=HistoryPolicy.KEEP_LAST,
-            reliability=ReliabilityPolicy.RELIABLE if values["image_qos_reliable"] else ReliabilityPolicy.BEST_EFFORT,
-        )
+        reliable = values["image_qos"] == "reliable"
         frame_qos = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
         with self._pub_lock:
             if self._sealer is not None:
@@ -119,14 +117,15 @@ class CameraNode(ManagedNode):
                 self.publisher = self.create_publisher(Sealed, str(values["sealed_output_topic"]), frame_qos)
             else:
                 self.publisher = self.create_publisher(CameraFrame, str(values["output_topic"]), frame_qos)
-        self._subs = [
-            self.create_subscription(Image, str(values["color_topic"]), self._on_color, image_qos),
-            self.create_subscription(Image, str(values["depth_topic"]), self._on_depth, image_qos),
-            self.create_subscription(CameraInfo, str(values["camera_info_topic"]), self._on_info, image_qos),
-        ]
+        inputs = [(Image, str(values["color_topic"]), self._on_color),
+                  (Image, str(values["depth_topic"]), self._on_depth),
+                  (CameraInfo, str(values["camera_info_topic"]), self._on_info)]
         if values["color_camera_info_topic"]:
-            self._subs.append(self.create_subscription(
-                CameraInfo, str(values["color_camera_info_topic"]), self._on_color_info, image_qos))
+            inputs.append((CameraInfo, str(values["color_camera_info_topic"]), self._on_color_info))
+        self._subs = [self._subscribe_input(msg_type, topic, callback, reliable)
+                      for msg_type, topic, callback in inputs]
+        if values["image_qos"] == "auto":
+            self._qos_timer = self.create_timer(1.0, self._match_driver_qos)
         assert self.health is not None
         self.health.start(self.now_s())
         self._running = True
@@ -148,6 +147,9 @@ class CameraNode(ManagedNode):
         if self._worker is not None:
             self._worker.join(timeout=5.0)
             self._worker = None
+        if self._qos_timer is not None:
+            self.destroy_timer(self._qos_timer)
+            self._qos_timer = None
         for sub in self._subs:
             self.destroy_subscription(sub)
         self._subs = []
@@ -155,6 +157,28 @@ class CameraNode(ManagedNode):
             if self.publisher is not None:
                 self.destroy_publisher(self.publisher)
                 self.publisher = None
+
+    def _subscribe_input(self, msg_type: Any, topic: str, callback: Any, reliable: bool) -> Any:
+        qos = QoSProfile(depth=2, history=HistoryPolicy.KEEP_LAST,
+                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
+        return self.create_subscription(msg_type, topic, callback, qos)
+
+    def _match_driver_qos(self) -> None:
+        """image_qos auto: a subscription whose publishers are all reliable becomes reliable (no frame lost to a
+        busy subscriber); one with a best-effort publisher becomes best effort (else it would hear nothing)."""
+        for k, sub in enumerate(self._subs):
+            topic = sub.topic_name
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue
+            want = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+            if want == (sub.qos_profile.reliability == ReliabilityPolicy.RELIABLE):
+                continue
+            msg_type, callback = sub.msg_type, sub.callback
+            self.destroy_subscription(sub)
+            self._subs[k] = self._subscribe_input(msg_type, topic, callback, want)
+            self.get_logger().info(f"{topic}: the driver publishes {'reliable' if want else 'best effort'}: "
+                                   "subscribed so")
 
     def cleanup(self) -> None:
         self.pipeline = None

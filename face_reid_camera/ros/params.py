@@ -58,8 +58,11 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("sealed_output_topic", "face_reid/frames_sealed",
               "Where sealed frames (face_reid_msgs/Sealed) are published when network_key_path is set."),
     ParamSpec(
-        "image_qos_reliable", False,
-        "Subscribe to images with RELIABLE QoS (true) or BEST_EFFORT (false, matches any publisher).",
+        "image_qos", "auto",
+        "Reliability of the image and CameraInfo subscriptions: auto (best effort until the driver's publishers "
+        "are seen, then reliable when they all are: reliable loses no frame to a busy subscriber), reliable "
+        "(only matches reliable publishers) or best_effort (matches any, may lose frames).",
+        choices=("auto", "reliable", "best_effort"),
     ),
     ParamSpec("sync_slop_s", 0.02, "Max stamp difference between a colour and a depth image of one pair (s).",
               low=0.0, high=1.0),

@@ -91,7 +91,7 @@ class _Run:
             self.children.append(start_child(f"{cam.camera_id}_node", [
                 "-m", "face_reid_camera.ros.node", "--ros-args", "-r", f"__ns:=/{cam.camera_id}",
                 "-p", f"camera_id:={cam.camera_id}", "-p", f"camera_pose_xyz_m:={_fmt((x, y, z))}",
-                "-p", f"camera_pose_rpy_rad:={_fmt((roll, pitch, yaw))}", "-p", "image_qos_reliable:=true",
+                "-p", f"camera_pose_rpy_rad:={_fmt((roll, pitch, yaw))}", "-p", "image_qos:=reliable",
                 "-p", "max_frame_age_s:=1.0"], env, logs))
             spec_path = self.work / f"{cam.camera_id}_player.json"
             spec_path.write_text(json.dumps(self.scenario.player_spec(c, self.args.rate_hz).to_json()))

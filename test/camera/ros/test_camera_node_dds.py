@@ -50,7 +50,7 @@ def test_camera_node_publishes_people_and_embeddings(
     node = procs.start(
         ["-m", "face_reid_camera.ros.node", "--ros-args", "-p", "camera_id:=cam_test",
          "-p", "camera_pose_xyz_m:=[0.0, 0.0, 2.2]", "-p", "camera_pose_rpy_rad:=[0.0, 0.3, 0.0]",
-         "-p", "max_frame_age_s:=2.0", "-p", "image_qos_reliable:=true"],
+         "-p", "max_frame_age_s:=2.0", "-p", "image_qos:=reliable"],
         ros_domain_id, tmp_path / "node.log",
     )
     collector = procs.start(
