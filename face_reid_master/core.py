@@ -100,6 +100,13 @@ class MasterConfig:
         low=1.0, high=100000.0)
     min_face_quality: float = param(0.0, "Embeddings with lower face quality are ignored (0..1).", low=0.0, high=1.0)
     publish_tentative: bool = param(False, "Also publish tracks not confirmed yet (bool).")
+    static_clutter_after_s: float = param(
+        60.0, "A track that has not moved more than static_clutter_radius_m from where it appeared and never "
+        "showed a face is static clutter (a coat stand, a pillar) after this long: not published (s; 0 = off).",
+        low=0.0, high=86400.0)
+    static_clutter_radius_m: float = param(
+        0.4, "How far a track must move from where it appeared to count as a person who moved (m).",
+        low=0.01, high=10.0)
     save_interval_s: float = param(1.0, "Faces with new embeddings are saved at least this often (s; a kill -9 "
                                    "loses at most this much learning).",
                                    low=0.0, high=86400.0)
@@ -378,6 +385,9 @@ class MasterCore:
         self._space_noticed: dict[str, str] = {}  # camera id -> the unusable space it was last logged for
         self._notices: list[str] = []
         self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed
+        self._birth: dict[int, tuple[float, float, float]] = {}  # track id -> (x, y, created s) until it moves
+        self._moved: set[int] = set()  # tracks that moved away from where they appeared
+        self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
         self._dirty_faces: dict[int, float] = {}  # face id -> first unsaved change (s)
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
         self._names: dict[int, str] = {}  # face id -> name from the predefined people
@@ -443,6 +453,8 @@ class MasterCore:
             return FrameOutcome(False, f"tracker rejected the frame ({result.status.value})", "tracker_late")
         st.frames_applied += 1
         st.detections_rejected_position += len(result.rejected_detections)
+        if self.config.static_clutter_after_s:
+            self._follow_births(result.associations, positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
 
         touched_tracks: set[int] = set()
@@ -800,11 +812,45 @@ class MasterCore:
         return self._names.get(face_id) or self.identity.face_name(face_id) or ""
 
     # ------------------------------------------------------------------------------ output
+    def _follow_births(self, associations: Iterable[tuple[int, int]], positions: NDArray[np.float64],
+                       stamp: float) -> None:
+        """Where each track appeared (its first detection), until it moves further than static_clutter_radius_m
+        from there (checked on every detection, so a walk there and back counts)."""
+        radius = self.config.static_clutter_radius_m
+        for tid, det in associations:
+            if tid in self._moved:
+                continue
+            x, y = float(positions[det, 0]), float(positions[det, 1])
+            birth = self._birth.get(tid)
+            if birth is None:
+                self._birth[tid] = (x, y, stamp)
+            elif math.hypot(x - birth[0], y - birth[1]) > radius:
+                self._moved.add(tid)
+                del self._birth[tid]
+
+    def _static_clutter(self, snaps: list[Any]) -> set[int]:
+        """Tracks that never moved from where they appeared nor showed a face for static_clutter_after_s (a body
+        descriptor does not count: cameras describe every person-sized cluster, a coat stand too)."""
+        alive = {snap.track_id for snap in snaps}
+        for gone in [t for t in self._birth if t not in alive]:
+            del self._birth[gone]
+        self._moved &= alive
+        after = self.config.static_clutter_after_s
+        if not after:
+            return set()
+        return {snap.track_id for snap in snaps if snap.track_id in self._birth
+                and self._face_obs.get(snap.track_id, 0) == 0 and snap.stamp_s - self._birth[snap.track_id][2] >= after}
+
     def tracks(self, at_s: float | None = None) -> list[NamedTrackRecord]:
-        """Current tracks with identities (confirmed and lost; tentative if configured)."""
+        """Current tracks with identities (confirmed and lost; tentative if configured), static clutter left
+        out (:meth:`_static_clutter`)."""
         out = []
-        for snap in self.tracker.snapshots(at_s, include_tentative=self.config.publish_tentative):
-            if snap.state == TrackState.DELETED:
+        snaps = [s for s in self.tracker.snapshots(at_s, include_tentative=self.config.publish_tentative)
+                 if s.state != TrackState.DELETED]
+        clutter = self._static_clutter(snaps)
+        self.static_clutter_tracks = len(clutter)
+        for snap in snaps:
+            if snap.track_id in clutter:
                 continue
             fid = self.identity.face_id_of(snap.track_id) or 0
             out.append(

@@ -401,6 +401,7 @@ class MasterNode(ManagedNode):
             "learned_faces": len(core.identity.face_ids()),
             "tracks": len(tracks),
             "tracks_identified": sum(1 for t in tracks if t.face_id),
+            "tracks_static_clutter": core.static_clutter_tracks,
             "camera_topics": len(self._subscribed),
             "frames_applied": stats["frames_applied"],
             "frames_dropped_overload": self.frames_dropped_overload,
