@@ -4,6 +4,7 @@ end-of-run summary (metrics of :mod:`face_reid_master.evaluation.metrics`): per 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -255,7 +256,10 @@ def format_table(scenario: DemoScenario, msg: TrackMessage | None, elapsed_s: fl
         return f"{head}: no /tracks_named message yet"
     xy, inside = scenario.true_xy(np.array([msg.stamp_s]))
     rows = []
+    half = scenario.world.room.half_extents
     for tr in sorted(msg.tracks, key=lambda r: r.track_id):
+        if tr.state == STATE_LOST:  # a lost track is a prediction that drifts on: shown where it was, in the room
+            tr = dataclasses.replace(tr, position_xy=np.clip(np.asarray(tr.position_xy, dtype=np.float64), -half, half))
         gt = nearest_person(np.asarray(tr.position_xy, dtype=np.float64), xy[0], inside[0])
         truth = scenario.people[gt].name if gt >= 0 else "-"
         rows.append((tr, truth))

@@ -189,7 +189,7 @@ class _Run:
             self.check_alive()
             self._collect_done()
             now = time.time()
-            if now >= next_print:
+            if now >= next_print and now - self.t0 <= self.scenario.duration_s:  # no table after the scene
                 next_print += period
                 last = self.messages[-1] if self.messages else None
                 table = format_table(self.scenario, last, now - self.t0, compact=not self.interactive)

@@ -311,3 +311,15 @@ def test_a_bad_domain_is_refused_before_anything_starts(capsys: pytest.CaptureFi
 
     assert main(["--domain-id", "300"]) == 2
     assert "0..232" in capsys.readouterr().err
+
+
+def test_a_lost_track_is_shown_inside_the_room(scenario: demo_scenario.DemoScenario) -> None:
+    """A lost track's prediction drifts on (here 40 m away): the table shows it at the room's edge."""
+    from face_reid_master.records import STATE_LOST
+
+    msg = _perfect_messages(scenario)[100]
+    far = dataclasses.replace(msg.tracks[0], state=STATE_LOST, position_xy=np.array([40.0, -40.0]))
+    table = report.format_table(scenario, TrackMessage(msg.stamp_s, (far,)), 20.0)
+    half = scenario.world.room.half_extents
+    row = table.splitlines()[2]
+    assert " lost " in row and f" {half[0]:.2f} " in row and f" {-half[1]:.2f} " in row and "40.00" not in row
