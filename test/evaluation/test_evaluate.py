@@ -336,7 +336,7 @@ def test_cli_prints_json_and_saves_plots(scenario_dir: Path, tmp_path: Path, cap
 
 def test_cli_errors(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     assert main([str(scenario_dir), "--live", "--domain-id", "500", "--quiet"]) == 2
-    assert "--domain-id must be in 0..101" in capsys.readouterr().err
+    assert "--domain-id must be in 0..232" in capsys.readouterr().err
     assert main([str(tmp_path), "--quiet"]) == 2
     assert "no scenario.json" in capsys.readouterr().err
     assert main([str(scenario_dir), "--gallery-people", "9", "--quiet"]) == 2

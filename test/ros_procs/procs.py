@@ -3,8 +3,12 @@ dying with pytest, loopback-only discovery on the test's domain), plus what only
 
 from __future__ import annotations
 
+import json
+import select
 import subprocess
+import time
 from pathlib import Path
+from typing import Any
 
 from conftest import REPO_ROOT as REPO
 
@@ -46,3 +50,19 @@ def run_pids(domain_id: int) -> list[int]:
             if "\nState:\tZ" not in status:
                 pids.append(int(env_file.parent.name))
     return pids
+
+
+def json_line(proc: subprocess.Popen[str], timeout_s: float) -> dict[str, Any]:
+    """The next JSON line a helper process prints on stdout (other lines skipped); AssertionError when it exits
+    first or nothing comes within ``timeout_s``."""
+    assert proc.stdout is not None
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([proc.stdout], [], [], 0.5)
+        if ready:
+            line = proc.stdout.readline()
+            if not line:
+                raise AssertionError(f"process exited ({proc.wait()}) before its line")
+            if line.startswith("{"):
+                return json.loads(line)
+    raise AssertionError(f"no JSON line within {timeout_s:g} s")

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import ast
 import json
-import select
 import time
 from pathlib import Path
 
@@ -24,17 +23,6 @@ EMPTY = "''"  # an empty parameter value on the command line
 FUZZ_MESSAGES = 5000  # per hostile process (two of them)
 
 
-def _json_line(proc, timeout_s: float) -> dict:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([proc.stdout], [], [], 0.5)
-        if ready:
-            line = proc.stdout.readline()
-            if not line:
-                raise AssertionError(f"process exited ({proc.wait()}) before its line")
-            if line.startswith("{"):
-                return json.loads(line)
-    raise AssertionError("no line in time")
 
 
 @pytest.mark.parametrize("secured", [True, False], ids=["secured", "unsecured"])
@@ -57,13 +45,13 @@ def test_fuzzed_master_keeps_the_walker_and_stores_nothing_forged(ros_domain_id:
         walker = procs.start([str(procs.PROCS / "sealed_walker.py"), "--key", str(key), "--seconds", "25"],
                              ros_domain_id, tmp_path / "walker.log")
         running.append(walker)
-        assert "start" in _json_line(walker, 90.0)
+        assert "start" in procs.json_line(walker, 90.0)
         fuzzers = [procs.start([str(procs.PROCS / "fuzz_master.py"), "--seed", str(seed), "--messages",
                                 str(FUZZ_MESSAGES)], ros_domain_id, tmp_path / f"fuzz{seed}.log") for seed in (1, 2)]
         running += fuzzers
-        sent = [_json_line(f, 240.0) for f in fuzzers]
+        sent = [procs.json_line(f, 240.0) for f in fuzzers]
         assert sum(s["sent"] for s in sent) >= 10_000 and all(s["calls"] > 0 for s in sent)
-        assert _json_line(walker, 120.0)["sent"] > 100
+        assert procs.json_line(walker, 120.0)["sent"] > 100
         assert master.poll() is None, "the master exited"
         time.sleep(1.0)  # the last /tracks_named to the collector (its own process; nothing to wait on)
     finally:

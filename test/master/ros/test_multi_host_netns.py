@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import shutil
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from conftest import REPO_ROOT
+from ros_procs.procs import json_line
 
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
@@ -63,17 +63,6 @@ def _start(ns: str, args: list[str], env: dict[str, str], log: Path) -> subproce
                                 stdout=subprocess.PIPE, stderr=f, text=True, start_new_session=True)
 
 
-def _json_line(proc: subprocess.Popen[str], timeout_s: float) -> dict:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([proc.stdout], [], [], 0.5)
-        if ready:
-            line = proc.stdout.readline()
-            if not line:
-                raise AssertionError(f"process exited ({proc.wait()}) before its line")
-            if line.startswith("{"):
-                return json.loads(line)
-    raise AssertionError("no line in time")
 
 
 def test_frames_cross_the_veth_and_tracks_come_out(two_hosts, ros_domain_id: int, tmp_path: Path) -> None:
@@ -93,8 +82,8 @@ def test_frames_cross_the_veth_and_tracks_come_out(two_hosts, ros_domain_id: int
         walker = _start(camera_ns, [str(REPO_ROOT / "test" / "ros_procs" / "sealed_walker.py"), "--seconds", "8",
                                     "--wait-s", "90"], env, tmp_path / "walker.log")
         procs.append(walker)
-        assert "start" in _json_line(walker, 120.0), (tmp_path / "walker.log").read_text()[-2000:]
-        sent = _json_line(walker, 60.0)["sent"]
+        assert "start" in json_line(walker, 120.0), (tmp_path / "walker.log").read_text()[-2000:]
+        sent = json_line(walker, 60.0)["sent"]
         assert sent >= 60
         time.sleep(1.0)  # the last /tracks_named into the collector (a separate process: nothing to wait on)
         assert procs[0].poll() is None, "the master exited"
