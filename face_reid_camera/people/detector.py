@@ -157,7 +157,8 @@ class PersonDetectorConfig:
         low=-1, high=2**31 - 1)
     people_on_pose_floor: bool = param(
         False, "With a camera pose: also detect people when no floor is seen in the data and only the pose's floor "
-        "is left (bool; false: such frames report nobody, since a wrong pose would put people in an empty room).")
+        "is left, and do not check the pose against the data (bool; false: such frames report nobody, since a wrong "
+        "pose would put people in an empty room).")
     pose_check_height_tolerance_m: float = param(
         0.2, "With a camera pose: the floor measured without the pose disagrees with it beyond this camera height "
         "difference (m).", low=0.0, high=10.0, low_open=True)
@@ -413,6 +414,8 @@ class PersonDetector:
         """While the pose-seeded floor search fails, measure the floor without the pose every
         ``pose_check_every_frames`` frames and compare (a wrong height or tilt is why it fails)."""
         cfg, pose_plane = self.config, self._pose_plane
+        if cfg.people_on_pose_floor:  # the pose's floor is trusted (e.g. a recording that shows no floor)
+            return None
         if pose_plane is None or source == "ransac":  # found within the pose's seed window: it agrees
             self._frames_unseen = 0
             self.floor_check = None
