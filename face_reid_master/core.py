@@ -656,6 +656,8 @@ class MasterCore:
         for track_id in deleted:
             self.identity.track_deleted(track_id, stamp)
             self._face_obs.pop(track_id, None)
+            self._birth.pop(track_id, None)
+            self._moved.discard(track_id)
         events = self.identity.step(stamp)
         if self.online_metric is not None:
             self._online_metric_step(stamp)
@@ -831,10 +833,6 @@ class MasterCore:
     def _static_clutter(self, snaps: list[Any]) -> set[int]:
         """Tracks that never moved from where they appeared nor showed a face for static_clutter_after_s (a body
         descriptor does not count: cameras describe every person-sized cluster, a coat stand too)."""
-        alive = {snap.track_id for snap in snaps}
-        for gone in [t for t in self._birth if t not in alive]:
-            del self._birth[gone]
-        self._moved &= alive
         after = self.config.static_clutter_after_s
         if not after:
             return set()

@@ -21,11 +21,10 @@ _UNLIMITED = 1 << 30
 
 @dataclass(frozen=True)
 class PendingFrame(Generic[T]):
-    """One received frame: its camera, its stamp (s), when it arrived (s, node clock) and the payload."""
+    """One received frame: its camera, its stamp (s) and the payload (the message)."""
 
     camera_id: str
     stamp_s: float
-    received_s: float
     payload: T
 
 
@@ -38,6 +37,10 @@ class FrameIntake(Generic[T]):
 
     def add(self, frame: PendingFrame[T]) -> None:
         self._waiting.append(frame)
+
+    def clear(self) -> None:
+        """Forget what waits (not counted as dropped: e.g. the node is being deactivated)."""
+        self._waiting = []
 
     def __len__(self) -> int:
         return len(self._waiting)

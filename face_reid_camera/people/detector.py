@@ -46,7 +46,7 @@ from scipy import ndimage
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose, depth_to_points
 from face_reid_camera.common.param_table import param, validate_fields
-from face_reid_camera.people.ground_plane import GroundPlane, fit_ground_plane
+from face_reid_camera.people.ground_plane import GroundFit, GroundPlane, fit_ground_plane
 
 __all__ = [
     "FloorCheck",
@@ -220,11 +220,6 @@ class FloorCheck:
         return (f"the configured pose (camera {self.pose_height_m:.2f} m high, tilted {self.pose_tilt_deg:.1f} deg "
                 f"down) {verdict} the floor measured in the depth data (camera {self.floor_height_m:.2f} m high, "
                 f"tilted {self.floor_tilt_deg:.1f} deg down; floors {self.angle_deg:.1f} deg apart)")
-
-
-def _tilt_down_deg(plane: GroundPlane) -> float:
-    """Angle (deg) of the optical axis (0, 0, 1) below the horizon of ``plane``."""
-    return math.degrees(math.asin(max(-1.0, min(1.0, -float(plane.normal[2])))))
 
 
 @dataclass
@@ -423,28 +418,24 @@ class PersonDetector:
         self._frames_unseen += 1
         if (self._frames_unseen - 1) % cfg.pose_check_every_frames:
             return None
-        fit = fit_ground_plane(
-            points, max_tilt_deg=cfg.ground_max_tilt_deg, distance_threshold_m=cfg.ground_distance_threshold_m,
-            iterations=cfg.ransac_iterations, min_inliers=cfg.min_ground_points,
-            max_below_fraction=cfg.ground_max_below_fraction, min_camera_height_m=cfg.min_camera_height_m,
-            max_sample_points=cfg.ransac_max_sample_points,
-            depth_noise_coefficient_per_m=cfg.depth_noise_coefficient_per_m, rng=self._rng, assume_finite=True)
+        fit = self._fit_floor(points, None, ())
         if fit is None:
             return None
         floor = fit.plane
         angle = math.degrees(math.acos(max(-1.0, min(1.0, float(floor.normal @ pose_plane.normal)))))
         agrees = (abs(floor.offset - pose_plane.offset) <= cfg.pose_check_height_tolerance_m
                   and angle <= cfg.pose_check_tilt_tolerance_deg)
-        self.floor_check = FloorCheck(pose_plane.offset, _tilt_down_deg(pose_plane), floor.offset,
-                                      _tilt_down_deg(floor), angle, agrees)
+        self.floor_check = FloorCheck(pose_plane.offset, pose_plane.tilt_down_deg, floor.offset,
+                                      floor.tilt_down_deg, angle, agrees)
         return self.floor_check
 
-    def _ground_plane(self, points: FloatArray) -> tuple[GroundPlane | None, str]:
+    def _fit_floor(self, points: FloatArray, seed: GroundPlane | None,
+                   priors: list[GroundPlane] | tuple[()]) -> GroundFit | None:
+        """The floor RANSAC with this detector's settings, near ``seed`` (the pose's floor) or unseeded."""
         cfg = self.config
-        priors = [p for p in (self._previous_plane, self._pose_plane) if p is not None]
-        fit = fit_ground_plane(
+        return fit_ground_plane(
             points,
-            seed_normal=None if self._pose_plane is None else self._pose_plane.normal,
+            seed_normal=None if seed is None else seed.normal,
             seed_angle_deg=cfg.ground_seed_angle_deg,
             max_tilt_deg=cfg.ground_max_tilt_deg,
             distance_threshold_m=cfg.ground_distance_threshold_m,
@@ -454,12 +445,16 @@ class PersonDetector:
             min_camera_height_m=cfg.min_camera_height_m,
             max_sample_points=cfg.ransac_max_sample_points,
             depth_noise_coefficient_per_m=cfg.depth_noise_coefficient_per_m,
-            seed_camera_height_m=None if self._pose_plane is None else self._pose_plane.offset,
+            seed_camera_height_m=None if seed is None else seed.offset,
             seed_height_tolerance_m=cfg.ground_seed_height_tolerance_m,
             prior_planes=priors,
             rng=self._rng,
             assume_finite=True,
         )
+
+    def _ground_plane(self, points: FloatArray) -> tuple[GroundPlane | None, str]:
+        priors = [p for p in (self._previous_plane, self._pose_plane) if p is not None]
+        fit = self._fit_floor(points, self._pose_plane, priors)
         if fit is not None:
             self._previous_plane = fit.plane
             return fit.plane, "ransac"

@@ -66,6 +66,11 @@ class GroundPlane:
         return cls(pose.up_in_camera, float(pose.translation[2]))
 
     @property
+    def tilt_down_deg(self) -> float:
+        """Angle (deg) of the camera's optical axis (0, 0, 1) below this plane's horizon."""
+        return math.degrees(math.asin(max(-1.0, min(1.0, -float(self.normal[2])))))
+
+    @property
     def camera_height_m(self) -> float:
         """Height of the camera centre above the plane (metres)."""
         return self.offset

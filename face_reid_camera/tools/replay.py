@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -121,13 +120,10 @@ def _floor_summary(result: FrameResult) -> dict[str, object] | None:
     plane = result.ground_plane
     if plane is None:
         return None
-    normal = np.asarray(plane.normal, dtype=np.float64)
-    # Angle of the optical axis (0, 0, 1) below the horizon.
-    tilt = math.degrees(math.asin(max(-1.0, min(1.0, -float(normal[2])))))
     return {
         "source": result.ground_plane_source,
         "camera_height_m": round(float(plane.offset), 3),
-        "camera_tilt_down_deg": round(tilt, 1),
+        "camera_tilt_down_deg": round(plane.tilt_down_deg, 1),
     }
 
 

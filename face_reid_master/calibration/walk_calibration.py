@@ -102,10 +102,8 @@ def time_matched(a: CameraTrack, b: CameraTrack, max_gap_s: float = 0.2) -> tupl
     lo, hi = np.clip(idx - 1, 0, b.stamps_s.size - 1), np.clip(idx, 0, b.stamps_s.size - 1)
     gap = b.stamps_s[hi] - b.stamps_s[lo]
     ok &= gap <= max_gap_s
-    exact = b.stamps_s[lo] == a.stamps_s  # a stamp equal to one of b's
     w = np.where(gap > 0, (a.stamps_s - b.stamps_s[lo]) / np.where(gap > 0, gap, 1.0), 0.0)
     interp = b.xy[lo] + w[:, None] * (b.xy[hi] - b.xy[lo])
-    interp[exact] = b.xy[lo][exact]
     return a.xy[ok], interp[ok]
 
 

@@ -84,7 +84,7 @@ class LiveRun:
     transport: dict[str, Any]
 
 
-def _last_stats(log_path: Path) -> dict[str, int] | None:
+def last_master_stats(log_path: Path) -> dict[str, int] | None:
     """The counters of the master's last 'stats: {...}' log line (None: no such line)."""
     import ast
 
@@ -258,7 +258,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
                 say(f"  live: {i + 1}/{len(frames)} frames sent, {len(received)} /tracks_named received")
         spin_until(time.time() + _TAIL_S)
         check_master()
-        master_stats = _last_stats(master.log_path)
+        master_stats = last_master_stats(master.log_path)
     finally:
         executor.shutdown()
         node.destroy_node()

@@ -74,7 +74,6 @@ class MasterNode(ManagedNode):
         self._publish_tokens = 2.0
         self._intake: FrameIntake[Any] = FrameIntake()
         self._budget = CycleBudget()
-        self.frames_dropped_overload = 0
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -155,7 +154,7 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             self.destroy_subscription(sub)
         self._subscribed = {}
-        self._intake.take(1 << 30)  # frames of a cycle that will not run
+        self._intake.clear()  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
                 self.destroy_publisher(pub)
@@ -238,13 +237,18 @@ class MasterNode(ManagedNode):
         self._receive(msg, self.now_s())
         self._cycle()
 
+    @property
+    def frames_dropped_overload(self) -> int:
+        """Frames dropped for overload since start (oldest first, fairly across cameras)."""
+        return self._intake.dropped
+
     def _on_sealed(self, sealed: Any) -> None:
         """A sealed camera message (secured network): opened, then queued like a plain one."""
-        frame = self._unseal(sealed, self.now_s())
+        frame = self._unseal(sealed)
         if frame is not None:
             self._on_frame(frame)
 
-    def _unseal(self, sealed: Any, now: float) -> Any:
+    def _unseal(self, sealed: Any) -> Any:
         """The CameraFrame inside a sealed message, or None (refused, counted by reason, logged)."""
         try:
             frame = open_message(self._openers["frames"], sealed, CameraFrame, time.time())
@@ -264,7 +268,7 @@ class MasterNode(ManagedNode):
             stamp = stamp_to_seconds(msg.header.stamp)
         except (ValueError, TypeError, AttributeError):
             stamp = float("nan")  # the core rejects it and counts it
-        self._intake.add(PendingFrame(str(msg.camera_id), stamp, now, msg))
+        self._intake.add(PendingFrame(str(msg.camera_id), stamp, msg))
         try:
             self._clocks.observe(str(msg.camera_id), stamp, time.time(), float(msg.processing_time_ms) * 1e-3)
         except (TypeError, ValueError):
@@ -277,7 +281,7 @@ class MasterNode(ManagedNode):
             try:
                 with sub.handle:
                     while (taken := sub.handle.take_message(sub.msg_type, False)) is not None:
-                        msg = taken[0] if not self._openers else self._unseal(taken[0], now)
+                        msg = taken[0] if not self._openers else self._unseal(taken[0])
                         if msg is not None:
                             self._receive(msg, now)
             except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
@@ -292,7 +296,6 @@ class MasterNode(ManagedNode):
         self._drain(self.now_s())
         frames, dropped = self._intake.take(self._budget.frames())
         if dropped:
-            self.frames_dropped_overload += dropped
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
                                            f"({len(frames)} applied, budget {self._budget.budget_ms:g} ms)",
                                self.frames_dropped_overload, warn=True)

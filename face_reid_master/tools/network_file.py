@@ -28,7 +28,7 @@ from typing import Any
 
 import yaml
 
-__all__ = ["NodeSpec", "hosts_of", "load_network_file", "node_specs"]
+__all__ = ["NodeSpec", "load_network_file", "node_specs"]
 
 _NAMESPACE = re.compile(r"^(/[A-Za-z][A-Za-z0-9_]*)+$")
 _CAMERA_KEYS = {"id", "namespace", "params", "set", "remap"}
@@ -97,10 +97,6 @@ def _check_node(node: Any, where: str, keys: set[str]) -> None:
         raise ValueError(f"{where}.namespace: like /kitchen or /site/cam1, got {ns!r}")
 
 
-def hosts_of(network: Mapping[str, Any]) -> list[str]:
-    return list(network["hosts"])
-
-
 def _value(v: Any) -> str:
     """A YAML value as ROS's -p name:=value reads it."""
     if isinstance(v, bool):
@@ -133,7 +129,7 @@ def _ros_args(node: Mapping[str, Any], folder: str, extra: list[str]) -> list[st
 def node_specs(network: Mapping[str, Any], host: str, roles: tuple[str, ...] = ("camera", "master")) -> list[NodeSpec]:
     """The node processes of ``host`` (only the given roles), in start order: the master first."""
     if host not in network["hosts"]:
-        raise ValueError(f"host {host!r} is not in the network file (hosts: {hosts_of(network)}); "
+        raise ValueError(f"host {host!r} is not in the network file (hosts: {list(network['hosts'])}); "
                          "give --host NAME")
     folder = str(network["_folder"])
     nodes = network["hosts"][host]

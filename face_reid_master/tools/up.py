@@ -37,7 +37,6 @@ class _Running:
     started_s: float = 0.0
     backoff_s: float = 1.0
     restart_at_s: float = 0.0
-    restarts: int = 0
     log: Path = field(default_factory=Path)
 
 
@@ -77,7 +76,6 @@ def supervise(specs: list[NodeSpec], log_dir: Path, max_backoff_s: float = 30.0,
                     node.restart_at_s = now + node.backoff_s
                     node.backoff_s = min(max_backoff_s, 2.0 * node.backoff_s)
                 elif node.proc is None and now >= node.restart_at_s:
-                    node.restarts += 1
                     start(node)
             time.sleep(0.1)
     finally:

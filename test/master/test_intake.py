@@ -12,7 +12,7 @@ from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 def _intake(frames: list[tuple[str, float]]) -> FrameIntake[int]:
     intake: FrameIntake[int] = FrameIntake()
     for k, (camera, stamp) in enumerate(frames):
-        intake.add(PendingFrame(camera, stamp, 0.0, k))
+        intake.add(PendingFrame(camera, stamp, k))
     return intake
 
 
@@ -22,6 +22,9 @@ def test_take_returns_everything_in_stamp_order_and_empties_the_intake() -> None
     assert dropped == 0 and len(intake) == 0
     assert [f.payload for f in frames] == [1, 4, 2, 0, 3]  # the NaN stamp last: the core refuses it
     assert intake.take(100) == ([], 0)
+    intake.add(PendingFrame("a", 5.0, 9))
+    intake.clear()  # e.g. deactivating: gone, but not counted as dropped for overload
+    assert len(intake) == 0 and intake.dropped == 0
 
 
 def test_over_the_limit_the_fullest_camera_loses_its_oldest_first() -> None:

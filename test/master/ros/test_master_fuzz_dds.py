@@ -5,7 +5,6 @@ key, no face from anyone without it is stored."""
 
 from __future__ import annotations
 
-import ast
 import json
 import time
 from pathlib import Path
@@ -17,6 +16,7 @@ pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
 
 from face_reid_camera.common.sealing import write_network_key
+from face_reid_master.evaluation.live import last_master_stats
 from face_reid_master.storage.face_store import FaceStore
 
 EMPTY = "''"  # an empty parameter value on the command line
@@ -66,10 +66,8 @@ def test_fuzzed_master_keeps_the_walker_and_stores_nothing_forged(ros_domain_id:
     assert {t["track_id"] for t in near} == {near[0]["track_id"]}  # one track on the walker's circle throughout
     if secured:  # unsecured, faces sent as camera "walker" are indistinguishable from the walker's own
         assert len({t["face_id"] for t in near if t["face_id"]}) == 1  # one face id
-    log = (tmp_path / "master.log").read_text().splitlines()
-    stats = [ast.literal_eval(line.split("stats: ", 1)[1]) for line in log if "stats: {" in line]
-    assert stats, "no stats line"
-    last = stats[-1]
+    last = last_master_stats(tmp_path / "master.log")
+    assert last is not None, "no stats line"
     if not secured:  # the hostile frames reached the core and were refused there, counted
         assert last.get("frames_rejected_unknown_camera", 0) >= 1000, last
         assert last.get("detections_rejected_position", 0) + last.get("embeddings_rejected_norm", 0) >= 100, last
