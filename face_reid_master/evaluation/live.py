@@ -101,20 +101,21 @@ def last_master_stats(log_path: Path) -> dict[str, int] | None:
     return None
 
 
-def _frame_latencies(sent: dict[int, float], first_reply: dict[int, float]) -> tuple[list[float], int]:
-    """Per sent frame: seconds from sending it to the first /tracks_named message stamped with it or a later
-    frame (the master applies a cycle's frames in stamp order and stamps its message with the newest), and how
-    many frames got one."""
-    if not sent or not first_reply:
-        return [], 0
-    stamps = np.array(sorted(first_reply), dtype=np.int64)
-    recv = np.array([first_reply[q] for q in stamps.tolist()])
+def frame_latencies(sent_s: NDArray[np.float64], reply_stamp_s: NDArray[np.float64],
+                    reply_recv_s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Per frame sent at ``sent_s`` (its stamp): seconds until the first /tracks_named message stamped at or after
+    it arrived (the master applies a cycle's frames in stamp order and stamps its message with the newest), and
+    which frames got one. Stamps compare with a 1 us tolerance (float round trips)."""
+    sent = np.asarray(sent_s, dtype=np.float64)
+    if not np.asarray(reply_stamp_s).size:
+        return np.zeros(0), np.zeros(sent.shape, dtype=bool)
+    order = np.argsort(reply_stamp_s, kind="stable")
+    stamps = np.asarray(reply_stamp_s, dtype=np.float64)[order]
+    recv = np.asarray(reply_recv_s, dtype=np.float64)[order]
     earliest = np.minimum.accumulate(recv[::-1])[::-1]  # first arrival among messages stamped >= stamps[i]
-    qs = np.array(sorted(sent), dtype=np.int64)
-    idx = np.searchsorted(stamps, qs)
+    idx = np.searchsorted(stamps, sent - 1e-6)
     has = idx < stamps.size
-    lat = earliest[idx[has]] - np.array([sent[q] for q in qs[has].tolist()])
-    return lat.tolist(), int(np.count_nonzero(has))
+    return earliest[idx[has]] - sent[has], has
 
 
 def _segments_to_scene(segments: Sequence[tuple[float, float]]) -> Any:
@@ -273,7 +274,10 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
         if q in sent and q not in first_reply:
             first_reply[q] = recv
         messages.append(TrackMessage(to_scene(wall), tuple(track_from_msg(t, to_scene) for t in msg.tracks)))
-    latencies, answered = _frame_latencies(sent, first_reply)
+    qs = sorted(first_reply)
+    lat_s, has = frame_latencies(np.array(sorted(sent)) * _STAMP_QUANTUM_S, np.array(qs) * _STAMP_QUANTUM_S,
+                                 np.array([first_reply[q] for q in qs]))
+    latencies, answered = lat_s.tolist(), int(np.count_nonzero(has))
     lag = np.asarray(lags) if lags else np.zeros(1)
     lat = np.asarray(latencies) * 1e3
 

@@ -89,3 +89,17 @@ def test_live_evaluation_matches_offline(ros_domain_id: int, tmp_path: Path, cap
     assert abs(live["tracker"]["tracks_evaluated"] - offline["tracker"]["tracks_evaluated"]) <= 2
     assert live["tracker"]["false_positive_tracks"] <= 1
     assert live["predefined_people"]["wrong_name"] == 0 and live["predefined_people"]["other_tracks_named"] == 0
+
+
+def test_a_frame_is_answered_by_the_first_message_stamped_at_or_after_it() -> None:
+    """Cycles stamp their message with the newest frame applied: frames 1.0 and 1.1 are answered by the message
+    stamped 1.1 (arrived at 1.15); 1.2 by the one stamped 1.3, although an earlier-arriving message exists only
+    for older stamps; 2.0 by nothing."""
+    from face_reid_master.evaluation.live import frame_latencies
+
+    lat, has = frame_latencies(np.array([1.0, 1.1, 1.2, 2.0]), np.array([1.3, 1.1, 0.5]),
+                               np.array([1.36, 1.15, 0.52]))
+    assert has.tolist() == [True, True, True, False]
+    np.testing.assert_allclose(lat, [0.15, 0.05, 0.16])
+    lat, has = frame_latencies(np.array([1.0]), np.zeros(0), np.zeros(0))
+    assert lat.size == 0 and not has.any()
