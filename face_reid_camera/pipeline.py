@@ -204,6 +204,7 @@ class CameraPipeline:
         self.config = config
         self.body_projection = body_projection
         self.body_errors = 0  # bodies that could not be described (the person is still reported, without one)
+        self.thin_support_rejected = 0  # person-shaped clusters standing on a thin pole (coat stands), not reported
         self.camera_pose = camera_pose
         self.face_detector = face_detector
         self.embedder = embedder
@@ -229,6 +230,7 @@ class CameraPipeline:
         t0 = time.perf_counter()
         stamp = time.monotonic() if stamp_s is None else float(stamp_s)
         detection = self.person_detector.detect_depth(depth_m, intrinsics)
+        self.thin_support_rejected += detection.num_thin_support
         t1 = time.perf_counter()
         if color_bgr is not None and color_intrinsics is None:
             h, w = color_bgr.shape[:2]

@@ -27,7 +27,9 @@ Pipeline per frame (numpy/scipy vectorised, no per-point Python; ~3-5 ms for 640
    highest; every voxel joins the nearest head of its cluster within ``max_person_width_m`` / 2;
 6. a sub-cluster is a person if its head is ``min_person_height_m``..``max_person_height_m`` above
    the floor, its upper body (top ``upper_body_depth_m``) is ``min_person_width_m``..
-   ``max_person_width_m`` wide and it has at least ``min_cluster_points`` voxels. The head top is
+   ``max_person_width_m`` wide, it has at least ``min_cluster_points`` voxels, and it does not stand on a
+   thin support: its voxels ``support_band_low_m``..``support_band_high_m`` above the floor (legs), when
+   seen, span at least ``min_support_width_m`` across the line of sight (a coat stand's pole does not). The head top is
    the mean floor position of the head cap at the highest voxel's height.
 
 State: :class:`PersonDetector` keeps the last estimated floor plane (temporal seed/fallback) and its
@@ -65,6 +67,8 @@ _MIN_CAP_CELLS = 3
 _HEAD_CAP_RADIUS_M = 0.1
 # The head position is averaged over its cap cells less than this below the top (metres).
 _HEAD_CAP_DROP_M = 0.1
+# The support band needs this many voxels to count as evidence (fewer: legs hidden or out of view).
+_MIN_SUPPORT_VOXELS = 3
 # Heads closer than this (horizontally) to the camera are seen from above: no line-of-sight sides.
 _OVERHEAD_RANGE_M = 0.3
 # Points more than this above max_person_height_m are ignored (ceilings, lamps, upper walls).
@@ -150,6 +154,16 @@ class PersonDetectorConfig:
     min_shoulder_offset_m: float = param(
         0.06, "Head test: shoulders on both sides of the line of sight, at least this far off it (m).",
         low=0.0, high=1.0, low_open=True)
+    min_support_width_m: float = param(
+        0.08, "Depth shape check: what stands in the support band is at least this wide across the line of sight; "
+        "a person-shaped top on a thin pole (coat stand, hat stand, lamp) is not a person (m; 0 = off).",
+        low=0.0, high=1.0)
+    support_band_low_m: float = param(
+        0.15, "Depth shape check: bottom of the support band, above the floor (m; legs at a person's shins).",
+        low=0.0, high=2.0)
+    support_band_high_m: float = param(
+        0.6, "Depth shape check: top of the support band, above the floor (m; below most coats' hems).",
+        low=0.0, high=2.0, low_open=True)
     head_top_to_centre_m: float = param(
         0.1, "Head centre = head top minus this along the floor normal (m).", low=0.0, high=1.0)
     random_seed: int = param(
@@ -179,6 +193,9 @@ class PersonDetectorConfig:
             raise ValueError("min_person_width_m must be < max_person_width_m")
         if self.head_annulus_inner_m >= self.head_annulus_outer_m:
             raise ValueError("head_annulus_inner_m must be < head_annulus_outer_m")
+        if self.support_band_low_m >= self.support_band_high_m:
+            raise ValueError(f"support_band_low_m ({self.support_band_low_m}) must be < support_band_high_m "
+                             f"({self.support_band_high_m})")
         if self.cluster_tolerance_m < self.voxel_size_m:
             raise ValueError("cluster_tolerance_m must be >= voxel_size_m (neighbouring voxels must connect)")
 
@@ -229,9 +246,9 @@ class PersonDetectionResult:
     ``ground_plane_source`` is "ransac" (estimated now), "previous" (last frame's floor reused),
     "pose" (the configured camera pose's floor; people are then only detected with ``people_on_pose_floor``) or
     "none". ``floor_check``: set on frames where the pose was checked against the floor measured without it.
-    ``num_points`` counts the valid input
-    points after striding and range limits, ``num_voxels`` the voxels above the floor, ``num_clusters``
-    their 2-D clusters on the floor plane. ``timings_ms`` breaks down the latency by stage.
+    ``num_points`` counts the valid input points after striding and range limits, ``num_voxels`` the voxels
+    above the floor, ``num_clusters`` their 2-D clusters on the floor plane, ``num_thin_support`` the
+    person-shaped ones that stand on a thin pole. ``timings_ms`` breaks down the latency by stage.
     """
 
     people: list[PersonCandidate]
@@ -242,6 +259,7 @@ class PersonDetectionResult:
     num_clusters: int = 0
     timings_ms: dict[str, float] = field(default_factory=dict)
     floor_check: FloorCheck | None = None
+    num_thin_support: int = 0  # person-shaped clusters rejected by the depth shape check (thin support)
 
 
 @dataclass
@@ -399,7 +417,7 @@ class PersonDetector:
             timings["total"] = (t3 - t0) * 1e3
             return result
 
-        result.people, result.num_clusters = self._people(obj, plane.height_of(obj), plane)
+        result.people, result.num_clusters, result.num_thin_support = self._people(obj, plane.height_of(obj), plane)
         t4 = time.perf_counter()
         timings["people"] = (t4 - t3) * 1e3
         timings["total"] = (t4 - t0) * 1e3
@@ -466,13 +484,13 @@ class PersonDetector:
 
     def _people(
         self, obj: FloatArray, obj_h: FloatArray, plane: GroundPlane
-    ) -> tuple[list[PersonCandidate], int]:
+    ) -> tuple[list[PersonCandidate], int, int]:
         """Height map, 2-D clusters, prominent heads, sub-clusters and person filters (see module doc)."""
         cfg = self.config
         grid = self._floor_grid(obj, obj_h, plane)
         heads = self._heads(grid, obj_h)
         if heads.size == 0:
-            return [], grid.n_clusters
+            return [], grid.n_clusters, 0
         tops = grid.top_voxel[heads]
         head_l = grid.labels[heads]
         # Head position on the floor: mean of the head cap's top voxels (one voxel is noisy far away).
@@ -497,6 +515,7 @@ class PersonDetector:
             best[closer] = dist2[closer]
 
         people: list[PersonCandidate] = []
+        thin = 0
         for k in range(heads.size):
             height = float(obj_h[tops[k]])
             if not (cfg.min_person_height_m <= height <= cfg.max_person_height_m):
@@ -507,6 +526,9 @@ class PersonDetector:
             upper = members[obj_h[members] >= height - cfg.upper_body_depth_m]
             width = self._width(grid.u[upper], grid.v[upper])
             if not (cfg.min_person_width_m <= width <= cfg.max_person_width_m):
+                continue
+            if self._thin_support(members, obj_h, grid, head_u[k], head_v[k]):
+                thin += 1
                 continue
             # Top of the head: at the cap's mean floor position, at the highest voxel's height.
             top = head_u[k] * grid.axis_u + head_v[k] * grid.axis_v + (height - plane.offset) * plane.normal
@@ -520,7 +542,24 @@ class PersonDetector:
                     num_points=int(members.size),
                 )
             )
-        return people, grid.n_clusters
+        return people, grid.n_clusters, thin
+
+    def _thin_support(self, members: NDArray[np.intp], obj_h: FloatArray, grid: _FloorGrid, head_u: float,
+                      head_v: float) -> bool:
+        """Depth shape check: the person's voxels in the support band (legs) span less than min_support_width_m
+        across the line of sight. A band hidden or out of view (too few voxels) is no evidence either way."""
+        cfg = self.config
+        if cfg.min_support_width_m <= 0:
+            return False
+        h = obj_h[members]
+        band = members[(h >= cfg.support_band_low_m) & (h <= cfg.support_band_high_m)]
+        if band.size < _MIN_SUPPORT_VOXELS:
+            return False
+        norm = math.hypot(head_u, head_v)
+        if norm < _OVERHEAD_RANGE_M:  # seen from above: no line of sight across the legs
+            return False
+        lateral = (grid.v[band] * head_u - grid.u[band] * head_v) / norm
+        return float(lateral.max() - lateral.min()) < cfg.min_support_width_m
 
     def _floor_grid(self, obj: FloatArray, obj_h: FloatArray, plane: GroundPlane) -> _FloorGrid:
         """Height map of the voxels on a padded floor-plane grid and its 8-connected clusters."""

@@ -240,7 +240,9 @@ def main(argv: list[str] | None = None) -> int:
             "timings_ms": {k: round(v, 2) for k, v in result.timings_ms.items()},
         }
         print(json.dumps(line), flush=True)
-    print(f"face-reid-replay: {frames} frames, {people_total} detections, {errors} skipped", file=sys.stderr)
+    print(f"face-reid-replay: {frames} frames, {people_total} detections, {errors} skipped, "
+          f"{pipeline.thin_support_rejected} person-shaped clusters on a thin support (coat stands) rejected",
+          file=sys.stderr)
     if last_check is not None:
         print(f"face-reid-replay: {last_check.describe()}", file=sys.stderr)
     if frames == 0:

@@ -142,6 +142,57 @@ class RenderedFrame:
     person_ids: NDArray[np.int16]
 
 
+@dataclass(frozen=True)
+class SceneObject:
+    """A static object part in the world (m): a vertical elliptic cylinder (``centre`` its mid-height axis point)
+    or an ellipsoid, axis-aligned in the world, with a flat colour. Person-sized clutter is made of these."""
+
+    shape: str  # "cylinder" or "ellipsoid"
+    centre: tuple[float, float, float]
+    semi_axes: tuple[float, float, float]  # (x, y, z half-extents) m
+    color_bgr: tuple[int, int, int] = (90, 110, 120)
+
+    def __post_init__(self) -> None:
+        if self.shape not in ("cylinder", "ellipsoid"):
+            raise ValueError(f"SceneObject.shape must be 'cylinder' or 'ellipsoid', got {self.shape!r}")
+        if len(self.centre) != 3 or not all(is_finite_number(v) for v in self.centre):
+            raise ValueError(f"SceneObject.centre must be 3 finite numbers (m), got {self.centre!r}")
+        if len(self.semi_axes) != 3 or not all(is_finite_number(v) and v > 0 for v in self.semi_axes):
+            raise ValueError(f"SceneObject.semi_axes must be 3 positive numbers (m), got {self.semi_axes!r}")
+        _check_colour(self.color_bgr, "SceneObject.color_bgr")
+
+
+CLUTTER_KINDS = ("coat_stand", "plant", "floor_lamp", "pillar", "door_frame", "cabinet")
+
+
+def clutter_object(kind: str, x_m: float, y_m: float) -> list[SceneObject]:
+    """The parts of one person-sized static object at (x, y) on the floor: a coat stand with coats, a potted
+    plant, a floor lamp, a pillar, a door frame (along x) or a tall cabinet."""
+    dark, wood, green, white = (40, 40, 45), (60, 90, 130), (50, 120, 60), (200, 205, 210)
+    if kind == "coat_stand":
+        return [SceneObject("cylinder", (x_m, y_m, 0.9), (0.025, 0.025, 0.9), dark),
+                SceneObject("ellipsoid", (x_m, y_m, 1.78), (0.06, 0.06, 0.05), dark),
+                SceneObject("ellipsoid", (x_m + 0.05, y_m, 1.3), (0.16, 0.22, 0.38), (90, 60, 50)),
+                SceneObject("ellipsoid", (x_m - 0.05, y_m + 0.05, 1.35), (0.15, 0.18, 0.33), (60, 60, 110))]
+    if kind == "plant":
+        return [SceneObject("cylinder", (x_m, y_m, 0.2), (0.18, 0.18, 0.2), wood),
+                SceneObject("ellipsoid", (x_m, y_m, 0.95), (0.35, 0.3, 0.55), green),
+                SceneObject("ellipsoid", (x_m + 0.1, y_m, 1.45), (0.15, 0.15, 0.2), green)]
+    if kind == "floor_lamp":
+        return [SceneObject("cylinder", (x_m, y_m, 0.02), (0.15, 0.15, 0.02), dark),
+                SceneObject("cylinder", (x_m, y_m, 0.8), (0.02, 0.02, 0.8), dark),
+                SceneObject("cylinder", (x_m, y_m, 1.7), (0.2, 0.2, 0.12), white)]
+    if kind == "pillar":
+        return [SceneObject("cylinder", (x_m, y_m, 1.5), (0.2, 0.2, 1.5), white)]
+    if kind == "door_frame":
+        return [SceneObject("cylinder", (x_m - 0.45, y_m, 1.05), (0.04, 0.06, 1.05), wood),
+                SceneObject("cylinder", (x_m + 0.45, y_m, 1.05), (0.04, 0.06, 1.05), wood),
+                SceneObject("cylinder", (x_m, y_m, 2.14), (0.49, 0.06, 0.04), wood)]
+    if kind == "cabinet":
+        return [SceneObject("cylinder", (x_m, y_m, 0.85), (0.3, 0.22, 0.85), wood)]
+    raise ValueError(f"clutter kind must be one of {', '.join(CLUTTER_KINDS)}, got {kind!r}")
+
+
 def _check_colour(value: object, name: str) -> None:
     """Colours are hashable (B, G, R) tuples of ints in [0, 255]."""
     if (
@@ -535,6 +586,33 @@ def _facing_angle_deg(person: SyntheticPerson, camera_xy: NDArray[np.float64]) -
     return math.degrees(math.acos(float(np.clip(facing @ to_cam / dist, -1.0, 1.0))))
 
 
+def _render_objects(caster: _Caster, objects: list[SceneObject], zflat: F32,
+                    colour_flat: NDArray[np.uint8]) -> None:
+    """Z-buffer static objects (world-aligned primitives, lit from above the camera) into the frame."""
+    for i, obj in enumerate(objects):
+        if not isinstance(obj, SceneObject):
+            raise TypeError(f"objects[{i}] must be a SceneObject, got {type(obj).__name__}")
+    if not objects:
+        return
+    centres = np.array([o.centre for o in objects], dtype=np.float64)
+    semi = np.array([o.semi_axes for o in objects], dtype=np.float64)
+    boxes = caster.pixel_boxes(centres, semi)
+    rot = caster.pose.rotation
+    for n, obj in enumerate(objects):
+        if boxes[n, 0] < 0:
+            continue
+        prim = _Primitive(obj.shape == "ellipsoid", centres[n], obj.semi_axes, -1,
+                          np.array(obj.color_bgr, dtype=np.float64))
+        hit = caster.cast(prim, boxes[n], rot / semi[n][:, None], (caster.pose.translation - centres[n]) / semi[n],
+                          zflat, all_hits=False)
+        if hit is None:
+            continue
+        zflat[hit.flat] = hit.depth
+        light = caster.pose.translation - centres[n] + np.array([0.0, 0.0, 1.5])
+        shade = _shade(hit.normal, light / np.linalg.norm(light))
+        colour_flat[hit.flat] = np.clip(prim.albedo * shade[:, None], 0, 255).astype(np.uint8)
+
+
 def render_scene(
     people: Sequence[SyntheticPerson],
     intrinsics: CameraIntrinsics,
@@ -551,6 +629,7 @@ def render_scene(
     walls: bool = False,
     wall_height_m: float = 3.0,
     background_bgr: tuple[int, int, int] | NDArray[np.uint8] = (70, 70, 70),
+    objects: Sequence[SceneObject] = (),
 ) -> RenderedFrame:
     """Render a registered colour + depth frame of ``people`` standing on the floor.
 
@@ -561,6 +640,7 @@ def render_scene(
     ``background_bgr`` colours pixels that hit nothing: a BGR triple or an HxWx3 uint8 image. A face
     is pasted when the person faces the camera within ``max_face_angle_deg``; it counts as visible
     when at least ``min_visible_face_fraction`` of its core is unoccluded and its box is in the image.
+    ``objects``: static clutter (:func:`clutter_object`), drawn before the people (person id -1).
     """
     if not isinstance(intrinsics, CameraIntrinsics):
         raise TypeError(f"intrinsics must be a CameraIntrinsics, got {type(intrinsics).__name__}")
@@ -600,6 +680,7 @@ def render_scene(
     zflat, colour_flat = zbuf.reshape(-1), colour.reshape(-1, 3)
     ids = np.full(h * w, -1, dtype=np.int16)
     parts = np.full(h * w, -1, dtype=np.int8)
+    _render_objects(caster, list(objects), zflat, colour_flat)
 
     # geometry of everyone, batched: primitives, their pixel boxes and their ray transforms
     prims = [(i, prim) for i, person in enumerate(people) for prim in _person_primitives(person)]

@@ -13,9 +13,12 @@ from conftest import FACES_DIR
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose, depth_to_points
 from face_reid_camera.common.resources import model_path
 from face_reid_master.sim.renderer import (
+    CLUTTER_KINDS,
     HEAD_SEMI_AXES_M,
     RenderedFrame,
+    SceneObject,
     SyntheticPerson,
+    clutter_object,
     crop_face_for_rendering,
     render_scene,
 )
@@ -147,6 +150,25 @@ def test_walls_bound_the_room() -> None:
     assert open_floor.depth_mm[240, 320] == 0  # horizon: nothing
     assert room.depth_mm[240, 320] == 3000  # wall at x = +3 m
     assert np.count_nonzero(room.depth_mm) > np.count_nonzero(open_floor.depth_mm)
+
+
+def test_static_objects_are_drawn_at_their_place_and_occlude_people() -> None:
+    pose = CameraPose.looking_at(np.array([0.0, 0.0, 1.2]), np.array([1.0, 0.0, 1.2]))
+    intr = CameraIntrinsics(525.0, 525.0, 320.0, 240.0, 640, 480)
+    pillar = clutter_object("pillar", 3.0, 0.0)
+    frame = render_scene([SyntheticPerson(4.0, 0.0)], intr, pose, depth_noise=False, objects=pillar)
+    assert frame.depth_mm[240, 320] == 2800  # the pillar's front surface (radius 0.2 m) hides the person
+    assert frame.person_ids[240, 320] == -1
+    alone = render_scene([SyntheticPerson(4.0, 0.0)], intr, pose, depth_noise=False)
+    assert alone.person_ids[240, 320] == 0
+    for kind in CLUTTER_KINDS:
+        assert clutter_object(kind, 1.0, 2.0), kind
+    with pytest.raises(ValueError, match="clutter kind"):
+        clutter_object("sofa", 0.0, 0.0)
+    with pytest.raises(ValueError, match="semi_axes"):
+        SceneObject("cylinder", (0.0, 0.0, 1.0), (0.1, -0.1, 1.0))
+    with pytest.raises(TypeError, match="objects"):
+        render_scene([], intr, pose, objects=["pillar"])  # type: ignore[list-item]
 
 
 def test_person_pixels_are_nearer_than_the_floor_behind_them() -> None:
