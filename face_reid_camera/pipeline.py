@@ -205,6 +205,7 @@ class CameraPipeline:
         self.body_projection = body_projection
         self.body_errors = 0  # bodies that could not be described (the person is still reported, without one)
         self.thin_support_rejected = 0  # person-shaped clusters standing on a thin pole (coat stands), not reported
+        self.cut_by_border_rejected = 0  # person-shaped clusters whose top is where the image ends, not reported
         self.camera_pose = camera_pose
         self.face_detector = face_detector
         self.embedder = embedder
@@ -231,6 +232,7 @@ class CameraPipeline:
         stamp = time.monotonic() if stamp_s is None else float(stamp_s)
         detection = self.person_detector.detect_depth(depth_m, intrinsics)
         self.thin_support_rejected += detection.num_thin_support
+        self.cut_by_border_rejected += detection.num_cut_by_border
         t1 = time.perf_counter()
         if color_bgr is not None and color_intrinsics is None:
             h, w = color_bgr.shape[:2]

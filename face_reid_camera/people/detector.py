@@ -29,8 +29,9 @@ Pipeline per frame (numpy/scipy vectorised, no per-point Python; ~3-5 ms for 640
    the floor, its upper body (top ``upper_body_depth_m``) is ``min_person_width_m``..
    ``max_person_width_m`` wide, it has at least ``min_cluster_points`` voxels, and it does not stand on a
    thin support: its voxels ``support_band_low_m``..``support_band_high_m`` above the floor (legs), when
-   seen, span at least ``min_support_width_m`` across the line of sight (a coat stand's pole does not). The head top is
-   the mean floor position of the head cap at the highest voxel's height.
+   seen, span at least ``min_support_width_m`` across the line of sight (a coat stand's pole does not), and
+   (depth images) its top is not at the image border (``head_image_margin_px``: a wall cut by the frustum).
+   The head top is the mean floor position of the head cap at the highest voxel's height.
 
 State: :class:`PersonDetector` keeps the last estimated floor plane (temporal seed/fallback) and its
 random generator; use one detector per camera stream and call :meth:`PersonDetector.reset` on a jump.
@@ -154,6 +155,9 @@ class PersonDetectorConfig:
     min_shoulder_offset_m: float = param(
         0.06, "Head test: shoulders on both sides of the line of sight, at least this far off it (m).",
         low=0.0, high=1.0, low_open=True)
+    head_image_margin_px: float = param(
+        6.0, "Depth images: a head top projecting closer than this to the image's top, left or right border is where "
+        "the view ends, not a head (a wall cut by the frustum looks like one) (px; 0 = off).", low=0.0, high=1000.0)
     min_support_width_m: float = param(
         0.08, "Depth shape check: what stands in the support band is at least this wide across the line of sight; "
         "a person-shaped top on a thin pole (coat stand, hat stand, lamp) is not a person (m; 0 = off).",
@@ -248,7 +252,8 @@ class PersonDetectionResult:
     "none". ``floor_check``: set on frames where the pose was checked against the floor measured without it.
     ``num_points`` counts the valid input points after striding and range limits, ``num_voxels`` the voxels
     above the floor, ``num_clusters`` their 2-D clusters on the floor plane, ``num_thin_support`` the
-    person-shaped ones that stand on a thin pole. ``timings_ms`` breaks down the latency by stage.
+    person-shaped ones that stand on a thin pole, ``num_cut_by_border`` those whose top is at the image border.
+    ``timings_ms`` breaks down the latency by stage.
     """
 
     people: list[PersonCandidate]
@@ -260,6 +265,7 @@ class PersonDetectionResult:
     timings_ms: dict[str, float] = field(default_factory=dict)
     floor_check: FloorCheck | None = None
     num_thin_support: int = 0  # person-shaped clusters rejected by the depth shape check (thin support)
+    num_cut_by_border: int = 0  # person-shaped clusters whose top is at the image border (depth images only)
 
 
 @dataclass
@@ -352,7 +358,7 @@ class PersonDetector:
         if not isinstance(intrinsics, CameraIntrinsics):
             raise ValueError(f"intrinsics must be CameraIntrinsics, got {type(intrinsics).__name__}")
         points = depth_to_points(depth_m, intrinsics, stride=self.config.depth_stride_px)
-        return self._detect(points, t0)
+        return self._detect(points, t0, intrinsics)
 
     def detect_points(self, points_cam: NDArray[np.floating]) -> PersonDetectionResult:
         """Detect people in an organized (H, W, 3) or unorganized (N, 3) camera-frame cloud (metres).
@@ -374,7 +380,8 @@ class PersonDetector:
         return self._detect(pts.astype(np.float64), t0)
 
     # ------------------------------------------------------------------------------------------ pipeline
-    def _detect(self, points: FloatArray, t0: float) -> PersonDetectionResult:
+    def _detect(self, points: FloatArray, t0: float, intrinsics: CameraIntrinsics | None = None
+                ) -> PersonDetectionResult:
         cfg = self.config
         timings: dict[str, float] = {}
         depth = points[:, 2]
@@ -418,6 +425,10 @@ class PersonDetector:
             return result
 
         result.people, result.num_clusters, result.num_thin_support = self._people(obj, plane.height_of(obj), plane)
+        if intrinsics is not None and cfg.head_image_margin_px > 0 and result.people:
+            inside = [p for p in result.people if self._top_in_view(p.top_cam, intrinsics)]
+            result.num_cut_by_border = len(result.people) - len(inside)
+            result.people = inside
         t4 = time.perf_counter()
         timings["people"] = (t4 - t3) * 1e3
         timings["total"] = (t4 - t0) * 1e3
@@ -543,6 +554,17 @@ class PersonDetector:
                 )
             )
         return people, grid.n_clusters, thin
+
+    def _top_in_view(self, top_cam: FloatArray, intrinsics: CameraIntrinsics) -> bool:
+        """The head top projects at least head_image_margin_px inside the image's top, left and right borders (a
+        crest where the view ends - a wall cut by the frustum - is not a head)."""
+        z = float(top_cam[2])
+        if z <= 1e-6:
+            return False
+        margin = self.config.head_image_margin_px
+        u = intrinsics.fx * float(top_cam[0]) / z + intrinsics.cx
+        v = intrinsics.fy * float(top_cam[1]) / z + intrinsics.cy
+        return v >= margin and margin <= u <= intrinsics.width - 1 - margin
 
     def _thin_support(self, members: NDArray[np.intp], obj_h: FloatArray, grid: _FloorGrid, head_u: float,
                       head_v: float) -> bool:

@@ -338,6 +338,7 @@ class CameraNode(ManagedNode):
             "floor_found": self._floor_found if self._floor_found is not None else "no frame yet",
             "body_errors": self.pipeline.body_errors if self.pipeline is not None else 0,
             "rejected_thin_support": self.pipeline.thin_support_rejected if self.pipeline is not None else 0,
+            "rejected_top_at_border": self.pipeline.cut_by_border_rejected if self.pipeline is not None else 0,
             "pose_agrees_with_floor": "not checked" if check is None else check.agrees,
         }
         if check is not None:
