@@ -33,6 +33,7 @@ from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.convert import frame_from_msg, markers_for, tracks_to_msg
+from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
@@ -67,6 +68,7 @@ class MasterNode(ManagedNode):
         self._timers: list[Any] = []
         self.tracks_pub: Any = None
         self.markers_pub: Any = None
+        self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
         self._regex: re.Pattern[str] | None = None
         self._tokens_counted_s = -float("inf")
         self._min_publish_interval_s = 0.0
@@ -85,6 +87,7 @@ class MasterNode(ManagedNode):
         likelihood = (load_face_likelihood(values["likelihood_path"]) if values["likelihood_path"]  # clear errors
                       else default_face_likelihood(str(values["embedding_space"])))
         self.values = values
+        self.people_topics = PeopleTopics(self, values)  # checks its parameters and the world->map file first
         self.store = self._open_store() if values["persist_faces"] else None
         gallery = self._load_gallery(str(values["gallery_path"]))
         body_metric = None
@@ -134,6 +137,8 @@ class MasterNode(ManagedNode):
         self.tracks_pub = self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos)
         markers_topic = str(values["markers_topic"])
         self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
+        if self.people_topics is not None:
+            self.people_topics.activate()
         for topic in master_params.clean_list(values["camera_topics"]):
             self._subscribe(topic)
         if self._regex is not None:
@@ -159,6 +164,8 @@ class MasterNode(ManagedNode):
             if pub is not None:
                 self.destroy_publisher(pub)
         self.tracks_pub = self.markers_pub = None
+        if self.people_topics is not None:
+            self.people_topics.deactivate()
 
     def cleanup(self) -> None:
         for srv in self._services:
@@ -374,6 +381,8 @@ class MasterNode(ManagedNode):
         frame_id = str(self.values["world_frame_id"])
         msg = tracks_to_msg(tracks, stamp_s, frame_id, self._track_msgs)
         self.tracks_pub.publish(msg)
+        if self.people_topics is not None:
+            self.people_topics.publish(tracks, msg.header.stamp, now_s)
         self._unpublished_stamp = None
         if self.health is not None:
             self.health.published()

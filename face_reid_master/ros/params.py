@@ -16,6 +16,7 @@ from face_reid_camera.common.param_table import (
     config_specs,
 )
 from face_reid_master.core import MasterConfig
+from face_reid_master.robot.people_outputs import PeopleOutputConfig
 from face_reid_master.tracking.config import TrackerConfig
 
 NODE_NAME = "face_reid_master"
@@ -85,7 +86,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
 )
 
 TABLE = ParamTable(
-    NODE_NAME, (*_NODE_PARAMS, *config_specs(MasterConfig), *config_specs(TrackerConfig, "tracker.")),
+    NODE_NAME, (*_NODE_PARAMS, *config_specs(MasterConfig), *config_specs(TrackerConfig, "tracker."),
+                *config_specs(PeopleOutputConfig)),
     "the face-reid master node (face-reid-master)", USAGE,
 )
 
