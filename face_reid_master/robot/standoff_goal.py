@@ -164,7 +164,8 @@ class StandoffGoal:
 
     # ------------------------------------------------------------------ inputs
     def set_target(self, name: str) -> str:
-        """Follow ``name`` from now on ('' = nobody); returns it trimmed. ValueError (the name shown cut and
+        """Follow ``name`` from now on ('' = nobody; the next update issues a goal at once); returns it trimmed.
+        ValueError (the name shown cut and
         escaped) for a name with control characters or longer than MAX_NAME_CHARS."""
         if not isinstance(name, str):
             raise ValueError(f"name must be a str, got {type(name).__name__}")
@@ -173,9 +174,9 @@ class StandoffGoal:
             raise ValueError(f"name is longer than {MAX_NAME_CHARS} characters: {shown(clean, 40)}")
         if any(not ch.isprintable() for ch in clean):
             raise ValueError(f"name has control characters: {shown(clean, 40)}")
-        if name_key(clean) != name_key(self.target):
-            self._last, self._last_person_world, self._heading_world = None, None, None
-            self._last_goal_s = -math.inf
+        # a request, even for the same person, gets a fresh goal at once
+        self._last, self._last_person_world, self._heading_world = None, None, None
+        self._last_goal_s = -math.inf
         self.target = clean
         return clean
 
@@ -183,8 +184,11 @@ class StandoffGoal:
         """Names of people the system knows (e.g. the master's learned faces): asking for one of them while
         nobody of that name is tracked is "not tracked", not "unknown name"."""
         for name in names:
-            if isinstance(name, str) and name.strip():
-                self._known[name_key(name)] = name.strip()
+            self._remember(name)
+
+    def _remember(self, name: object) -> None:
+        if isinstance(name, str) and 0 < len(name.strip()) <= MAX_NAME_CHARS and name.isprintable():
+            self._known[name_key(name)] = name.strip()
 
     @property
     def last_goal(self) -> Goal | None:
@@ -203,8 +207,7 @@ class StandoffGoal:
             if not t.finite:
                 self.tracks_skipped_not_finite += 1
                 continue
-            if t.name.strip():
-                self._known[name_key(t.name)] = t.name.strip()
+            self._remember(t.name)
             if name_key(t.name) == key:
                 mine.append(t)
         live_states = {TrackState.CONFIRMED, TrackState.TENTATIVE} if self.config.accept_tentative else {
