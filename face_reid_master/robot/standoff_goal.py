@@ -165,8 +165,7 @@ class StandoffGoal:
     # ------------------------------------------------------------------ inputs
     def set_target(self, name: str) -> str:
         """Follow ``name`` from now on ('' = nobody; the next update issues a goal at once); returns it trimmed.
-        ValueError (the name shown cut and
-        escaped) for a name with control characters or longer than MAX_NAME_CHARS."""
+        ValueError (the name shown cut and escaped) for control characters or more than MAX_NAME_CHARS."""
         if not isinstance(name, str):
             raise ValueError(f"name must be a str, got {type(name).__name__}")
         clean = name.strip()

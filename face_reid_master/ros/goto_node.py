@@ -1,0 +1,312 @@
+"""face-reid-goto: send a robot to a named person (thin: messages <-> :class:`StandoffGoal`).
+
+Subscribes /tracks_named; the target comes from the command line (``face-reid-goto NAME``), the ``target_name``
+parameter, the ``~/go_to`` service (face_reid_msgs/GoToPerson) or the ``~/target`` topic (std_msgs/String).
+Publishes geometry_msgs/PoseStamped goals on /goal_pose (what nav2's navigator takes) in the robot's map frame,
+and one line per goal or refusal on ``~/status`` (std_msgs/String). Known names also come from the master's
+``~/list_faces``, so that a learned person who is away is "not tracked" rather than "unknown name".
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any
+
+from geometry_msgs.msg import PoseStamped
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from face_reid_camera.common.checks import shown
+from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
+from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.ros.lifecycle import ManagedNode, run_node
+from face_reid_master.robot.frames import PlanarTransform, load_world_to_map
+from face_reid_master.robot.standoff_goal import (
+    Decision,
+    DecisionKind,
+    GoalTrack,
+    StandoffGoal,
+    StandoffGoalConfig,
+    TrackState,
+)
+from face_reid_msgs.msg import NamedTrackArray
+from face_reid_msgs.srv import GoToPerson, ListFaces
+
+NODE_NAME = "face_reid_goto"
+USAGE = """usage: face-reid-goto [NAME] [--ros-args -p world_to_map_path:=world_to_map.yaml -p name:=value ...]
+
+Sends the robot to the named person: goals (geometry_msgs/PoseStamped, map frame) on /goal_pose, a stand-off
+distance in front of the person and facing them, re-issued as they move; one status line per goal or refusal
+on ~/status. NAME (or the target_name parameter, the ~/go_to service, the ~/target topic) picks the person.
+Parameters (`ros2 param describe` lists them):
+"""
+
+_NODE_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("autostart", True, "Configure and activate at start (false: wait for a lifecycle manager).",
+              read_only=True),
+    ParamSpec("target_name", "", "Person to go to from the start ('' = nobody; NAME on the command line wins)."),
+    ParamSpec("tracks_topic", "/tracks_named", "The master's face_reid_msgs/NamedTrackArray."),
+    ParamSpec("goal_topic", "/goal_pose", "Where the goals (geometry_msgs/PoseStamped, map frame) are published."),
+    ParamSpec("world_to_map_path", "",
+              "The world -> map transform file of face-reid-align-map ('' = none: the map frame is the world "
+              "frame).", read_only=True),
+    ParamSpec("map_frame_id", "",
+              "frame_id of the goals ('' = the transform file's map_frame; without a file: 'map')."),
+    ParamSpec("robot_pose_topic", "",
+              "The robot's geometry_msgs/PoseStamped in the map frame: a standing person is faced from the robot's "
+              "side ('' = none: their last heading)."),
+    ParamSpec("names_service", "/face_reid_master/list_faces",
+              "The master's face_reid_msgs/ListFaces: its learned names are known names ('' = only the names seen "
+              "on /tracks_named)."),
+    ParamSpec("names_refresh_period_s", 10.0, "How often the known names are asked for again (s).",
+              low=0.5, high=86400.0),
+    ParamSpec("no_tracks_warning_s", 5.0, "/diagnostics warns when no /tracks_named arrived for this long (s).",
+              low=0.1, high=3600.0),
+)
+
+TABLE = ParamTable(NODE_NAME, (*_NODE_PARAMS, *config_specs(StandoffGoalConfig)),
+                   "the go-to-a-named-person node (face-reid-goto)", "face-reid-goto NAME --ros-args "
+                   "--params-file config/goto.yaml")
+
+_MAX_STATUS_CHARS = 400
+
+
+def tracks_from_msg(msg: Any) -> tuple[list[GoalTrack], int]:
+    """The tracks of a NamedTrackArray as core records, and how many were malformed (skipped)."""
+    out, bad = [], 0
+    for t in msg.tracks:
+        try:
+            state = TrackState(int(t.state))
+            out.append(GoalTrack(int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence),
+                                 float(t.position.x), float(t.position.y), float(t.velocity.x), float(t.velocity.y),
+                                 state))
+        except (ValueError, TypeError, AttributeError):
+            bad += 1
+    return out, bad
+
+
+class GotoNode(ManagedNode):
+    """The face-reid-goto node; see the module docstring."""
+
+    def __init__(self, target: str | None = None, **kwargs: Any) -> None:
+        super().__init__(TABLE, **kwargs)
+        self._cli_target = target
+        self.values: dict[str, Any] = {}
+        self.core: StandoffGoal | None = None
+        self.map_frame = "map"
+        self.world_frame = ""  # expected frame of the tracks ('' = not checked: no transform file)
+        self._tracks: list[GoalTrack] = []
+        self._robot_xy: tuple[float, float] | None = None
+        self._last_status = ""
+        self._last_tracks_s: float | None = None
+        self._started_s = 0.0
+        self._names_future: Any = None
+        self._names_asked_s = -math.inf
+        self._names_loaded = False
+        self.counts = {"tracks_msgs": 0, "goals": 0, "refusals": 0, "requests": 0}
+        self.rejected: dict[str, int] = {}
+        self._subs: list[Any] = []
+        self._timers: list[Any] = []
+        self._service: Any = None
+        self.goal_pub: Any = None
+        self.status_pub: Any = None
+        self._names_client: Any = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def configure(self) -> None:
+        values = self.parameter_values()
+        transform, world, mapf = PlanarTransform.identity(), "", "map"
+        if values["world_to_map_path"]:
+            transform, world, mapf = load_world_to_map(str(values["world_to_map_path"]))
+        self.world_frame = world
+        self.map_frame = str(values["map_frame_id"]) or mapf
+        self.core = StandoffGoal(config_from_values(StandoffGoalConfig, values), transform)
+        target = self._cli_target if self._cli_target is not None else str(values["target_name"])
+        self.core.set_target(target)  # a bad name fails the start with its reason
+        self.values = values
+        self.get_logger().info(
+            f"goto: target {shown(self.core.target, 64) if self.core.target else '(none)'}, goals in frame "
+            f"{self.map_frame!r} (world->map x={transform.x_m:g} y={transform.y_m:g} "
+            f"yaw={math.degrees(transform.yaw_rad):g} deg), standoff {self.core.config.standoff_distance_m:g} m")
+
+    def activate(self) -> None:
+        values = self.values
+        reliable = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+        latched = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.goal_pub = self.create_publisher(PoseStamped, str(values["goal_topic"]), reliable)
+        self.status_pub = self.create_publisher(String, "~/status", latched)
+        self._subs = [
+            self.create_subscription(NamedTrackArray, str(values["tracks_topic"]), self._on_tracks, reliable),
+            self.create_subscription(String, "~/target", self._on_target, reliable),
+        ]
+        self._service = self.create_service(GoToPerson, "~/go_to", self._on_go_to)
+        if values["robot_pose_topic"]:
+            self._subs.append(self.create_subscription(PoseStamped, str(values["robot_pose_topic"]),
+                                                       self._on_robot_pose, reliable))
+        if values["names_service"]:
+            self._names_client = self.create_client(ListFaces, str(values["names_service"]))
+            self._timers.append(self.create_timer(1.0, self._ask_names))
+        self._started_s = self.now_s()
+        self._decide(self.now_s(), announce=True)
+
+    def deactivate(self) -> None:
+        for sub in self._subs:
+            self.destroy_subscription(sub)
+        for timer in self._timers:
+            self.destroy_timer(timer)
+        if self._service is not None:
+            self.destroy_service(self._service)
+        self._subs, self._timers, self._service = [], [], None
+        if self._names_client is not None:
+            self.destroy_client(self._names_client)
+            self._names_client = None
+        for pub in (self.goal_pub, self.status_pub):
+            if pub is not None:
+                self.destroy_publisher(pub)
+        self.goal_pub = self.status_pub = None
+
+    def cleanup(self) -> None:
+        self.core = None
+
+    # ------------------------------------------------------------------ inputs
+    def _on_tracks(self, msg: Any) -> None:
+        self.counts["tracks_msgs"] += 1
+        self._last_tracks_s = self.now_s()
+        frame = str(msg.header.frame_id)
+        if self.world_frame and frame != self.world_frame:
+            self._reject("frame_id", f"/tracks_named in frame {shown(frame, 64)}, the transform file is from "
+                                     f"{self.world_frame!r}: ignored")
+            return
+        tracks, bad = tracks_from_msg(msg)
+        if bad:
+            self._reject("malformed_track", f"{bad} malformed track(s) in /tracks_named skipped", bad)
+        self._tracks = tracks
+        self._decide(self.now_s())
+
+    def _on_robot_pose(self, msg: Any) -> None:
+        x, y = float(msg.pose.position.x), float(msg.pose.position.y)
+        if msg.header.frame_id != self.map_frame or not (math.isfinite(x) and math.isfinite(y)):
+            self._reject("robot_pose", f"robot pose in frame {shown(msg.header.frame_id, 64)} at ({x}, {y}): "
+                                       f"expected finite numbers in {self.map_frame!r}; ignored")
+            return
+        self._robot_xy = (x, y)
+
+    def _on_target(self, msg: Any) -> None:
+        self._request(str(msg.data))
+
+    def _on_go_to(self, request: Any, response: Any) -> Any:
+        decision = self._request(str(request.name))
+        response.accepted = decision is not None and decision.kind in (DecisionKind.GOAL, DecisionKind.IDLE)
+        response.status = self._last_status if self.core is not None else "not active"
+        return response
+
+    def _request(self, name: str) -> Decision | None:
+        """A new target from the service or the topic: the decision for it at once (None: the name is refused)."""
+        self.counts["requests"] += 1
+        if self.core is None:
+            return None
+        try:
+            self.core.set_target(name)
+        except ValueError as exc:
+            self.counts["refusals"] += 1
+            self._status(f"refused: invalid name: {exc}", force=True)
+            self.log_throttled("invalid_name", f"target refused: {exc}", self.counts["refusals"], warn=True)
+            return None
+        return self._decide(self.now_s(), announce=True)
+
+    # ------------------------------------------------------------------ the decision
+    def _decide(self, now_s: float, announce: bool = False) -> Decision | None:
+        if self.core is None or self.goal_pub is None:
+            return None
+        decision = self.core.update(self._tracks, self._robot_xy, now_s)
+        if decision.kind == DecisionKind.GOAL and decision.goal is not None:
+            self.goal_pub.publish(self._pose(decision))
+            self.counts["goals"] += 1
+        elif decision.kind == DecisionKind.REFUSED and (announce or decision.status_line() != self._last_status):
+            self.counts["refusals"] += 1
+        if decision.kind != DecisionKind.UNCHANGED:
+            self._status(decision.status_line(), force=announce)
+        return decision
+
+    def _pose(self, decision: Decision) -> PoseStamped:
+        goal = decision.goal
+        assert goal is not None
+        msg = PoseStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.map_frame
+        msg.pose.position.x, msg.pose.position.y = goal.x_m, goal.y_m
+        msg.pose.orientation.z, msg.pose.orientation.w = math.sin(goal.yaw_rad / 2), math.cos(goal.yaw_rad / 2)
+        return msg
+
+    def _status(self, line: str, force: bool = False) -> None:
+        """One status line, published when it differs from the last one (or always, for a request)."""
+        line = line[:_MAX_STATUS_CHARS]
+        if (line == self._last_status and not force) or self.status_pub is None:
+            return
+        self._last_status = line
+        self.status_pub.publish(String(data=line))
+        self.get_logger().info(line, throttle_duration_sec=1.0)
+
+    # ------------------------------------------------------------------ known names
+    def _ask_names(self) -> None:
+        """Ask the master for its learned names (every names_refresh_period_s; every second until it answers)."""
+        client, now = self._names_client, self.now_s()
+        if client is None or self._names_future is not None or not client.service_is_ready():
+            return
+        period = float(self.values["names_refresh_period_s"]) if self._names_loaded else 1.0
+        if now - self._names_asked_s < period:
+            return
+        self._names_asked_s = now
+        self._names_future = client.call_async(ListFaces.Request())
+        self._names_future.add_done_callback(self._on_names)
+
+    def _on_names(self, future: Any) -> None:
+        self._names_future = None
+        try:
+            names = list(future.result().names)
+        except Exception as exc:  # the master went away mid-call: asked again later
+            self.log_throttled("names", f"{self.values['names_service']}: {type(exc).__name__}: {exc}", warn=True)
+            return
+        if self.core is not None:
+            self.core.add_known_names(names)
+            self._names_loaded = True
+
+    # ------------------------------------------------------------------ health
+    def _reject(self, reason: str, message: str, count: int = 1) -> None:
+        self.rejected[reason] = self.rejected.get(reason, 0) + count
+        self.log_throttled(reason, message, self.rejected[reason], warn=True)
+
+    def diagnostics(self, now_s: float) -> DiagnosticReport:
+        warnings = []
+        since = self._last_tracks_s if self._last_tracks_s is not None else self._started_s
+        if now_s - since > float(self.values["no_tracks_warning_s"]):
+            warnings.append(f"no /tracks_named for {now_s - since:.1f} s")
+        core = self.core
+        values: dict[str, str] = {k: str(v) for k, v in self.counts.items()}
+        values.update({f"rejected_{k}": str(v) for k, v in sorted(self.rejected.items())})
+        values["target"] = shown(core.target, 64) if core is not None else ""
+        values["status"] = self._last_status
+        values["tracks_skipped_not_finite"] = str(core.tracks_skipped_not_finite if core is not None else 0)
+        return DiagnosticReport(self.get_name(), self.get_fully_qualified_name(),
+                                DiagnosticLevel.WARN if warnings else DiagnosticLevel.OK,
+                                "; ".join(warnings) or "ok", values)
+
+
+def target_from_args(argv: list[str]) -> str | None:
+    """NAME from ``face-reid-goto NAME [--ros-args ...]`` (words before --ros-args joined), None when absent."""
+    end = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    words = [a for a in argv[1:end] if not a.startswith("-")]
+    return " ".join(words) if words else None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console-script entry point."""
+    args = list(sys.argv if argv is None else argv)
+    target = target_from_args(args)
+    return run_node("face-reid-goto", USAGE, TABLE, lambda: GotoNode(target), args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
