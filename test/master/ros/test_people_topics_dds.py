@@ -235,3 +235,94 @@ def test_without_the_packages_the_master_warns_once_and_runs(ros_context, tmp_pa
         executor.shutdown()
         listener.destroy_node()
         node.destroy_node()
+
+
+class _Pub:
+    def __init__(self, topic: str) -> None:
+        self.topic_name, self.sent = topic, []
+
+    def publish(self, msg: object) -> None:
+        self.sent.append(msg)
+
+
+class _Node:
+    """What PeopleTopics uses of a node, recording publishers."""
+
+    def __init__(self) -> None:
+        self.pubs: dict[str, _Pub] = {}
+        self.destroyed: list[str] = []
+        self.failures: list[str] = []
+
+    def create_publisher(self, msg_type: object, topic: str, qos: object) -> _Pub:
+        self.pubs[topic] = _Pub(topic)
+        return self.pubs[topic]
+
+    def destroy_publisher(self, pub: _Pub) -> None:
+        self.destroyed.append(pub.topic_name)
+        del self.pubs[pub.topic_name]
+
+    def get_logger(self) -> _Node:
+        return self
+
+    def info(self, message: str) -> None:
+        pass
+
+    warning = info
+
+    def log_throttled(self, key: str, message: str, total: int | None = None, warn: bool = False) -> None:
+        self.failures.append(message)
+
+
+def test_person_topics_are_made_on_first_use_latched_and_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The helper's bookkeeping (no DDS): per-person publishers made when a person appears, values sent only when
+    they change, the anonymous id aliased to the identified one, publishers destroyed once the person is gone."""
+    import types
+    from types import SimpleNamespace
+
+    from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
+    from face_reid_master.ros import params as master_params
+    from face_reid_master.ros.people_topics import PeopleTopics
+
+    def header() -> SimpleNamespace:
+        return SimpleNamespace(stamp=None, frame_id="")
+
+    class Point(SimpleNamespace):
+        def __init__(self) -> None:
+            super().__init__(x=0.0, y=0.0, z=0.0)
+
+    fakes = {
+        "people_msgs.msg": types.SimpleNamespace(
+            People=lambda: SimpleNamespace(header=header(), people=[]),
+            Person=lambda: SimpleNamespace(name="", position=Point(), velocity=Point(), reliability=0.0,
+                                           tagnames=[], tags=[])),
+        "hri_msgs.msg": types.SimpleNamespace(IdsList=lambda: SimpleNamespace(header=header(), ids=[])),
+    }
+    for name, module in fakes.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    values = {**master_params.defaults(), "publish_people": True, "publish_hri": True, "hri_forget_after_s": 1.0}
+    node = _Node()
+    topics = PeopleTopics(node, values)
+    topics.activate()
+    assert set(node.pubs) == {"/people", "/humans/persons/tracked", "/humans/persons/known"}
+
+    def track(face_id: int, name: str = "") -> NamedTrackRecord:
+        return NamedTrackRecord(7, face_id, name, 0.9, 3, np.array([1.0, 2.0]), np.zeros(2), np.eye(4), 1.7,
+                                STATE_CONFIRMED, 0.0, 1.0)
+
+    topics.publish([track(0)], None, 0.0)
+    assert {"/humans/persons/anon7/anonymous", "/humans/persons/anon7/location_confidence"} <= set(node.pubs)
+    assert node.pubs["/people"].sent[-1].people[0].name == "track_7"
+    topics.publish([track(2, "Bob")], None, 0.5)
+    topics.publish([track(2, "Bob")], None, 0.6)
+    assert [m.data for m in node.pubs["/humans/persons/anon7/alias"].sent] == ["face2"]
+    assert [m.data for m in node.pubs["/humans/persons/face2/face_id"].sent] == ["2"]  # latched: sent once
+    assert [m.data for m in node.pubs["/humans/persons/face2/name"].sent] == ["Bob"]
+    assert node.pubs["/humans/persons/known"].sent[-1].ids == ["anon7", "face2"]
+    assert [m.ids for m in node.pubs["/humans/persons/tracked"].sent] == [["anon7"], ["face2"], ["face2"]]
+    topics.publish([], None, 3.0)
+    assert not [t for t in node.pubs if t.count("/") > 3] and topics.person_topics == 0
+    assert "/humans/persons/face2/face_id" in node.destroyed and node.pubs["/humans/persons/known"].sent[-1].ids == []
+    topics.publish(None, None, 4.0)  # type: ignore[arg-type]  # a failure is logged, never raised
+    assert node.failures and "people topics failed" in node.failures[0]
+    topics.deactivate()
+    assert node.pubs == {}
