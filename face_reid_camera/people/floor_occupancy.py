@@ -44,7 +44,7 @@ class FloorOccupancyConfig:
         6.0, "Only points within this horizontal distance of the camera are counted; bounds the grid (m).",
         low=0.1, high=50.0)
     max_cells: int = param(
-        65536, "Most cells a summary may cover; (2 max_range_m / resolution_m + 1)^2 must fit (count).",
+        65536, "Most cells a summary may cover; (2 max_range_m / resolution_m + 2)^2 must fit (count).",
         low=1, high=10_000_000)
     depth_stride_px: int = param(
         4, "Floor occupancy uses every n-th depth row and column (px).", low=1, high=64)

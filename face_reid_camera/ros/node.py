@@ -22,6 +22,7 @@ from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_camera.pipeline import CameraPipeline
 from face_reid_camera.ros import params as camera_params
 from face_reid_camera.ros.convert import frame_to_msg, intrinsics_from_camera_info
+from face_reid_camera.ros.floor_map import FloorMapOutput
 from face_reid_camera.ros.frame_sync import StampSynchronizer
 from face_reid_camera.ros.image_codec import ImageDecodeError, decode_image, depth_to_metres, to_bgr
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
@@ -63,6 +64,7 @@ class CameraNode(ManagedNode):
         self._dropped_reported = 0
         self._floor_found: bool | None = None
         self._floor_check: Any = None  # FloorCheck of the last frame the pose was checked on
+        self._floor_map: FloorMapOutput | None = None  # floor occupancy output (floor_map_period_s > 0)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -95,6 +97,8 @@ class CameraNode(ManagedNode):
         self.health = NodeHealth(f"{self.get_name()}: camera {config.camera_id}", config.camera_id,
                                  float(values["no_input_warning_s"]))
         self._camera_frame_id = str(values["camera_frame_id"])
+        self._floor_map = FloorMapOutput.from_values(self, values, config.camera_id, pose,
+                                                     str(values["world_frame_id"]))
         self._sync = StampSynchronizer(float(values["sync_slop_s"]))
         self._sealer = None
         if values["network_key_path"]:
@@ -126,6 +130,8 @@ class CameraNode(ManagedNode):
                       for msg_type, topic, callback in inputs]
         if values["image_qos"] == "auto":
             self._qos_timer = self.create_timer(1.0, self._match_driver_qos)
+        if self._floor_map is not None:
+            self._floor_map.activate()
         assert self.health is not None
         self.health.start(self.now_s())
         self._running = True
@@ -147,6 +153,8 @@ class CameraNode(ManagedNode):
         if self._worker is not None:
             self._worker.join(timeout=5.0)
             self._worker = None
+        if self._floor_map is not None:
+            self._floor_map.deactivate()
         if self._qos_timer is not None:
             self.destroy_timer(self._qos_timer)
             self._qos_timer = None
@@ -182,6 +190,7 @@ class CameraNode(ManagedNode):
 
     def cleanup(self) -> None:
         self.pipeline = None
+        self._floor_map = None
         self._sync = None
         self._intrinsics = None
         self._color_intrinsics = None
@@ -301,6 +310,8 @@ class CameraNode(ManagedNode):
             self.publisher.publish(msg)
         health.frame_processed(result.timings_ms.get("total_ms", 0.0), len(result.people), result.num_faces)
         health.published()
+        if self._floor_map is not None:
+            self._floor_map.frame(stamp_s, depth, intr)
 
     def _dropped_total(self) -> int:
         sync = self._sync

@@ -20,6 +20,7 @@ from face_reid_camera.common.param_table import (
     config_specs,
 )
 from face_reid_camera.people.detector import PersonDetectorConfig
+from face_reid_camera.people.floor_occupancy import FloorOccupancyConfig
 from face_reid_camera.pipeline import CameraPipelineConfig, FaceQualityConfig
 
 NODE_NAME = "face_reid_camera"
@@ -89,6 +90,7 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
 TABLE = ParamTable(
     NODE_NAME,
     (*config_specs(CameraPipelineConfig), *config_specs(FaceQualityConfig), *_NODE_PARAMS,
+     *config_specs(FloorOccupancyConfig, "floor_map_"),
      *config_specs(PersonDetectorConfig, "person."), *config_specs(BodyConfig, "body.")),
     "the face-reid camera node (face-reid-camera / face-reid-replay)", USAGE,
 )
