@@ -167,15 +167,16 @@ def test_goals_follow_alice_through_leave_and_return_and_refuse_who_is_not_track
         person_map = np.array([m.pose.position.x + STANDOFF_M * math.cos(yaw),
                                m.pose.position.y + STANDOFF_M * math.sin(yaw)])
         person = to_world.apply(person_map)
-        recent = [xy for t, xy in alice_seen if received - 1.0 <= t <= received]
+        # the tracks message a goal came from may reach this test just after the goal (two topics)
+        recent = [xy for t, xy in alice_seen if received - 1.0 <= t <= received + 0.5]
         assert recent, "a goal while Alice was not published"
         errors_tracked.append(min(float(np.linalg.norm(person - xy)) for xy in recent))
         errors_path.append(_on_path(person))
-    # the person each goal faces is where the master tracks Alice (the message it came from is among the last
-    # second's) and on her true path (the tracker's error); reported with -s
+    # the person each goal faces is where the master tracks Alice (the message it came from is among those
+    # around it) and on her true path (the tracker's error, coasting past her last detection); reported with -s
     print(f"goals {len(goals)}: faced person vs Alice's track max {max(errors_tracked):.3f} m; vs her path "
           f"median {np.median(errors_path):.3f} max {max(errors_path):.3f} m")
-    assert max(errors_tracked) < 0.05, errors_tracked
+    assert max(errors_tracked) < 0.02, errors_tracked
     assert max(errors_path) < 0.35, errors_path
 
     # ---- the status lines: two visits (two tracks, one face), goals changing as she walks, headings
