@@ -4,7 +4,8 @@ Subscribes /tracks_named; the target comes from the command line (``face-reid-go
 parameter, the ``~/go_to`` service (face_reid_msgs/GoToPerson) or the ``~/target`` topic (std_msgs/String).
 Publishes geometry_msgs/PoseStamped goals on /goal_pose (what nav2's navigator takes) in the robot's map frame,
 and one line per goal or refusal on ``~/status`` (std_msgs/String). Known names also come from the master's
-``~/list_faces``, so that a learned person who is away is "not tracked" rather than "unknown name".
+``~/list_faces``, so that a learned person who is away is "not tracked" rather than "unknown name". A refusal
+does not cancel a goal the navigator already has (a nav2 action cancel is the robot application's call).
 """
 
 from __future__ import annotations

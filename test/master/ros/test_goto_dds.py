@@ -239,8 +239,14 @@ def test_goto_node_survives_bad_input_and_refuses_hostile_names(ros_context) -> 
         assert node._last_status == "no target: no goals"
         node._on_robot_pose(PoseStamped())  # frame '' is not the map frame
         assert node.rejected["robot_pose"] == 1
+        robot = PoseStamped()
+        robot.header.frame_id, robot.pose.position.x, robot.pose.position.y = "map", 3.0, 5.0
+        node._on_robot_pose(robot)
+        node._on_target(String(data="Alice"))  # standing at (3, 1): faced from the robot's side
+        assert (published[-1].pose.position.x, published[-1].pose.position.y) == pytest.approx((3.0, 2.0))
+        node._on_target(String(data="  "))
         report = node.diagnostics(node.now_s())
-        assert report.values["rejected_malformed_track"] == "2" and report.values["goals"] == "1"
+        assert report.values["rejected_malformed_track"] == "2" and report.values["goals"] == "2"
     finally:
         executor.shutdown()
         node.destroy_node()
