@@ -14,7 +14,7 @@ REPO = Path(__file__).resolve().parents[1]
 TOOLING = ("face_reid_master.sim", "face_reid_master.evaluation", "face_reid_master.demo", "face_reid_master.tools",
            "face_reid_camera.tools")
 ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
-               "visualization_msgs", "diagnostic_msgs", "lifecycle_msgs", "face_reid_msgs")
+               "visualization_msgs", "diagnostic_msgs", "lifecycle_msgs", "face_reid_msgs", "nav_msgs")
 
 
 def _module_name(path: Path, root: Path) -> str:

@@ -1,0 +1,207 @@
+"""face-reid-map: the camera network's floor map (thin: FloorOccupancy messages -> CameraMapFusion -> OccupancyGrid).
+
+Subscribes to every discovered face_reid_msgs/FloorOccupancy topic whose name matches ``topic_regex`` (the cameras'
+``face_reid/floor_occupancy``, published when their ``floor_map_period_s`` > 0), keeps each camera's latest summary,
+and publishes the fused nav_msgs/OccupancyGrid on ``output_topic`` (transient local) every ``publish_period_s``.
+``save_path`` saves it as a nav2 map (YAML + PGM) on exit; ``--save PATH --once`` waits until every camera of
+``--cameras`` (or, without it, the first camera plus ``--settle`` seconds) reported, saves and exits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from nav_msgs.msg import OccupancyGrid
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.common.stamps import set_stamp
+from face_reid_camera.ros.floor_map import FLOOR_MAP_QOS, snapshot_from_msg
+from face_reid_camera.ros.lifecycle import descriptor_for
+from face_reid_master.robot.camera_map import CameraMapConfig, CameraMapFusion, OccupancyGridMap, save_nav2_map
+from face_reid_msgs.msg import FloorOccupancy
+
+NODE_NAME = "face_reid_map"
+USAGE = """usage: face-reid-map [--save PATH [--once [--cameras ID,ID] [--timeout S] [--settle S]]]
+                     [--ros-args -p name:=value ...]
+
+The camera network's floor map: fuses the cameras' face_reid_msgs/FloorOccupancy summaries (camera parameter
+floor_map_period_s > 0) into a nav_msgs/OccupancyGrid on /camera_map; --save writes a nav2 map (YAML + PGM).
+Parameters:
+"""
+_TYPE = "face_reid_msgs/msg/FloorOccupancy"
+
+TABLE = ParamTable(NODE_NAME, (
+    ParamSpec("topic_regex", r"^(/.*)?/face_reid/floor_occupancy$",
+              "Subscribe to every FloorOccupancy topic whose full name matches this regular expression."),
+    ParamSpec("discovery_period_s", 1.0, "Look for new camera topics this often (s).", low=0.05, high=3600.0),
+    ParamSpec("output_topic", "/camera_map", "Where the fused nav_msgs/OccupancyGrid is published (transient local)."),
+    ParamSpec("publish_period_s", 2.0, "Publish the fused grid this often when a summary changed (s).",
+              low=0.05, high=3600.0),
+    ParamSpec("world_frame_id", "world", "Frame id of the grid (the cameras' shared world frame, z up)."),
+    ParamSpec("save_path", "", "Save the map here as a nav2 map (YAML + PGM next to it) on exit ('' = do not)."),
+    *config_specs(CameraMapConfig),
+), "the face-reid camera map node (face-reid-map)", "face-reid-map --ros-args -p save_path:=maps/cameras.yaml")
+
+
+def grid_to_msg(grid: OccupancyGridMap, stamp_s: float) -> Any:
+    """A nav_msgs/OccupancyGrid of ``grid`` (row-major, origin = corner of cell (0, 0))."""
+    msg = OccupancyGrid()
+    set_stamp(msg.header.stamp, stamp_s)
+    msg.header.frame_id = grid.frame
+    set_stamp(msg.info.map_load_time, stamp_s)
+    msg.info.resolution = float(grid.resolution_m)
+    msg.info.width, msg.info.height = grid.width, grid.height
+    msg.info.origin.position.x, msg.info.origin.position.y = float(grid.origin_x_m), float(grid.origin_y_m)
+    msg.info.origin.orientation.z = math.sin(grid.origin_yaw_rad / 2)
+    msg.info.origin.orientation.w = math.cos(grid.origin_yaw_rad / 2)
+    msg.data = grid.data.reshape(-1)
+    return msg
+
+
+class MapNode(Node):
+    """The map node; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for spec in TABLE.specs:
+            self.declare_parameter(spec.name, spec.default, descriptor_for(spec))
+        values = {s.name: s.check(self.get_parameter(s.name).value) for s in TABLE.specs}
+        try:
+            self._regex = re.compile(str(values["topic_regex"]))
+        except re.error as exc:
+            raise ValueError(f"parameter 'topic_regex' is not a regular expression: {exc}") from None
+        self.values = values
+        self.fusion = CameraMapFusion(config_from_values(CameraMapConfig, values), str(values["world_frame_id"]))
+        self.rejected = 0
+        self.published = 0
+        self._changed = False
+        self._subs: dict[str, Any] = {}
+        qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.publisher = self.create_publisher(OccupancyGrid, str(values["output_topic"]), qos)
+        self.create_timer(float(values["discovery_period_s"]), self.discover)
+        self.create_timer(float(values["publish_period_s"]), self.publish_grid)
+        self.discover()
+
+    def discover(self) -> None:
+        """Subscribe to FloorOccupancy topics not yet subscribed whose names match ``topic_regex``."""
+        for name, types in self.get_topic_names_and_types():
+            if name in self._subs or _TYPE not in types or not self._regex.search(name):
+                continue
+            self._subs[name] = self.create_subscription(FloorOccupancy, name, self._on_summary, FLOOR_MAP_QOS)
+            self.get_logger().info(f"floor summaries from {name}")
+
+    def _on_summary(self, msg: Any) -> None:
+        try:
+            self._changed |= self.fusion.update(snapshot_from_msg(msg))
+        except ValueError as exc:
+            self.rejected += 1
+            self.get_logger().warning(f"floor summary rejected: {exc}", throttle_duration_sec=5.0)
+
+    def publish_grid(self, force: bool = False) -> OccupancyGridMap | None:
+        """Fuse and publish when a summary changed (or ``force``); returns the grid."""
+        if not (self._changed or force):
+            return None
+        try:
+            grid = self.fusion.grid()
+        except ValueError as exc:
+            self.get_logger().error(f"cannot fuse the floor summaries: {exc}", throttle_duration_sec=5.0)
+            return None
+        if grid is None:
+            return None
+        self._changed = False
+        self.publisher.publish(grid_to_msg(grid, self.get_clock().now().nanoseconds * 1e-9))
+        self.published += 1
+        return grid
+
+    def save(self, path: str) -> Path | None:
+        """Save the fused map as a nav2 map; None (and a log line) when no camera reported."""
+        grid = self.fusion.grid()
+        if grid is None:
+            self.get_logger().warning(f"no floor summary received: nothing saved to {path}")
+            return None
+        ypath, ipath = save_nav2_map(grid, path)
+        print(f"saved {ypath} and {ipath.name}: {grid.width} x {grid.height} cells of {grid.resolution_m} m from "
+              f"cameras {', '.join(self.fusion.cameras)}", file=sys.stderr)
+        return ypath
+
+
+def _wait_once(node: MapNode, cameras: list[str], timeout_s: float, settle_s: float) -> str:
+    """Spin until every camera of ``cameras`` (or the first one + ``settle_s``) reported; '' or why not."""
+    import rclpy
+
+    deadline = time.monotonic() + timeout_s
+    first_at: float | None = None
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        have = set(node.fusion.cameras)
+        if cameras and set(cameras) <= have:
+            return ""
+        if not cameras and have:
+            first_at = first_at if first_at is not None else time.monotonic()
+            if time.monotonic() - first_at >= settle_s:
+                return ""
+    missing = sorted(set(cameras) - set(node.fusion.cameras)) if cameras else ["any camera"]
+    return f"no floor summary from {', '.join(missing)} within {timeout_s:g} s (is floor_map_period_s > 0 there?)"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console-script entry point."""
+    argv = list(sys.argv if argv is None else argv)
+    ros_at = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    own, ros_args = argv[1:ros_at], argv[ros_at:]
+    if any(a in ("-h", "--help") for a in own):
+        print(USAGE + TABLE.help_text())
+        return 0
+    parser = argparse.ArgumentParser(prog="face-reid-map", add_help=False)
+    parser.add_argument("--save", default="", help="nav2 map YAML to write (with --once: then exit)")
+    parser.add_argument("--once", action="store_true")
+    parser.add_argument("--cameras", default="", help="comma-separated camera ids --once waits for")
+    parser.add_argument("--timeout", type=float, default=60.0)
+    parser.add_argument("--settle", type=float, default=3.0)
+    args = parser.parse_args(own)
+    if args.once and not args.save:
+        print("face-reid-map: --once needs --save PATH", file=sys.stderr)
+        return 2
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=[argv[0], *ros_args])
+    try:
+        node = MapNode()
+    except ValueError as exc:
+        print(f"[face-reid-map] FATAL: cannot start: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    status = 0
+    save_path = args.save or str(node.values["save_path"])
+    try:
+        if args.once:
+            why = _wait_once(node, [c for c in args.cameras.split(",") if c], args.timeout, args.settle)
+            if why:
+                print(f"face-reid-map: {why}", file=sys.stderr)
+                status = 1
+            else:
+                node.publish_grid(force=True)
+        else:
+            rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if save_path and status == 0 and node.save(save_path) is None:
+            status = 1
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
