@@ -47,6 +47,14 @@ class DemoError(RuntimeError):
     """The demo could not run (a process failed to start or died): the message says which and why."""
 
 
+def _ros_setting(text: str) -> str:
+    """A ``name:=value`` parameter setting (what ``--ros-args -p`` takes)."""
+    name, sep, _value = text.partition(":=")
+    if not sep or not name or not all(c.isalnum() or c in "_." for c in name):
+        raise argparse.ArgumentTypeError(f"expected NAME:=VALUE (a node parameter), got {text!r}")
+    return text
+
+
 def _fmt(values: Sequence[float]) -> str:
     return "[" + ", ".join(f"{float(v):.6f}" for v in values) + "]"
 
@@ -85,6 +93,8 @@ class _Run:
                        "-p", f"method:={self.args.method}"]
         if any(p.in_gallery for p in self.scenario.people):
             master_args += ["-p", f"gallery_path:={gallery}"]
+        for setting in self.args.master_param:
+            master_args += ["-p", setting]
         self.children.append(start_child("master", master_args, env, logs))
         for c, cam in enumerate(self.scenario.cameras):
             x, y, z, roll, pitch, yaw = cam.xyz_rpy
@@ -92,7 +102,8 @@ class _Run:
                 "-m", "face_reid_camera.ros.node", "--ros-args", "-r", f"__ns:=/{cam.camera_id}",
                 "-p", f"camera_id:={cam.camera_id}", "-p", f"camera_pose_xyz_m:={_fmt((x, y, z))}",
                 "-p", f"camera_pose_rpy_rad:={_fmt((roll, pitch, yaw))}", "-p", "image_qos:=reliable",
-                "-p", "max_frame_age_s:=1.0"], env, logs))
+                "-p", "max_frame_age_s:=1.0", *(a for setting in self.args.camera_param for a in ("-p", setting))],
+                env, logs))
             spec_path = self.work / f"{cam.camera_id}_player.json"
             spec_path.write_text(json.dumps(self.scenario.player_spec(c, self.args.rate_hz).to_json()))
             self.children.append(start_child(f"{cam.camera_id}_player", [
@@ -244,6 +255,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-db", action="store_true",
                    help="keep the temporary folder (face database, gallery, logs) instead of deleting it")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
+    p.add_argument("--camera-param", action="append", default=[], type=_ros_setting, metavar="NAME:=VALUE",
+                   help="a parameter for every camera node (repeatable), e.g. floor_map_period_s:=2")
+    p.add_argument("--master-param", action="append", default=[], type=_ros_setting, metavar="NAME:=VALUE",
+                   help="a parameter for the master (repeatable), e.g. publish_people:=true")
     p.add_argument("--startup-timeout-s", type=float, default=90.0, help="give up if start-up takes longer")
     return p
 

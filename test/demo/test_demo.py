@@ -323,3 +323,16 @@ def test_a_lost_track_is_shown_inside_the_room(scenario: demo_scenario.DemoScena
     half = scenario.world.room.half_extents
     row = table.splitlines()[2]
     assert " lost " in row and f" {half[0]:.2f} " in row and f" {-half[1]:.2f} " in row and "40.00" not in row
+
+
+def test_node_parameters_pass_through_and_bad_ones_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    from face_reid_master.demo.run import _parser
+
+    args = _parser().parse_args(["--camera-param", "floor_map_period_s:=2", "--camera-param",
+                                 "person.voxel_size_m:=0.05", "--master-param", "publish_people:=true"])
+    assert args.camera_param == ["floor_map_period_s:=2", "person.voxel_size_m:=0.05"]
+    assert args.master_param == ["publish_people:=true"]
+    for bad in ("floor_map_period_s=2", ":=2", "a b:=1"):
+        with pytest.raises(SystemExit):
+            _parser().parse_args(["--camera-param", bad])
+        assert "expected NAME:=VALUE" in capsys.readouterr().err
