@@ -58,10 +58,16 @@ def snapshot_from_msg(msg: Any) -> FloorOccupancySnapshot:
         raise ValueError(f"FloorOccupancy from {msg.camera_id!r}: {floor.size} floor and {occ.size} occupied counts "
                          f"for {w} x {h} cells")
     return FloorOccupancySnapshot(
-        camera_id=str(msg.camera_id), stamp_s=stamp_to_seconds(msg.header.stamp), resolution_m=float(msg.resolution_m),
-        origin_x_m=float(msg.origin_x_m), origin_y_m=float(msg.origin_y_m), min_height_m=float(msg.min_height_m),
-        max_height_m=float(msg.max_height_m), frames=int(msg.frames),
+        camera_id=str(msg.camera_id), stamp_s=stamp_to_seconds(msg.header.stamp),
+        resolution_m=_float32_value(msg.resolution_m), origin_x_m=float(msg.origin_x_m),
+        origin_y_m=float(msg.origin_y_m), min_height_m=_float32_value(msg.min_height_m),
+        max_height_m=_float32_value(msg.max_height_m), frames=int(msg.frames),
         floor_counts=floor.reshape(h, w), occupied_counts=occ.reshape(h, w))
+
+
+def _float32_value(value: float) -> float:
+    """The decimal a float32 message field was set from (0.05, not 0.05000000074505806: maps files stay clean)."""
+    return float(str(np.float32(value)))
 
 
 class FloorMapOutput:

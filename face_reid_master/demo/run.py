@@ -256,7 +256,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="keep the temporary folder (face database, gallery, logs) instead of deleting it")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
     p.add_argument("--camera-param", action="append", default=[], type=_ros_setting, metavar="NAME:=VALUE",
-                   help="a parameter for every camera node (repeatable), e.g. floor_map_period_s:=2")
+                   help="a parameter for every camera node (repeatable), e.g. floor_map_period_s:=2.0")
     p.add_argument("--master-param", action="append", default=[], type=_ros_setting, metavar="NAME:=VALUE",
                    help="a parameter for the master (repeatable), e.g. publish_people:=true")
     p.add_argument("--startup-timeout-s", type=float, default=90.0, help="give up if start-up takes longer")

@@ -222,6 +222,11 @@ class GotoNode(ManagedNode):
         if self.core is None or self.goal_pub is None:
             return None
         decision = self.core.update(self._tracks, self._robot_xy, now_s)
+        if decision.kind == DecisionKind.REFUSED and not self.counts["tracks_msgs"] and not self._names_loaded:
+            # nothing heard from the master yet: no name can be known, so this is no refusal
+            self._status(f"waiting for {self.values['tracks_topic']}: nothing received yet (target "
+                         f"{shown(self.core.target, 64)})", force=announce)
+            return decision
         if decision.kind == DecisionKind.GOAL and decision.goal is not None:
             self.goal_pub.publish(self._pose(decision))
             self.counts["goals"] += 1

@@ -217,6 +217,8 @@ def test_goto_node_survives_bad_input_and_refuses_hostile_names(ros_context) -> 
         assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
         assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
         assert node.map_frame == "map"
+        # nothing heard from the master yet: waiting, not "unknown name"
+        assert node._last_status == "waiting for /tracks_named: nothing received yet (target 'Alice')"
         published: list[PoseStamped] = []
         node.goal_pub.publish = published.append  # what the node would send
         msg = NamedTrackArray()
