@@ -66,6 +66,10 @@ class CameraPipelineConfig:
     position_std_base_m: float = param(0.05, "Position uncertainty at 0 m range (m).", low=0.0, high=5.0,
                                        low_open=True)
     position_std_per_m2: float = param(0.005, "Uncertainty growth with range squared (m/m^2).", low=0.0, high=1.0)
+    position_far_side_offset_m: float = param(
+        0.045, "A camera sees the near half of a head: positions are moved this far away from the camera along the "
+        "line of sight, so cameras on opposite sides agree (m; measured on rendered heads, 0 = off).",
+        low=0.0, high=0.5)
     person: PersonDetectorConfig = field(default_factory=PersonDetectorConfig)
     quality: FaceQualityConfig = field(default_factory=FaceQualityConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
@@ -247,6 +251,7 @@ class CameraPipeline:
             # The person's position is the head centre dropped onto the floor: unlike the centroid
             # of the visible surface it does not shift towards whichever camera sees the person.
             cam = head - float(plane.height_of(head[None, :])[0]) * plane.normal if plane is not None else head
+            cam = self._beyond_near_side(cam, plane)
             rng = float(np.linalg.norm(cam))
             std = self.config.position_std_base_m + self.config.position_std_per_m2 * rng * rng
             roi = head_roi_px(
@@ -280,6 +285,16 @@ class CameraPipeline:
             people, found, timings, detection.ground_plane, detection.ground_plane_source,
             detection.floor_check,
         )
+
+    def _beyond_near_side(self, cam: NDArray[np.float64], plane: GroundPlane | None) -> NDArray[np.float64]:
+        """Move a floor position position_far_side_offset_m further from the camera, horizontally (the visible head
+        cap is biased towards the camera by about that much)."""
+        offset = self.config.position_far_side_offset_m
+        if offset <= 0 or plane is None:
+            return cam
+        away = cam - float(cam @ plane.normal) * plane.normal  # horizontal direction from the camera
+        norm = float(np.linalg.norm(away))
+        return cam if norm < 1e-6 else cam + (offset / norm) * away
 
     def _add_bodies(
         self, color_bgr: NDArray[np.uint8], depth_m: NDArray[np.floating], intrinsics: CameraIntrinsics,
