@@ -7,7 +7,7 @@
 line per frame: camera id, stamp, the camera's configured pose, the people's floor positions. ``solve`` finds,
 with the anchor camera's pose kept, the x, y, yaw of every other camera whose view overlaps the anchor's or
 another solved camera's (face_reid_master/calibration/walk_calibration.py), prints the correction and the RMS
-residual per camera and writes ``<out-dir>/<camera>.yaml`` (a params file with camera_pose_xyz_m and
+residual per camera and writes ``<out-dir>/<camera>.yaml`` (a params file with camera_id, camera_pose_xyz_m and
 camera_pose_rpy_rad; height, roll and pitch are kept from the camera's floor). Each camera's height, roll and
 pitch must be right first (the camera node measures the floor; ``face-reid-replay`` prints it).
 
@@ -141,6 +141,7 @@ def _params_yaml(camera_id: str, xyz_rpy: tuple[float, ...], note: str) -> str:
     x, y, z, roll, pitch, yaw = xyz_rpy
     return (f"# face-reid-calibrate: camera {camera_id}; {note}\n"
             "/**:\n  ros__parameters:\n"
+            f"    camera_id: {json.dumps(camera_id)}\n"
             f"    camera_pose_xyz_m: [{x:.4f}, {y:.4f}, {z:.4f}]\n"
             f"    camera_pose_rpy_rad: [{roll:.5f}, {pitch:.5f}, {yaw:.5f}]\n")
 

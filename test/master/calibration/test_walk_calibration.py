@@ -146,6 +146,7 @@ def test_face_reid_calibrate_solve_writes_params_files_with_the_true_poses(tmp_p
     for cam, (x, y, heading) in TRUE.items():
         params = yaml.safe_load((tmp_path / "poses" / f"{cam}.yaml").read_text())["/**"]["ros__parameters"]
         px, py, pz = params["camera_pose_xyz_m"]
+        assert params["camera_id"] == cam  # the file sets up that camera on its own
         roll, pitch, yaw = params["camera_pose_rpy_rad"]
         assert math.hypot(px - x, py - y) <= 0.05 and pz == pytest.approx(2.5)
         assert abs(math.degrees((yaw - heading + math.pi) % (2 * math.pi) - math.pi)) <= 1.0
