@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.people.floor_occupancy import FloorOccupancySnapshot
+from face_reid_master.robot.frames import load_yaml_mapping
 
 __all__ = [
     "FREE",
@@ -287,15 +288,7 @@ def load_nav2_map(yaml_path: str | os.PathLike[str], frame: str = "map") -> Occu
     """Read a nav2 map YAML and its image (path relative to the YAML) the way nav2's map_server does: occ =
     1 - shade (shade when ``negate``); trinary / scale / raw modes. ValueError names what is wrong."""
     ypath = Path(yaml_path)
-    try:
-        doc = yaml.safe_load(ypath.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise ValueError(f"cannot read the map YAML {ypath}: {exc}") from exc
-    if not isinstance(doc, dict):
-        raise ValueError(f"{ypath}: a nav2 map YAML is a mapping with image, resolution, origin")
-    missing = [k for k in ("image", "resolution", "origin") if k not in doc]
-    if missing:
-        raise ValueError(f"{ypath}: missing {', '.join(missing)}")
+    doc = load_yaml_mapping(ypath, ("image", "resolution", "origin"), "map YAML")
     try:
         resolution = float(doc["resolution"])
         origin = [float(v) for v in doc["origin"]]

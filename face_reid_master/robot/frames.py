@@ -10,12 +10,13 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-__all__ = ["PlanarTransform", "load_world_to_map", "save_world_to_map"]
+__all__ = ["PlanarTransform", "load_world_to_map", "load_yaml_mapping", "save_world_to_map"]
 
 
 @dataclass(frozen=True)
@@ -85,19 +86,27 @@ def save_world_to_map(path: str | os.PathLike[str], transform: PlanarTransform, 
                           + yaml.safe_dump(doc, sort_keys=False))
 
 
-def load_world_to_map(path: str | os.PathLike[str]) -> tuple[PlanarTransform, str, str]:
-    """Read a file written by :func:`save_world_to_map`: (transform, world_frame, map_frame). ValueError names
-    what is wrong with it."""
+def load_yaml_mapping(path: str | os.PathLike[str], required: tuple[str, ...], what: str) -> dict[str, Any]:
+    """A YAML file's top-level mapping with the ``required`` keys; ValueError names the file (``what`` it is
+    meant to be) and what is wrong: unreadable, not a mapping, missing keys."""
     p = Path(path)
     try:
         doc = yaml.safe_load(p.read_text())
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise ValueError(f"cannot read the world->map transform {p}: {exc}") from exc
+        raise ValueError(f"cannot read the {what} {p}: {exc}") from exc
     if not isinstance(doc, dict):
-        raise ValueError(f"{p}: expected a mapping with x_m, y_m, yaw_deg")
-    missing = [k for k in ("x_m", "y_m", "yaw_deg") if k not in doc]
+        raise ValueError(f"{p}: a {what} is a mapping with {', '.join(required)}")
+    missing = [k for k in required if k not in doc]
     if missing:
         raise ValueError(f"{p}: missing {', '.join(missing)}")
+    return doc
+
+
+def load_world_to_map(path: str | os.PathLike[str]) -> tuple[PlanarTransform, str, str]:
+    """Read a file written by :func:`save_world_to_map`: (transform, world_frame, map_frame). ValueError names
+    what is wrong with it."""
+    p = Path(path)
+    doc = load_yaml_mapping(p, ("x_m", "y_m", "yaw_deg"), "world->map transform")
     try:
         transform = PlanarTransform(float(doc["x_m"]), float(doc["y_m"]), math.radians(float(doc["yaw_deg"])))
     except (TypeError, ValueError) as exc:
