@@ -16,6 +16,7 @@ import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.common.checks import shown
 from face_reid_camera.common.param_table import config_from_values
 from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
 from face_reid_camera.people.floor_occupancy import (
@@ -55,8 +56,8 @@ def snapshot_from_msg(msg: Any) -> FloorOccupancySnapshot:
     floor = np.asarray(msg.floor_counts, dtype=np.uint16)
     occ = np.asarray(msg.occupied_counts, dtype=np.uint16)
     if w * h == 0 or floor.size != w * h or occ.size != w * h:
-        raise ValueError(f"FloorOccupancy from {msg.camera_id!r}: {floor.size} floor and {occ.size} occupied counts "
-                         f"for {w} x {h} cells")
+        raise ValueError(f"FloorOccupancy from {shown(msg.camera_id, 64)}: {floor.size} floor and {occ.size} occupied "
+                         f"counts for {w} x {h} cells")
     return FloorOccupancySnapshot(
         camera_id=str(msg.camera_id), stamp_s=stamp_to_seconds(msg.header.stamp),
         resolution_m=_float32_value(msg.resolution_m), origin_x_m=float(msg.origin_x_m),

@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from face_reid_camera.common.checks import shown
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.people.floor_occupancy import FloorOccupancySnapshot
 from face_reid_master.robot.frames import load_yaml_mapping
@@ -119,6 +120,9 @@ class CameraMapConfig:
     max_cells: int = param(
         16_000_000, "Refuse to build a grid of more cells than this (count; a camera with a wild pose).",
         low=1, high=1_000_000_000)
+    max_cameras: int = param(
+        256, "At most this many cameras' summaries are kept; a summary of one more camera is refused (count).",
+        low=1, high=100_000)
 
     def __post_init__(self) -> None:
         validate_fields(self)
@@ -174,9 +178,12 @@ class CameraMapFusion:
         """Keep ``snapshot`` unless an as-new one of its camera is kept; ValueError for another resolution."""
         others = [s for c, s in self._latest.items() if c != snapshot.camera_id]
         if others and abs(snapshot.resolution_m - others[0].resolution_m) > 1e-9:
-            raise ValueError(f"camera {snapshot.camera_id!r}: resolution_m {snapshot.resolution_m} differs from "
-                             f"the other cameras' {others[0].resolution_m}")
+            raise ValueError(f"camera {shown(snapshot.camera_id, 64)}: resolution_m {snapshot.resolution_m} differs "
+                             f"from the other cameras' {others[0].resolution_m}")
         old = self._latest.get(snapshot.camera_id)
+        if old is None and len(self._latest) >= self.config.max_cameras:
+            raise ValueError(f"camera {shown(snapshot.camera_id, 64)}: already {len(self._latest)} cameras "
+                             f"(max_cameras)")
         if old is not None and snapshot.stamp_s < old.stamp_s:
             return False
         self._latest[snapshot.camera_id] = snapshot

@@ -75,6 +75,16 @@ def test_latest_summary_per_camera_and_one_resolution() -> None:
                        CameraMapConfig(max_cells=1000))
 
 
+def test_a_flood_of_camera_ids_is_bounded_and_not_echoed_whole() -> None:
+    fusion = CameraMapFusion(CameraMapConfig(max_cameras=3))
+    for cam in ("a", "b", "c"):
+        fusion.update(_snap(cam, [[9]], [[0]]))
+    with pytest.raises(ValueError, match="max_cameras") as refused:
+        fusion.update(_snap("x" * 100_000, [[9]], [[0]]))
+    assert len(str(refused.value)) < 200 and fusion.cameras == ["a", "b", "c"]
+    assert fusion.update(_snap("a", [[0]], [[9]], stamp=2.0))  # a known camera still updates
+
+
 def _grid() -> OccupancyGridMap:
     rng = np.random.default_rng(0)
     data = rng.choice(np.array([UNKNOWN, FREE, OCCUPIED], dtype=np.int8), size=(37, 52))
