@@ -3,8 +3,9 @@
 Subscribes to every discovered face_reid_msgs/FloorOccupancy topic whose name matches ``topic_regex`` (the cameras'
 ``face_reid/floor_occupancy``, published when their ``floor_map_period_s`` > 0), keeps each camera's latest summary,
 and publishes the fused nav_msgs/OccupancyGrid on ``output_topic`` (transient local) every ``publish_period_s``.
-``save_path`` saves it as a nav2 map (YAML + PGM) on exit; ``--save PATH --once`` waits until every camera of
-``--cameras`` (or, without it, the first camera plus ``--settle`` seconds) reported, saves and exits.
+``save_path`` (or ``--save PATH``) saves it as a nav2 map (YAML + PGM) when the node is deactivated or stopped;
+``--save PATH --once`` waits until every camera of ``--cameras`` (or, without it, the first camera plus
+``--settle`` seconds) reported, saves and exits. A lifecycle node like the others, with counts on /diagnostics.
 """
 
 from __future__ import annotations
@@ -18,13 +19,14 @@ from pathlib import Path
 from typing import Any
 
 from nav_msgs.msg import OccupancyGrid
-from rclpy.node import Node
+from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
+from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable, config_from_values, config_specs
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.floor_map import FLOOR_MAP_QOS, snapshot_from_msg
-from face_reid_camera.ros.lifecycle import descriptor_for
+from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_master.robot.camera_map import CameraMapConfig, CameraMapFusion, OccupancyGridMap, save_nav2_map
 from face_reid_msgs.msg import FloorOccupancy
 
@@ -39,6 +41,8 @@ Parameters:
 _TYPE = "face_reid_msgs/msg/FloorOccupancy"
 
 TABLE = ParamTable(NODE_NAME, (
+    ParamSpec("autostart", True, "Configure and activate at start (false: wait for a lifecycle manager).",
+              read_only=True),
     ParamSpec("topic_regex", r"^(/.*)?/face_reid/floor_occupancy$",
               "Subscribe to every FloorOccupancy topic whose full name matches this regular expression."),
     ParamSpec("discovery_period_s", 1.0, "Look for new camera topics this often (s).", low=0.05, high=3600.0),
@@ -46,7 +50,10 @@ TABLE = ParamTable(NODE_NAME, (
     ParamSpec("publish_period_s", 2.0, "Publish the fused grid this often when a summary changed (s).",
               low=0.05, high=3600.0),
     ParamSpec("world_frame_id", "world", "Frame id of the grid (the cameras' shared world frame, z up)."),
-    ParamSpec("save_path", "", "Save the map here as a nav2 map (YAML + PGM next to it) on exit ('' = do not)."),
+    ParamSpec("save_path", "", "Save the map here as a nav2 map (YAML + PGM next to it) when the node is deactivated "
+              "or stopped ('' = do not)."),
+    ParamSpec("no_summary_warning_s", 30.0, "/diagnostics warns when no floor summary arrived for this long (s).",
+              low=0.1, high=86400.0),
     *config_specs(CameraMapConfig),
 ), "the face-reid camera map node (face-reid-map)", "face-reid-map --ros-args -p save_path:=maps/cameras.yaml")
 
@@ -66,33 +73,69 @@ def grid_to_msg(grid: OccupancyGridMap, stamp_s: float) -> Any:
     return msg
 
 
-class MapNode(Node):
-    """The map node; see the module docstring."""
+class MapNode(ManagedNode):
+    """The map node (a lifecycle node, like the others); see the module docstring."""
 
-    def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        for spec in TABLE.specs:
-            self.declare_parameter(spec.name, spec.default, descriptor_for(spec))
-        values = {s.name: s.check(self.get_parameter(s.name).value) for s in TABLE.specs}
+    def __init__(self, save_path: str | None = None, **kwargs: Any) -> None:
+        super().__init__(TABLE, **kwargs)
+        self._save_override = save_path  # --save on the command line wins over the save_path parameter
+        self.values: dict[str, Any] = {}
+        self._regex: re.Pattern[str] | None = None
+        self.fusion = CameraMapFusion()
+        self.rejected = 0
+        self.received = 0
+        self.published = 0
+        self._changed = False
+        self._last_summary_s: float | None = None
+        self._started_s = 0.0
+        self._subs: dict[str, Any] = {}
+        self._timers: list[Any] = []
+        self.publisher: Any = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def configure(self) -> None:
+        values = self.parameter_values()
         try:
             self._regex = re.compile(str(values["topic_regex"]))
         except re.error as exc:
             raise ValueError(f"parameter 'topic_regex' is not a regular expression: {exc}") from None
         self.values = values
         self.fusion = CameraMapFusion(config_from_values(CameraMapConfig, values), str(values["world_frame_id"]))
-        self.rejected = 0
-        self.published = 0
-        self._changed = False
-        self._subs: dict[str, Any] = {}
+
+    def activate(self) -> None:
         qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.publisher = self.create_publisher(OccupancyGrid, str(values["output_topic"]), qos)
-        self.create_timer(float(values["discovery_period_s"]), self.discover)
-        self.create_timer(float(values["publish_period_s"]), self.publish_grid)
+        self.publisher = self.create_publisher(OccupancyGrid, str(self.values["output_topic"]), qos)
+        self._timers = [self.create_timer(float(self.values["discovery_period_s"]), self.discover),
+                        self.create_timer(float(self.values["publish_period_s"]), self.publish_grid)]
+        self._started_s = self.now_s()
         self.discover()
 
+    def deactivate(self) -> None:
+        path = self.save_path
+        if path and self.fusion.cameras:
+            try:
+                self.save(path)
+            except (OSError, ValueError) as exc:
+                self.get_logger().error(f"cannot save the camera map to {path}: {exc}")
+        for sub in self._subs.values():
+            self.destroy_subscription(sub)
+        for timer in self._timers:
+            self.destroy_timer(timer)
+        self._subs, self._timers = {}, []
+        if self.publisher is not None:
+            self.destroy_publisher(self.publisher)
+            self.publisher = None
+
+    @property
+    def save_path(self) -> str:
+        return self._save_override or str(self.values.get("save_path", ""))
+
+    # ------------------------------------------------------------------ work
     def discover(self) -> None:
         """Subscribe to FloorOccupancy topics not yet subscribed whose names match ``topic_regex``."""
+        if self._regex is None:
+            return
         for name, types in self.get_topic_names_and_types():
             if name in self._subs or _TYPE not in types or not self._regex.search(name):
                 continue
@@ -100,25 +143,27 @@ class MapNode(Node):
             self.get_logger().info(f"floor summaries from {name}")
 
     def _on_summary(self, msg: Any) -> None:
+        self.received += 1
+        self._last_summary_s = self.now_s()
         try:
             self._changed |= self.fusion.update(snapshot_from_msg(msg))
         except ValueError as exc:
             self.rejected += 1
-            self.get_logger().warning(f"floor summary rejected: {exc}", throttle_duration_sec=5.0)
+            self.log_throttled("summary", f"floor summary rejected: {exc}", self.rejected, warn=True)
 
     def publish_grid(self, force: bool = False) -> OccupancyGridMap | None:
         """Fuse and publish when a summary changed (or ``force``); returns the grid."""
-        if not (self._changed or force):
+        if not (self._changed or force) or self.publisher is None:
             return None
         try:
             grid = self.fusion.grid()
         except ValueError as exc:
-            self.get_logger().error(f"cannot fuse the floor summaries: {exc}", throttle_duration_sec=5.0)
+            self.log_throttled("fuse", f"cannot fuse the floor summaries: {exc}")
             return None
         if grid is None:
             return None
         self._changed = False
-        self.publisher.publish(grid_to_msg(grid, self.get_clock().now().nanoseconds * 1e-9))
+        self.publisher.publish(grid_to_msg(grid, self.now_s()))
         self.published += 1
         return grid
 
@@ -132,6 +177,17 @@ class MapNode(Node):
         print(f"saved {ypath} and {ipath.name}: {grid.width} x {grid.height} cells of {grid.resolution_m} m from "
               f"cameras {', '.join(self.fusion.cameras)}", file=sys.stderr)
         return ypath
+
+    def diagnostics(self, now_s: float) -> DiagnosticReport:
+        since = self._last_summary_s if self._last_summary_s is not None else self._started_s
+        quiet = now_s - since > float(self.values["no_summary_warning_s"])
+        warning = (f"no floor summary for {now_s - since:.0f} s (is floor_map_period_s > 0 on the cameras?)"
+                   if quiet else "")
+        values = {"cameras": str(len(self.fusion.cameras)), "summaries_received": str(self.received),
+                  "summaries_rejected": str(self.rejected), "grids_published": str(self.published),
+                  "subscribed_topics": str(len(self._subs))}
+        return DiagnosticReport(self.get_name(), self.get_fully_qualified_name(),
+                                DiagnosticLevel.WARN if quiet else DiagnosticLevel.OK, warning or "ok", values)
 
 
 def _wait_once(node: MapNode, cameras: list[str], timeout_s: float, settle_s: float) -> str:
@@ -171,33 +227,43 @@ def main(argv: list[str] | None = None) -> int:
     if args.once and not args.save:
         print("face-reid-map: --once needs --save PATH", file=sys.stderr)
         return 2
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
+    if not args.once:
+        return run_node("face-reid-map", USAGE, TABLE, lambda: MapNode(args.save or None), [argv[0], *ros_args])
+    return _run_once(args, [argv[0], *ros_args])
 
-    rclpy.init(args=[argv[0], *ros_args])
+
+def _run_once(args: argparse.Namespace, ros_argv: list[str]) -> int:
+    """``--save PATH --once``: configure, activate, wait for the cameras, save, stop."""
+    import rclpy
+
+    rclpy.init(args=ros_argv)
     try:
-        node = MapNode()
-    except ValueError as exc:
+        node = MapNode(args.save)
+    except (ParamError, ValueError) as exc:
         print(f"[face-reid-map] FATAL: cannot start: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
     status = 0
-    save_path = args.save or str(node.values["save_path"])
     try:
-        if args.once:
-            why = _wait_once(node, [c for c in args.cameras.split(",") if c], args.timeout, args.settle)
-            if why:
-                print(f"face-reid-map: {why}", file=sys.stderr)
-                status = 1
-            else:
-                node.publish_grid(force=True)
-        else:
-            rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if save_path and status == 0 and node.save(save_path) is None:
+        node.quiet_failures = True
+        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS or \
+                node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+            print(f"[face-reid-map] FATAL: cannot start: {node.failure}", file=sys.stderr)
+            return (status := 2)
+        why = _wait_once(node, [c for c in args.cameras.split(",") if c], args.timeout, args.settle)
+        if why:
+            print(f"face-reid-map: {why}", file=sys.stderr)
             status = 1
+        else:
+            node.publish_grid(force=True)
+            if node.save(args.save) is None:
+                status = 1
+    except KeyboardInterrupt:
+        status = 130
+    finally:
+        node._save_override = ""  # saved above (or nothing to save): not again on the way out
+        node.values["save_path"] = ""
+        node.release()
         node.destroy_node()
         rclpy.try_shutdown()
     return status

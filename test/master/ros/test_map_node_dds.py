@@ -19,6 +19,7 @@ pytestmark = pytest.mark.ros
 def test_floor_summary_to_occupancy_grid(ros_context, tmp_path: Path) -> None:
     from nav_msgs.msg import OccupancyGrid
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.lifecycle import TransitionCallbackReturn
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -33,7 +34,9 @@ def test_floor_summary_to_occupancy_grid(ros_context, tmp_path: Path) -> None:
     ctx = ros_context(["--ros-args", "-p", "publish_period_s:=0.1", "-p", "discovery_period_s:=0.1"])
     camera = Node("camera", namespace="cam1", context=ctx)
     probe = Node("probe", context=ctx)
-    mapper = MapNode(context=ctx)
+    mapper = MapNode(str(tmp_path / "on_exit.yaml"), context=ctx)
+    assert mapper.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert mapper.trigger_activate() == TransitionCallbackReturn.SUCCESS
     executor = SingleThreadedExecutor(context=ctx)
     for n in (camera, probe, mapper):
         executor.add_node(n)
@@ -83,6 +86,12 @@ def test_floor_summary_to_occupancy_grid(ros_context, tmp_path: Path) -> None:
         pub.publish(bad)
         assert spin_until(executor, lambda: mapper.rejected == 1, 20.0), "the malformed summary was not seen"
         assert mapper.fusion.cameras == ["cam1"]
+        report = mapper.diagnostics(mapper.now_s())
+        assert report.values["cameras"] == "1" and report.values["summaries_rejected"] == "1"
+        assert int(report.values["grids_published"]) >= 1
+        # a lifecycle node: deactivating saves the map to save_path and stops publishing
+        assert mapper.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+        assert np.array_equal(load_nav2_map(tmp_path / "on_exit.yaml").data, data) and mapper.publisher is None
     finally:
         for n in (camera, probe, mapper):
             executor.remove_node(n)
