@@ -216,7 +216,7 @@ def save_nav2_map(grid: OccupancyGridMap, yaml_path: str | os.PathLike[str]) -> 
     header = f"P5\n# CREATOR: face-reid-map {grid.resolution_m:.3f} m/pix\n{grid.width} {grid.height}\n255\n"
     ipath.write_bytes(header.encode("ascii") + np.ascontiguousarray(pixels[::-1]).tobytes())
     doc = {"image": ipath.name, "mode": "trinary", "resolution": float(grid.resolution_m),
-           "origin": [float(grid.origin_x_m), float(grid.origin_y_m), float(grid.origin_yaw_rad)],
+           "origin": [round(float(v), 9) for v in (grid.origin_x_m, grid.origin_y_m, grid.origin_yaw_rad)],
            "negate": 0, "occupied_thresh": SAVE_OCCUPIED_THRESH, "free_thresh": SAVE_FREE_THRESH}
     ypath.write_text(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     return ypath, ipath
