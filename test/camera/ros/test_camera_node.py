@@ -323,3 +323,56 @@ def test_with_a_network_key_frames_go_out_sealed_only(ros_context, tmp_path: Pat
         assert node.trigger_configure() != OK and "readable by others" in (node.failure or "")
     finally:
         node.destroy_node()
+
+
+def test_floor_summary_is_published_only_when_asked_for(ros_context) -> None:
+    """floor_map_period_s > 0: the real node counts its depth frames into a FloorOccupancy (walls of a rendered room
+    in the obstacle band, the open floor free); at the default 0 it has no such publisher."""
+    from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+    from face_reid_camera.ros.floor_map import FLOOR_MAP_QOS, FLOOR_MAP_TOPIC
+    from face_reid_master.sim.renderer import render_scene
+    from face_reid_msgs.msg import FloorOccupancy
+
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_map", "-p", "detect_faces:=false",
+                       "-p", "describe_bodies:=false", "-p", "camera_pose_xyz_m:=[0.0, 0.0, 2.4]",
+                       "-p", "camera_pose_rpy_rad:=[0.0, 0.4, 0.0]", "-p", "max_frame_age_s:=0.0",
+                       "-p", "floor_map_period_s:=1.0", "-p", "floor_map_every_frames:=1"])
+    node = CameraNode(context=ctx)
+    probe = Node("probe", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    executor.add_node(probe)
+    got: list[FloorOccupancy] = []
+    probe.create_subscription(FloorOccupancy, FLOOR_MAP_TOPIC, got.append, FLOOR_MAP_QOS)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        pose = CameraPose.from_xyz_rpy(0.0, 0.0, 2.4, 0.0, 0.4, 0.0)
+        frame = render_scene([], CameraIntrinsics.kinect_default(640, 480), pose, walls=True, floor_size_m=8.0)
+        stamp = node.get_clock().now().to_msg()
+        color, depth = _images(frame.rgb_bgr, "bgr8", frame.depth_mm, "16UC1", stamp)
+        node._on_info(_camera_info(stamp))
+        node._on_color(color)
+        node._on_depth(depth)
+        assert spin_until(executor, lambda: len(got) > 0), "no FloorOccupancy from the camera node"
+        msg = got[-1]
+        assert msg.camera_id == "cam_map" and msg.frames >= 1 and msg.header.frame_id
+        occupied = np.asarray(msg.occupied_counts).reshape(msg.height, msg.width)
+        floor = np.asarray(msg.floor_counts).reshape(msg.height, msg.width)
+        _, cols = np.nonzero(occupied)
+        xs = msg.origin_x_m + (cols + 0.5) * msg.resolution_m
+        assert floor.sum() > 0 and xs.size > 0
+        assert np.median(xs) == pytest.approx(4.0, abs=0.3)  # the wall ahead, at x = +4 m (within range)
+        assert any(name.endswith(FLOOR_MAP_TOPIC) for name, _ in node.get_publisher_names_and_types_by_node(
+            node.get_name(), node.get_namespace()))
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+    ctx2 = ros_context(["--ros-args", "-p", "camera_id:=cam_off", "-p", "detect_faces:=false"])
+    off = CameraNode(context=ctx2)
+    try:
+        assert off.trigger_configure() == OK and off.trigger_activate() == OK
+        assert not any(name.endswith(FLOOR_MAP_TOPIC) for name, _ in off.get_publisher_names_and_types_by_node(
+            off.get_name(), off.get_namespace()))
+    finally:
+        off.destroy_node()
