@@ -38,7 +38,8 @@ from face_reid_master.demo.children import (
 )
 from face_reid_master.demo.report import format_summary, format_table, summarize
 from face_reid_master.demo.scenario import DEFAULT_SEED, DemoScenario, build_scenario
-from face_reid_master.evaluation.published_tracks import TrackMessage, track_from_msg
+from face_reid_master.evaluation.published_tracks import TrackMessage
+from face_reid_master.ros.convert import track_from_msg
 
 __all__ = ["DemoError", "main"]
 

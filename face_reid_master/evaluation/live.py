@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 
 from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_master.demo.children import ChildProcess, child_env, start_child, stop_children
-from face_reid_master.evaluation.published_tracks import TrackMessage, TruthLookup, track_from_msg
+from face_reid_master.evaluation.published_tracks import TrackMessage, TruthLookup
 from face_reid_master.records import CameraFrameRecord
-from face_reid_master.ros.convert import frame_record_to_msg
+from face_reid_master.ros.convert import frame_record_to_msg, track_from_msg
 from face_reid_master.tracking.config import TrackerConfig
 
 __all__ = ["LiveError", "LiveRun", "run_live", "scenario_truth"]

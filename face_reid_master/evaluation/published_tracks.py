@@ -12,17 +12,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_master.evaluation.runner import RunLog, TrackLog
 from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
 
-__all__ = ["MATCH_RADIUS_M", "TrackMessage", "TruthLookup", "nearest_person", "run_log_from_messages",
-           "track_from_msg"]
+__all__ = ["MATCH_RADIUS_M", "TrackMessage", "TruthLookup", "nearest_person", "run_log_from_messages"]
 
 MATCH_RADIUS_M = 1.0  # a track is at a true person when within this distance
 
@@ -36,19 +33,6 @@ class TrackMessage:
 
     stamp_s: float
     tracks: tuple[NamedTrackRecord, ...]
-
-
-def track_from_msg(t: Any, to_scene: Callable[[float], float]) -> NamedTrackRecord:
-    """A face_reid_msgs/NamedTrack -> record, its stamps mapped to scene seconds by ``to_scene``."""
-    def secs(stamp: Any) -> float:
-        return to_scene(stamp_to_seconds(stamp))
-
-    return NamedTrackRecord(
-        int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence), int(t.face_observations),
-        np.array([t.position.x, t.position.y]), np.array([t.velocity.x, t.velocity.y]),
-        np.asarray(t.covariance, dtype=np.float64).reshape(4, 4), float(t.height_m), int(t.state),
-        secs(t.first_seen), secs(t.last_seen), tuple(t.cameras), str(t.identity_evidence),
-    )
 
 
 def nearest_person(xy: NDArray[np.float64], true_xy: NDArray[np.float64], inside: NDArray[np.bool_]) -> int:

@@ -15,32 +15,24 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import is_finite_number, shown
 from face_reid_camera.common.param_table import param, validate_fields
+from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, STATE_TENTATIVE, NamedTrackRecord
 from face_reid_master.robot.frames import PlanarTransform
 
 __all__ = [
     "Decision",
     "DecisionKind",
     "Goal",
-    "GoalTrack",
     "Refusal",
     "StandoffGoal",
     "StandoffGoalConfig",
-    "TrackState",
     "name_key",
 ]
 
 MAX_NAME_CHARS = 200  # longer target names are refused (a person's name never is this long)
-
-
-class TrackState(enum.IntEnum):
-    """The states of face_reid_msgs/NamedTrack (same values)."""
-
-    TENTATIVE = 0
-    CONFIRMED = 1
-    LOST = 2
 
 
 class Refusal(enum.Enum):
@@ -76,26 +68,6 @@ class StandoffGoalConfig:
 
     def __post_init__(self) -> None:
         validate_fields(self)
-
-
-@dataclass(frozen=True)
-class GoalTrack:
-    """One track of /tracks_named as the core needs it (world frame, SI units)."""
-
-    track_id: int
-    face_id: int
-    name: str
-    identity_confidence: float
-    x_m: float
-    y_m: float
-    vx_m_s: float
-    vy_m_s: float
-    state: TrackState
-
-    @property
-    def finite(self) -> bool:
-        """True when position and velocity are finite numbers (a track that is not is skipped)."""
-        return all(is_finite_number(v) for v in (self.x_m, self.y_m, self.vx_m_s, self.vy_m_s))
 
 
 @dataclass(frozen=True)
@@ -157,7 +129,7 @@ class StandoffGoal:
         self.target = ""
         self._known: dict[str, str] = {}  # name key -> name as last seen
         self._last: Goal | None = None
-        self._last_person_world: tuple[float, float] | None = None
+        self._last_person_world: NDArray[np.float64] | None = None
         self._last_goal_s = -math.inf
         self._heading_world: tuple[float, float] | None = None  # unit vector, kept per target
         self.tracks_skipped_not_finite = 0
@@ -195,7 +167,8 @@ class StandoffGoal:
         return self._last
 
     # ------------------------------------------------------------------ the decision
-    def update(self, tracks: Sequence[GoalTrack], robot_xy_map: tuple[float, float] | None, now_s: float) -> Decision:
+    def update(self, tracks: Sequence[NamedTrackRecord], robot_xy_map: tuple[float, float] | None,
+               now_s: float) -> Decision:
         """The decision for the current tracks (all of them, as last published), the robot's position in the map
         frame (None = unknown) and the time (s, any clock that only moves forward)."""
         if not self.target:
@@ -203,52 +176,53 @@ class StandoffGoal:
         key = name_key(self.target)
         mine = []
         for t in tracks:
-            if not t.finite:
+            if not (np.isfinite(t.position_xy).all() and np.isfinite(t.velocity_xy).all()):
                 self.tracks_skipped_not_finite += 1
                 continue
             self._remember(t.name)
             if name_key(t.name) == key:
                 mine.append(t)
-        live_states = {TrackState.CONFIRMED, TrackState.TENTATIVE} if self.config.accept_tentative else {
-            TrackState.CONFIRMED}
+        live_states = {STATE_CONFIRMED, STATE_TENTATIVE} if self.config.accept_tentative else {STATE_CONFIRMED}
         live = [t for t in mine if t.state in live_states]
         if not live:
             self._last = None  # the next live track gets a goal at once
             if key not in self._known:
                 return self._refuse(Refusal.UNKNOWN_NAME)
-            if any(t.state == TrackState.LOST for t in mine):
+            if any(t.state == STATE_LOST for t in mine):
                 return self._refuse(Refusal.ONLY_LOST, f"track {max(t.track_id for t in mine)}")
             if mine:
                 return self._refuse(Refusal.NOT_TRACKED, "only a tentative track")
             return self._refuse(Refusal.NOT_TRACKED)
-        track = max(live, key=lambda t: (t.state == TrackState.CONFIRMED, t.identity_confidence, t.track_id))
+        track = max(live, key=lambda t: (t.state == STATE_CONFIRMED, t.identity_confidence, t.track_id))
         goal = self._goal_for(track, robot_xy_map)
         if self._should_issue(track, goal, now_s):
-            self._last, self._last_person_world, self._last_goal_s = goal, (track.x_m, track.y_m), now_s
+            self._last, self._last_person_world, self._last_goal_s = goal, track.position_xy.copy(), now_s
             return Decision(DecisionKind.GOAL, self.target, goal)
         return Decision(DecisionKind.UNCHANGED, self.target, self._last)
 
     def _refuse(self, reason: Refusal, detail: str = "") -> Decision:
         return Decision(DecisionKind.REFUSED, self.target, reason=reason, detail=detail)
 
-    def _should_issue(self, track: GoalTrack, goal: Goal, now_s: float) -> bool:
+    def _should_issue(self, track: NamedTrackRecord, goal: Goal, now_s: float) -> bool:
         last, person = self._last, self._last_person_world
         if last is None or person is None or last.track_id != track.track_id:
             return True
         if now_s - self._last_goal_s < self.config.min_goal_interval_s:
             return False
         limit = self.config.reissue_distance_m
-        return (math.hypot(track.x_m - person[0], track.y_m - person[1]) > limit
+        return (float(np.hypot(*(track.position_xy - person))) > limit
                 or math.hypot(goal.x_m - last.x_m, goal.y_m - last.y_m) > limit)
 
-    def _heading(self, track: GoalTrack, robot_xy_map: tuple[float, float] | None) -> tuple[tuple[float, float], str]:
+    def _heading(self, track: NamedTrackRecord,
+                 robot_xy_map: tuple[float, float] | None) -> tuple[tuple[float, float], str]:
         """The person's heading in the world frame (unit vector) and where it came from."""
-        speed = math.hypot(track.vx_m_s, track.vy_m_s)
+        vx, vy = (float(v) for v in track.velocity_xy)
+        speed = math.hypot(vx, vy)
         if speed >= self.config.min_speed_for_heading_m_s and speed > 0.0:
-            return (track.vx_m_s / speed, track.vy_m_s / speed), "velocity"
+            return (vx / speed, vy / speed), "velocity"
         if robot_xy_map is not None and all(is_finite_number(v) for v in robot_xy_map):
             rx, ry = (float(v) for v in self._map_to_world.apply(np.asarray(robot_xy_map, dtype=np.float64)))
-            dx, dy = rx - track.x_m, ry - track.y_m
+            dx, dy = rx - float(track.position_xy[0]), ry - float(track.position_xy[1])
             dist = math.hypot(dx, dy)
             if dist > 1e-6:
                 return (dx / dist, dy / dist), "robot"
@@ -257,12 +231,12 @@ class StandoffGoal:
         c, s = math.cos(-self.world_to_map.yaw_rad), math.sin(-self.world_to_map.yaw_rad)
         return (c, s), "default"  # the map's +x, in the world frame
 
-    def _goal_for(self, track: GoalTrack, robot_xy_map: tuple[float, float] | None) -> Goal:
+    def _goal_for(self, track: NamedTrackRecord, robot_xy_map: tuple[float, float] | None) -> Goal:
         (hx, hy), source = self._heading(track, robot_xy_map)
         self._heading_world = (hx, hy)
         d = self.config.standoff_distance_m
-        person_map = self.world_to_map.apply(np.array([track.x_m, track.y_m]))
-        goal_map = self.world_to_map.apply(np.array([track.x_m + d * hx, track.y_m + d * hy]))
+        person_map = self.world_to_map.apply(track.position_xy)
+        goal_map = self.world_to_map.apply(track.position_xy + d * np.array([hx, hy]))
         face_map = self.world_to_map.rotate(np.array([-hx, -hy]))  # from the goal towards the person
         return Goal(float(goal_map[0]), float(goal_map[1]), math.atan2(float(face_map[1]), float(face_map[0])),
                     int(track.track_id), int(track.face_id), track.name.strip(),

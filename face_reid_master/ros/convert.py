@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -73,6 +74,22 @@ def frame_record_to_msg(frame: CameraFrameRecord, stamp_s: float) -> Any:
                     setattr(m, name, float(value))
         msg.people.append(m)
     return msg
+
+
+def track_from_msg(t: Any, to_seconds: Callable[[float], float] | None = None) -> NamedTrackRecord:
+    """A face_reid_msgs/NamedTrack -> record (the inverse of :func:`tracks_to_msg` for one track); ``to_seconds``
+    maps its stamps (default: seconds as stamped). ValueError/TypeError for a malformed one."""
+    def secs(stamp: Any) -> float:
+        value = stamp_to_seconds(stamp)
+        return to_seconds(value) if to_seconds is not None else value
+
+    return NamedTrackRecord(
+        int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence), int(t.face_observations),
+        np.array([t.position.x, t.position.y], dtype=np.float64), np.array([t.velocity.x, t.velocity.y],
+                                                                           dtype=np.float64),
+        np.asarray(t.covariance, dtype=np.float64).reshape(4, 4), float(t.height_m), int(t.state),
+        secs(t.first_seen), secs(t.last_seen), tuple(t.cameras), str(t.identity_evidence),
+    )
 
 
 def tracks_to_msg(tracks: list[NamedTrackRecord], stamp_s: float, frame_id: str,

@@ -22,15 +22,15 @@ from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
 from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
+from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, STATE_TENTATIVE, NamedTrackRecord
 from face_reid_master.robot.frames import PlanarTransform, load_world_to_map
 from face_reid_master.robot.standoff_goal import (
     Decision,
     DecisionKind,
-    GoalTrack,
     StandoffGoal,
     StandoffGoalConfig,
-    TrackState,
 )
+from face_reid_master.ros.convert import track_from_msg
 from face_reid_msgs.msg import NamedTrackArray
 from face_reid_msgs.srv import GoToPerson, ListFaces
 
@@ -73,16 +73,18 @@ TABLE = ParamTable(NODE_NAME, (*_NODE_PARAMS, *config_specs(StandoffGoalConfig))
 _MAX_STATUS_CHARS = 400
 
 
-def tracks_from_msg(msg: Any) -> tuple[list[GoalTrack], int]:
-    """The tracks of a NamedTrackArray as core records, and how many were malformed (skipped)."""
+def tracks_from_msg(msg: Any) -> tuple[list[NamedTrackRecord], int]:
+    """The tracks of a NamedTrackArray as records, and how many were malformed (skipped; e.g. an unknown state)."""
     out, bad = [], 0
     for t in msg.tracks:
         try:
-            state = TrackState(int(t.state))
-            out.append(GoalTrack(int(t.track_id), int(t.face_id), str(t.name), float(t.identity_confidence),
-                                 float(t.position.x), float(t.position.y), float(t.velocity.x), float(t.velocity.y),
-                                 state))
+            record = track_from_msg(t)
         except (ValueError, TypeError, AttributeError):
+            bad += 1
+            continue
+        if record.state in (STATE_TENTATIVE, STATE_CONFIRMED, STATE_LOST):
+            out.append(record)
+        else:
             bad += 1
     return out, bad
 
@@ -97,7 +99,7 @@ class GotoNode(ManagedNode):
         self.core: StandoffGoal | None = None
         self.map_frame = "map"
         self.world_frame = ""  # expected frame of the tracks ('' = not checked: no transform file)
-        self._tracks: list[GoalTrack] = []
+        self._tracks: list[NamedTrackRecord] = []
         self._robot_xy: tuple[float, float] | None = None
         self._last_status = ""
         self._last_tracks_s: float | None = None

@@ -7,23 +7,19 @@ import math
 import numpy as np
 import pytest
 
+from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, STATE_TENTATIVE, NamedTrackRecord
 from face_reid_master.robot.frames import PlanarTransform
-from face_reid_master.robot.standoff_goal import (
-    DecisionKind,
-    GoalTrack,
-    Refusal,
-    StandoffGoal,
-    StandoffGoalConfig,
-    TrackState,
-)
+from face_reid_master.robot.standoff_goal import DecisionKind, Refusal, StandoffGoal, StandoffGoalConfig
 
 
 def _track(x: float = 0.0, y: float = 0.0, vx: float = 0.0, vy: float = 0.0, *, tid: int = 1, name: str = "Alice",
-           state: TrackState = TrackState.CONFIRMED, conf: float = 0.9, face: int = 7) -> GoalTrack:
-    return GoalTrack(tid, face, name, conf, x, y, vx, vy, state)
+           state: int = STATE_CONFIRMED, conf: float = 0.9, face: int = 7) -> NamedTrackRecord:
+    return NamedTrackRecord(tid, face, name, conf, 10, np.array([x, y]), np.array([vx, vy]), np.zeros((4, 4)), 1.7,
+                            state, 0.0, 1.0)
 
 
-def _goal(core: StandoffGoal, tracks: list[GoalTrack], robot: tuple[float, float] | None = None, now: float = 0.0):
+def _goal(core: StandoffGoal, tracks: list[NamedTrackRecord], robot: tuple[float, float] | None = None,
+          now: float = 0.0):
     decision = core.update(tracks, robot, now)
     assert decision.kind == DecisionKind.GOAL, decision.status_line()
     assert decision.goal is not None
@@ -86,9 +82,9 @@ def test_refusals_unknown_not_tracked_only_lost_and_invalid() -> None:
     assert "refused 'Bob': unknown name" in seen.status_line()
     core.add_known_names(["bob"])  # e.g. a learned face of the master
     assert core.update([_track(name="Alice")], None, 0.0).reason == Refusal.NOT_TRACKED
-    lost = core.update([_track(name="Bob", state=TrackState.LOST, tid=4)], None, 0.0)
+    lost = core.update([_track(name="Bob", state=STATE_LOST, tid=4)], None, 0.0)
     assert lost.reason == Refusal.ONLY_LOST and "track 4" in lost.status_line()
-    tentative = core.update([_track(name="Bob", state=TrackState.TENTATIVE)], None, 0.0)
+    tentative = core.update([_track(name="Bob", state=STATE_TENTATIVE)], None, 0.0)
     assert tentative.reason == Refusal.NOT_TRACKED
     # a name once seen on a track is known from then on
     core.set_target("Alice")
@@ -106,13 +102,13 @@ def test_refusals_unknown_not_tracked_only_lost_and_invalid() -> None:
 def test_tentative_tracks_count_when_configured() -> None:
     core = StandoffGoal(StandoffGoalConfig(accept_tentative=True))
     core.set_target("Alice")
-    assert _goal(core, [_track(state=TrackState.TENTATIVE)]).track_id == 1
+    assert _goal(core, [_track(state=STATE_TENTATIVE)]).track_id == 1
 
 
 def test_names_match_trimmed_and_case_insensitively_and_the_best_confirmed_track_wins() -> None:
     core = StandoffGoal()
     assert core.set_target("  aLiCe \t") == "aLiCe"
-    tracks = [_track(0.0, 0.0, tid=1, conf=0.95, name="Alice", state=TrackState.LOST),
+    tracks = [_track(0.0, 0.0, tid=1, conf=0.95, name="Alice", state=STATE_LOST),
               _track(5.0, 0.0, tid=2, conf=0.6, name=" ALICE"),
               _track(9.0, 0.0, tid=3, conf=0.8, name="alice"),
               _track(3.0, 3.0, tid=4, conf=0.99, name="Bob")]
