@@ -24,7 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CalibrationResult", "CameraTrack", "Correction", "calibrate_cameras", "rigid_2d", "time_matched"]
+from face_reid_master.robot.frames import PlanarTransform
+
+__all__ = ["CalibrationResult", "CameraTrack", "calibrate_cameras", "rigid_2d", "time_matched"]
 
 FloatArray = NDArray[np.float64]
 
@@ -49,31 +51,6 @@ class CameraTrack:
 
 
 @dataclass(frozen=True)
-class Correction:
-    """A rigid 2-D motion: rotate by ``yaw_rad`` about the origin, then shift by (``x_m``, ``y_m``)."""
-
-    x_m: float = 0.0
-    y_m: float = 0.0
-    yaw_rad: float = 0.0
-
-    def apply(self, xy: FloatArray) -> FloatArray:
-        c, s = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
-        pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        return pts @ np.array([[c, s], [-s, c]]) + np.array([self.x_m, self.y_m])
-
-    def then(self, other: Correction) -> Correction:
-        """``other`` after ``self`` (apply self first)."""
-        x, y = other.apply(np.array([[self.x_m, self.y_m]]))[0]
-        return Correction(float(x), float(y), _wrap(self.yaw_rad + other.yaw_rad))
-
-    def inverse(self) -> Correction:
-        c, s = math.cos(-self.yaw_rad), math.sin(-self.yaw_rad)
-        x = -(c * self.x_m - s * self.y_m)
-        y = -(s * self.x_m + c * self.y_m)
-        return Correction(x, y, -self.yaw_rad)
-
-
-@dataclass(frozen=True)
 class CalibrationResult:
     """Per camera: its correction (world_true <- as configured) and RMS residual (m) over its matched pairs.
 
@@ -82,7 +59,7 @@ class CalibrationResult:
     """
 
     anchor: str
-    corrections: dict[str, Correction]
+    corrections: dict[str, PlanarTransform]
     residual_m: dict[str, float]
     pairs: dict[tuple[str, str], int] = field(default_factory=dict)
     unreached: tuple[str, ...] = ()
@@ -107,20 +84,20 @@ def time_matched(a: CameraTrack, b: CameraTrack, max_gap_s: float = 0.2) -> tupl
     return a.xy[ok], interp[ok]
 
 
-def rigid_2d(src: FloatArray, dst: FloatArray) -> Correction:
+def rigid_2d(src: FloatArray, dst: FloatArray) -> PlanarTransform:
     """The least-squares rigid motion taking ``src`` (N, 2) onto ``dst`` (N, 2) (N >= 2; 2-D Kabsch)."""
     if src.shape[0] < 2:
         raise ValueError(f"a rigid 2-D transform needs at least 2 point pairs, got {src.shape[0]}")
     cs, cd = src.mean(axis=0), dst.mean(axis=0)
     s, d = src - cs, dst - cd
     yaw = math.atan2(float(np.sum(s[:, 0] * d[:, 1] - s[:, 1] * d[:, 0])), float(np.sum(s * d)))
-    rot = Correction(0.0, 0.0, yaw)
+    rot = PlanarTransform(0.0, 0.0, yaw)
     shift = cd - rot.apply(cs[None, :])[0]
-    return Correction(float(shift[0]), float(shift[1]), yaw)
+    return PlanarTransform(float(shift[0]), float(shift[1]), yaw)
 
 
 def _ransac_rigid_2d(src: FloatArray, dst: FloatArray, threshold_m: float, iterations: int,
-                     rng: np.random.Generator) -> tuple[Correction, NDArray[np.bool_]]:
+                     rng: np.random.Generator) -> tuple[PlanarTransform, NDArray[np.bool_]]:
     """Robust :func:`rigid_2d`: the two-point hypothesis with most inliers, refitted on them (twice)."""
     n = src.shape[0]
     best = np.zeros(n, dtype=bool)
@@ -146,7 +123,8 @@ def _ransac_rigid_2d(src: FloatArray, dst: FloatArray, threshold_m: float, itera
 def calibrate_cameras(tracks: list[CameraTrack], anchor: str, *, max_gap_s: float = 0.2,
                       min_pairs: int = 20, inlier_threshold_m: float = 0.25, iterations: int = 300,
                       seed: int = 0) -> CalibrationResult:
-    """Corrections of every camera reachable from ``anchor`` through overlapping views; see the module docstring.
+    """Corrections (world_true <- as configured) of every camera reachable from ``anchor`` through overlapping
+    views; see the module docstring.
 
     ``max_gap_s``: longest gap (s) across which a track is interpolated; ``min_pairs``: time-matched positions
     two cameras need to be linked (>= 3); ``inlier_threshold_m``: a matched pair further apart than this after the
@@ -167,7 +145,7 @@ def calibrate_cameras(tracks: list[CameraTrack], anchor: str, *, max_gap_s: floa
         raise ValueError(f"max_gap_s must be > 0, got {max_gap_s}")
     rng = np.random.default_rng(seed)
     ids = sorted(by_id)
-    links: dict[tuple[str, str], tuple[Correction, FloatArray, FloatArray]] = {}  # b's frame -> a's frame
+    links: dict[tuple[str, str], tuple[PlanarTransform, FloatArray, FloatArray]] = {}  # b's frame -> a's frame
     for ia, a in enumerate(ids):
         for b in ids[ia + 1:]:
             pa, pb = time_matched(by_id[a], by_id[b], max_gap_s)
@@ -184,26 +162,26 @@ def calibrate_cameras(tracks: list[CameraTrack], anchor: str, *, max_gap_s: floa
                              tuple(c for c in ids if c not in corrections))
 
 
-def _spanning_tree(anchor: str, links: dict[tuple[str, str], tuple[Correction, FloatArray, FloatArray]]
-                   ) -> dict[str, Correction]:
+def _spanning_tree(anchor: str, links: dict[tuple[str, str], tuple[PlanarTransform, FloatArray, FloatArray]]
+                   ) -> dict[str, PlanarTransform]:
     """First corrections: breadth first from the anchor, always through the link with most inliers."""
-    edges: dict[str, list[tuple[int, str, Correction]]] = {}
+    edges: dict[str, list[tuple[int, str, PlanarTransform]]] = {}
     for (a, b), (fit, pa, _) in links.items():  # fit maps b's reports onto a's
         edges.setdefault(a, []).append((pa.shape[0], b, fit))
         edges.setdefault(b, []).append((pa.shape[0], a, fit.inverse()))
-    out = {anchor: Correction()}
+    out = {anchor: PlanarTransform()}
     queue = deque([anchor])
     while queue:
         here = queue.popleft()
         for _, there, to_here in sorted(edges.get(here, []), key=lambda e: -e[0]):
             if there not in out:
-                out[there] = to_here.then(out[here])  # there's reports -> here's -> truth
+                out[there] = out[here].compose(to_here)  # there's reports -> here's -> truth
                 queue.append(there)
     return out
 
 
-def _refine(anchor: str, guess: dict[str, Correction],
-            links: dict[tuple[str, str], tuple[Correction, FloatArray, FloatArray]]) -> dict[str, Correction]:
+def _refine(anchor: str, guess: dict[str, PlanarTransform],
+            links: dict[tuple[str, str], tuple[PlanarTransform, FloatArray, FloatArray]]) -> dict[str, PlanarTransform]:
     """Joint least squares over every link between reached cameras (the anchor fixed)."""
     from scipy.optimize import least_squares
 
@@ -213,10 +191,10 @@ def _refine(anchor: str, guess: dict[str, Correction],
         return dict(guess)
     index = {c: k for k, c in enumerate(free)}
 
-    def unpack(params: FloatArray) -> dict[str, Correction]:
-        out = {anchor: Correction()}
+    def unpack(params: FloatArray) -> dict[str, PlanarTransform]:
+        out = {anchor: PlanarTransform()}
         for c, k in index.items():
-            out[c] = Correction(float(params[3 * k]), float(params[3 * k + 1]), float(params[3 * k + 2]))
+            out[c] = PlanarTransform(float(params[3 * k]), float(params[3 * k + 1]), float(params[3 * k + 2]))
         return out
 
     def residuals(params: FloatArray) -> FloatArray:
@@ -225,11 +203,11 @@ def _refine(anchor: str, guess: dict[str, Correction],
 
     x0 = np.array([v for c in free for v in (guess[c].x_m, guess[c].y_m, guess[c].yaw_rad)])
     fit = least_squares(residuals, x0, loss="soft_l1", f_scale=0.05)
-    return {c: Correction(v.x_m, v.y_m, _wrap(v.yaw_rad)) for c, v in unpack(fit.x).items()}
+    return {c: PlanarTransform(v.x_m, v.y_m, _wrap(v.yaw_rad)) for c, v in unpack(fit.x).items()}
 
 
-def _residuals(corrections: dict[str, Correction],
-               links: dict[tuple[str, str], tuple[Correction, FloatArray, FloatArray]]) -> dict[str, float]:
+def _residuals(corrections: dict[str, PlanarTransform],
+               links: dict[tuple[str, str], tuple[PlanarTransform, FloatArray, FloatArray]]) -> dict[str, float]:
     """RMS distance (m) between where a camera and each linked camera put the walker at the same moment."""
     sq: dict[str, list[FloatArray]] = {c: [] for c in corrections}
     for (a, b), (_, pa, pb) in links.items():

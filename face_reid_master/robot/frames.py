@@ -1,4 +1,5 @@
-"""The planar transform between the camera network's world frame and a robot's map frame, and its file.
+"""Rigid 2-D transforms (:class:`PlanarTransform`: the world -> map transform of a robot's map, the cameras' pose
+corrections of face-reid-calibrate) and the world -> map transform's file.
 
 ``p_map = R(yaw) p_world + (x, y)``: what ``face-reid-align-map`` writes and ``face-reid-goto`` (and the
 people outputs) read. Heights are unchanged (both frames have z up from the same floor).

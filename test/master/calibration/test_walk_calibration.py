@@ -11,18 +11,18 @@ import pytest
 
 from face_reid_master.calibration.walk_calibration import (
     CameraTrack,
-    Correction,
     calibrate_cameras,
     rigid_2d,
     time_matched,
 )
+from face_reid_master.robot.frames import PlanarTransform
 
 # (true x, y, heading) of four cameras around a 10 x 6 m room; D sees only the far end, which A does not
 TRUE = {"A": (0.0, 0.0, math.radians(30)), "B": (10.0, 0.0, math.radians(150)),
         "C": (10.0, 6.0, math.radians(-135)), "D": (14.0, 3.0, math.radians(180))}
 # what the cameras were configured with: the anchor right, the others off by up to 1.5 m and 25 degrees
-WRONG = {"A": Correction(), "B": Correction(0.8, -0.5, math.radians(12)),
-         "C": Correction(-1.5, 0.7, math.radians(-25)), "D": Correction(0.4, 1.2, math.radians(8))}
+WRONG = {"A": PlanarTransform(), "B": PlanarTransform(0.8, -0.5, math.radians(12)),
+         "C": PlanarTransform(-1.5, 0.7, math.radians(-25)), "D": PlanarTransform(0.4, 1.2, math.radians(8))}
 
 
 def _walk(seconds: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +57,7 @@ def _tracks(rng: np.random.Generator, noise_m: float = 0.03, outliers: float = 0
     return out
 
 
-def _pose_error(cam: str, got: Correction) -> tuple[float, float]:
+def _pose_error(cam: str, got: PlanarTransform) -> tuple[float, float]:
     """Position (m) and yaw (deg) error of the corrected camera pose."""
     x, y, _ = TRUE[cam]
     configured = WRONG[cam].inverse().apply(np.array([[x, y]]))  # where the camera was configured to be
@@ -95,11 +95,11 @@ def test_time_matching_interpolates_only_across_short_gaps() -> None:
 
 
 def test_rigid_fit_is_exact_on_exact_data_and_arguments_are_checked() -> None:
-    truth = Correction(1.0, -2.0, 0.7)
+    truth = PlanarTransform(1.0, -2.0, 0.7)
     src = np.random.default_rng(0).uniform(-3, 3, (10, 2))
     got = rigid_2d(src, truth.apply(src))
     assert got.x_m == pytest.approx(1.0) and got.y_m == pytest.approx(-2.0) and got.yaw_rad == pytest.approx(0.7)
-    np.testing.assert_allclose(truth.then(truth.inverse()).apply(src), src, atol=1e-12)
+    np.testing.assert_allclose(truth.inverse().compose(truth).apply(src), src, atol=1e-12)
     with pytest.raises(ValueError, match="at least 2"):
         rigid_2d(src[:1], src[:1])
     tracks = _tracks(np.random.default_rng(0))
