@@ -88,7 +88,7 @@ def _colcon() -> str | None:
 
 @pytest.fixture(scope="module")
 def interface_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """people_msgs and hri_msgs built with colcon (one invocation, once per session); the environment variables a
+    """people_msgs and hri_msgs built with colcon (one invocation for this module); the environment variables a
     process needs to use them (Python path, their libraries, the ament index)."""
     colcon = _colcon()
     if colcon is None:
