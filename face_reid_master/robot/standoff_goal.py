@@ -161,11 +161,6 @@ class StandoffGoal:
         if isinstance(name, str) and 0 < len(name.strip()) <= MAX_NAME_CHARS and name.isprintable():
             self._known[name_key(name)] = name.strip()
 
-    @property
-    def last_goal(self) -> Goal | None:
-        """The last goal issued for the current target (None after a refusal or a new target)."""
-        return self._last
-
     # ------------------------------------------------------------------ the decision
     def update(self, tracks: Sequence[NamedTrackRecord], robot_xy_map: tuple[float, float] | None,
                now_s: float) -> Decision:

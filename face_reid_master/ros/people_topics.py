@@ -56,14 +56,6 @@ class PeopleTopics:
             self._warn(f"{parameter} is set but {package} is not installed: {what} not published ({exc})")
             return None
 
-    @property
-    def people_enabled(self) -> bool:
-        return self._people_msgs is not None
-
-    @property
-    def hri_enabled(self) -> bool:
-        return self._hri_msgs is not None
-
     # ------------------------------------------------------------------ lifecycle
     def activate(self) -> None:
         """Make the publishers of the outputs that are on (an output whose type support fails is turned off)."""
