@@ -76,3 +76,22 @@ def start_up_output(module: str, *ros_args: str) -> tuple[int, list[str]]:
     result = subprocess.run([sys.executable, "-m", module, "--ros-args", *ros_args], cwd=REPO_ROOT,
                             capture_output=True, text=True, timeout=60)
     return result.returncode, [line for line in (result.stderr + result.stdout).splitlines() if line.strip()]
+
+
+def colcon_build(workspace: Path, timeout_s: float = 900.0) -> None:
+    """``colcon build`` of ``workspace``/src with this environment's ROS wheels on PATH (skips the test when colcon
+    is not installed; fails it with the build's last output when the build fails)."""
+    import shutil
+    import subprocess
+    import sys
+
+    prefix = Path(sys.prefix)
+    beside = prefix / "bin" / "colcon"
+    colcon = shutil.which("colcon") or (str(beside) if beside.exists() else None)
+    if colcon is None:
+        pytest.skip("colcon is not installed")
+    env = dict(os.environ)
+    env["PATH"] = f"{prefix / 'bin'}{os.pathsep}{env.get('PATH', '')}"
+    result = subprocess.run([colcon, "build", "--event-handlers", "console_direct-"], cwd=workspace, env=env,
+                            capture_output=True, text=True, timeout=timeout_s)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]

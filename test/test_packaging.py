@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import colcon_build
 
 REPO = Path(__file__).resolve().parents[1]
 PREFIX = Path(sys.prefix)
@@ -80,18 +81,9 @@ def test_installed_master_loads_the_installed_likelihood(tmp_path: Path) -> None
     assert got["decision"] == pytest.approx(shipped.decision_distance, abs=1e-12)
 
 
-@pytest.mark.skipif(shutil.which("colcon") is None and not (PREFIX / "bin" / "colcon").exists(),
-                    reason="colcon is not installed")
 def test_face_reid_msgs_builds_with_colcon(tmp_path: Path) -> None:
     src = tmp_path / "ws" / "src"
     shutil.copytree(REPO / "face_reid_msgs", src / "face_reid_msgs")
-    colcon = shutil.which("colcon") or str(PREFIX / "bin" / "colcon")
-    env = dict(os.environ)
-    env["PATH"] = f"{PREFIX / 'bin'}{os.pathsep}{env.get('PATH', '')}"
-    result = subprocess.run(
-        [colcon, "build", "--event-handlers", "console_direct-"], cwd=tmp_path / "ws", env=env,
-        capture_output=True, text=True, timeout=600,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    colcon_build(tmp_path / "ws", timeout_s=600)
     generated = list((tmp_path / "ws" / "install" / "face_reid_msgs").rglob("_named_track_array.py"))
     assert generated, "no generated Python message module"

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT, spin_until
+from conftest import REPO_ROOT, colcon_build, spin_until
 from ros_procs import procs
 
 pytest.importorskip("rclpy")
@@ -29,7 +29,6 @@ from face_reid_master.demo.children import spawn
 
 pytestmark = pytest.mark.ros
 
-PREFIX = Path(sys.prefix)
 INTERFACES = REPO_ROOT / "test" / "data" / "interfaces"
 BUILD_SECONDS: list[float] = []  # how long the colcon build took (reported in the assertion messages)
 
@@ -81,28 +80,16 @@ print(json.dumps(got), flush=True)
 """
 
 
-def _colcon() -> str | None:
-    found = shutil.which("colcon")
-    return found or (str(PREFIX / "bin" / "colcon") if (PREFIX / "bin" / "colcon").exists() else None)
-
-
 @pytest.fixture(scope="module")
 def interface_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     """people_msgs and hri_msgs built with colcon (one invocation for this module); the environment variables a
     process needs to use them (Python path, their libraries, the ament index)."""
-    colcon = _colcon()
-    if colcon is None:
-        pytest.skip("colcon is not installed: cannot build the people_msgs / hri_msgs stand-ins")
     ws = tmp_path_factory.mktemp("people_interfaces")
     for pkg in ("people_msgs", "hri_msgs"):
         shutil.copytree(INTERFACES / pkg, ws / "src" / pkg)
-    env = dict(os.environ)
-    env["PATH"] = f"{PREFIX / 'bin'}{os.pathsep}{env.get('PATH', '')}"
     t0 = time.monotonic()
-    result = subprocess.run([colcon, "build", "--event-handlers", "console_direct-"], cwd=ws, env=env,
-                            capture_output=True, text=True, timeout=900)
+    colcon_build(ws)
     BUILD_SECONDS.append(time.monotonic() - t0)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     install = ws / "install"
     pkgs = ("people_msgs", "hri_msgs")
     sites = [str(p) for pkg in pkgs for p in (install / pkg / "lib").glob("python*/site-packages")]
