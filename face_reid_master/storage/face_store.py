@@ -205,6 +205,9 @@ class FaceStore:
         self.salvaged_face_ids: list[int] = []  # faces read back from a corrupt file moved aside
         self._ledger_ids: set[int] = set()
         self._ledger_max = 0
+        # face id -> hash of each stored feature row, as this connection last committed them: a face saved again
+        # rewrites only the rows that changed (the feature bank replaces one row at a time)
+        self._row_hashes: dict[int, list[int]] = {}
         self._lock_fd: int | None = None
         self._conn: sqlite3.Connection | None = None
         if (not create or self.read_only) and not os.path.lexists(self.path):
@@ -583,16 +586,31 @@ class FaceStore:
         raw = np.ascontiguousarray(feats, dtype=_VECTOR_DTYPE)
         return [(face.face_id, i, raw[i].tobytes()) for i in range(raw.shape[0])]
 
-    def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, rows: list[tuple[int, int, bytes]]) -> None:
+    def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, rows: list[tuple[int, int, bytes]]) -> list[int]:
+        """Upsert the face's row and its feature rows; returns the rows' hashes (for :attr:`_row_hashes` once
+        committed). Only rows that differ from what this connection last committed are written, when the
+        stored row count still matches (else, e.g. after another process touched the face, all of them)."""
+        fid = face.face_id
         conn.execute(
             "INSERT INTO faces(face_id, name, created_s, last_seen_s, n_observations) VALUES (?, ?, ?, ?, ?) "
             "ON CONFLICT(face_id) DO UPDATE SET name = excluded.name, created_s = excluded.created_s, "
             "last_seen_s = excluded.last_seen_s, n_observations = excluded.n_observations",
-            (face.face_id, face.name, face.created_s, face.last_seen_s, face.n_observations),
+            (fid, face.name, face.created_s, face.last_seen_s, face.n_observations),
         )
-        conn.execute("DELETE FROM features WHERE face_id = ?", (face.face_id,))
-        conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?)", rows)
-        self._bump_max_face_id(conn, face.face_id)
+        hashes = [hash(r[2]) for r in rows]
+        old = self._row_hashes.get(fid)
+        if old is not None and conn.execute("SELECT COUNT(*) FROM features WHERE face_id = ?",
+                                            (fid,)).fetchone()[0] == len(old):
+            changed = [r for i, r in enumerate(rows) if i >= len(old) or old[i] != hashes[i]]
+            conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?) "
+                             "ON CONFLICT(face_id, idx) DO UPDATE SET vector = excluded.vector", changed)
+            if len(old) > len(rows):
+                conn.execute("DELETE FROM features WHERE face_id = ? AND idx >= ?", (fid, len(rows)))
+        else:
+            conn.execute("DELETE FROM features WHERE face_id = ?", (fid,))
+            conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?)", rows)
+        self._bump_max_face_id(conn, fid)
+        return hashes
 
     @staticmethod
     def _bump_max_face_id(conn: sqlite3.Connection, face_id: int) -> None:
@@ -606,6 +624,8 @@ class FaceStore:
         """Delete faces + features in one transaction, then scrub the WAL (secure_delete zeroed the pages)."""
         if not face_ids:
             return
+        for f in face_ids:
+            self._row_hashes.pop(f, None)
         with self._transaction() as conn:
             conn.executemany("DELETE FROM features WHERE face_id = ?", [(f,) for f in face_ids])
             if self._has_body_pairs(conn):
@@ -637,10 +657,7 @@ class FaceStore:
     # ------------------------------------------------------------------------------ public API
     def save_face(self, face: LearnedFace) -> None:
         """Insert or replace one face (row + all its features) in one transaction, committed on return."""
-        rows = self._encode(face)
-        with self._transaction() as conn:
-            self._write_face(conn, face, rows)
-        self._note_saved([face.face_id])
+        self.save_faces([face])
 
     def save_body_pairs(self, rows: Iterable[tuple[Any, bool, int, int, float]], subspace: str) -> int:
         """Replace the stored body pairs of the online metric update with ``rows`` (difference vector,
@@ -685,9 +702,14 @@ class FaceStore:
             raise ValueError("save_faces: duplicate face ids in the batch")
         if not batch:
             return 0
-        with self._transaction() as conn:
-            for face, rows in batch:
-                self._write_face(conn, face, rows)
+        try:
+            with self._transaction() as conn:
+                written = {face.face_id: self._write_face(conn, face, rows) for face, rows in batch}
+        except BaseException:
+            for fid in ids:  # rolled back: what is stored is not known any more
+                self._row_hashes.pop(fid, None)
+            raise
+        self._row_hashes.update(written)
         self._note_saved(ids)
         return len(batch)
 

@@ -171,6 +171,32 @@ def test_embedding_dim_mismatch_is_an_error_not_a_recovery(db: Path) -> None:
         assert len(store.load_faces()) == 1
 
 
+def test_saving_again_rewrites_only_the_rows_that_changed(db: Path) -> None:
+    feats = _feats(1, 50)
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(3, feats, None, 1.0, 2.0, 10))
+        conn = store._db  # the store's own connection: how many rows its statements changed
+        before = conn.total_changes
+        feats = feats.copy()
+        feats[[4, 31]] = _feats(2, 2)  # the feature bank replaces single rows
+        store.save_face(LearnedFace(3, feats, None, 1.0, 3.0, 11))
+        assert conn.total_changes - before <= 4  # the face row, 2 feature rows, the id high-water mark
+        assert store.load_faces()[0].features.tobytes() == feats.tobytes()
+        store.save_face(LearnedFace(3, feats[:30], None, 1.0, 4.0, 12))  # fewer rows
+        assert store.load_faces()[0].features.tobytes() == feats[:30].tobytes()
+        store.save_face(LearnedFace(3, feats[:40], None, 1.0, 5.0, 13))  # more rows
+        assert store.load_faces()[0].features.tobytes() == feats[:40].tobytes()
+        with sqlite3.connect(db) as other:  # someone else removed rows: everything is written again
+            other.execute("DELETE FROM features WHERE face_id = 3 AND idx < 5")
+        store.save_face(LearnedFace(3, feats[:40], None, 1.0, 6.0, 14))
+        assert store.load_faces()[0].features.tobytes() == feats[:40].tobytes()
+        store.forget(3)
+        store.save_face(LearnedFace(3, feats[:10], None, 1.0, 7.0, 1))  # forgotten, then saved anew: in full
+        assert store.load_faces()[0].features.tobytes() == feats[:10].tobytes()
+    with FaceStore(db) as store:
+        assert store.load_faces()[0].features.tobytes() == feats[:10].tobytes()
+
+
 def test_store_is_single_thread(db: Path) -> None:
     with FaceStore(db) as store:
         errors: list[BaseException] = []
