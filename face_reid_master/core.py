@@ -389,6 +389,8 @@ class MasterCore:
         self._moved: set[int] = set()  # tracks that moved away from where they appeared
         self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
         self._dirty_faces: dict[int, float] = {}  # face id -> first unsaved change (s)
+        # frames applied with defer_identity: (deleted, stamp, lost, recovered, tracks given a face observation)
+        self._deferred: list[tuple[tuple[int, ...], float, tuple[int, ...], tuple[int, ...], set[int]]] = []
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
         self._names: dict[int, str] = {}  # face id -> name from the predefined people
         self._last_stamp = -math.inf
@@ -405,8 +407,13 @@ class MasterCore:
             self._restore_body_pairs()
 
     # ------------------------------------------------------------------------------ input
-    def process_frame(self, frame: CameraFrameRecord, now_s: float | None = None) -> FrameOutcome:
-        """Validate one camera frame, track its people and update face identities."""
+    def process_frame(self, frame: CameraFrameRecord, now_s: float | None = None, *,
+                      defer_identity: bool = False) -> FrameOutcome:
+        """Validate one camera frame, track its people and update face identities.
+
+        ``defer_identity``: queue the frame's face evidence and track events and leave the identity update
+        (and face saving) to :meth:`finish_frames`, which runs it once for every frame deferred: a node that
+        applies several frames per cycle pays for one identity update, not one per frame."""
         cfg, st = self.config, self.stats
         st.frames_received += 1
         stamp = float(frame.stamp_s) if isinstance(frame.stamp_s, int | float) else math.nan
@@ -438,6 +445,7 @@ class MasterCore:
                                     "future_stamp")
             if now_s < self._last_now_s - self.config.tracker.max_detection_delay_s:  # our own clock went back
                 st.clock_jumps_back += 1
+                self.finish_frames()
                 self._identity_step(self.tracker.reset(), now_s, (), ())
                 self._last_stamp = -math.inf
             self._last_now_s = now_s
@@ -474,16 +482,32 @@ class MasterCore:
                 if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
                     self.identity.add_body_observations(track_id, row[None, :], stamp, frame.camera_id,
                                                         heights[det_index: det_index + 1])
-        events = self._identity_step(result.deleted, stamp, result.lost, result.recovered)
-        for track_id in touched_tracks:
-            fid = self.identity.face_id_of(track_id)
-            if fid is not None:
-                self._dirty_faces.setdefault(fid, stamp)
-        self._maintain_faces(stamp)
+        self._deferred.append((result.deleted, stamp, result.lost, result.recovered, touched_tracks))
+        events = () if defer_identity else tuple(self.finish_frames())
         track_of_person = {person_index[det]: tid for tid, det in result.associations}
         notices, self._notices = tuple(self._notices), []
         return FrameOutcome(True, track_of_person=track_of_person, tracks_created=tuple(result.created),
-                            tracks_deleted=tuple(result.deleted), identity_events=tuple(events), notices=notices)
+                            tracks_deleted=tuple(result.deleted), identity_events=events, notices=notices)
+
+    def finish_frames(self) -> list[Any]:
+        """The identity update of the frames applied since the last call (one step at the newest stamp, after
+        their track events in order), then face saving; returns the identity events. A no-op when nothing
+        waits (process_frame without ``defer_identity`` calls it itself)."""
+        if not self._deferred:
+            return []
+        deferred, self._deferred = self._deferred, []
+        for deleted, stamp, lost, recovered, _ in deferred[:-1]:
+            self._track_events(deleted, stamp, lost, recovered)
+        deleted, stamp, lost, recovered, _ = deferred[-1]
+        stamp = max(stamp, *(d[1] for d in deferred))
+        events = self._identity_step(deleted, stamp, lost, recovered)
+        for *_, touched_tracks in deferred:
+            for track_id in touched_tracks:
+                fid = self.identity.face_id_of(track_id)
+                if fid is not None:
+                    self._dirty_faces.setdefault(fid, stamp)
+        self._maintain_faces(stamp)
+        return events
 
     def _camera_rate_ok(self, camera_id: str, now_s: float) -> bool:
         """Whether the camera sent fewer than ``max_camera_rate_hz`` frames in the second before ``now_s``
@@ -503,6 +527,7 @@ class MasterCore:
 
     def tick(self, now_s: float) -> None:
         """Advance time without a frame (tracks time out, released faces are saved)."""
+        self.finish_frames()
         if not math.isfinite(now_s) or now_s <= self._last_stamp:
             return
         result = self.tracker.advance(now_s)
@@ -647,8 +672,9 @@ class MasterCore:
         return part
 
     # ------------------------------------------------------------------------------ identities
-    def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
-                       recovered: Iterable[int] = ()) -> list[Any]:
+    def _track_events(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
+                      recovered: Iterable[int] = ()) -> None:
+        """The tracker's lost / recovered / deleted tracks of one update, told to the face table."""
         for track_id in lost:
             self.identity.track_lost(track_id)
         for track_id in recovered:
@@ -658,6 +684,10 @@ class MasterCore:
             self._face_obs.pop(track_id, None)
             self._birth.pop(track_id, None)
             self._moved.discard(track_id)
+
+    def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
+                       recovered: Iterable[int] = ()) -> list[Any]:
+        self._track_events(deleted, stamp, lost, recovered)
         events = self.identity.step(stamp)
         if self.online_metric is not None:
             self._online_metric_step(stamp)
@@ -775,6 +805,7 @@ class MasterCore:
     def flush(self) -> None:
         """Write every face with unsaved features (and the online update's pairs) to the store, and stop the
         body-metric worker (call at shutdown)."""
+        self.finish_frames()
         for fid in list(self._dirty_faces):
             self._save_faces([fid])
         self._save_body_pairs(self._last_stamp, force=True)

@@ -121,7 +121,7 @@ def tracks_to_msg(tracks: list[NamedTrackRecord], stamp_s: float, frame_id: str,
         m.identity_evidence = tr.identity_evidence
         m.position.x, m.position.y = float(tr.position_xy[0]), float(tr.position_xy[1])
         m.velocity.x, m.velocity.y = float(tr.velocity_xy[0]), float(tr.velocity_xy[1])
-        m.covariance = [float(v) for v in np.asarray(tr.covariance, dtype=np.float64).reshape(16)]
+        m.covariance = np.asarray(tr.covariance, dtype=np.float64).reshape(16)  # the setter copies it
         m.height_m = float(tr.height_m) if math.isfinite(tr.height_m) else 0.0
         m.state = int(tr.state)
         set_stamp(m.first_seen, max(0.0, tr.first_seen_s))

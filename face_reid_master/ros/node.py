@@ -241,8 +241,9 @@ class MasterNode(ManagedNode):
     def _on_frame(self, msg: Any) -> None:
         """A camera message: a cycle with it and everything else already waiting (the cycle drains every camera
         subscription, so the executor finds nothing left for the messages that came meanwhile)."""
-        self._receive(msg, self.now_s())
-        self._cycle()
+        now = self.now_s()
+        self._receive(msg, now)
+        self._cycle(now)
 
     @property
     def frames_dropped_overload(self) -> int:
@@ -295,12 +296,13 @@ class MasterNode(ManagedNode):
                 self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
                                    1, warn=True)
 
-    def _cycle(self) -> None:
-        """One master cycle: everything received since the last one, in stamp order, then one publish."""
+    def _cycle(self, now: float) -> None:
+        """One master cycle: everything received since the last one (by ``now``, the node clock's seconds), in
+        stamp order, then one publish."""
         core, health = self.core, self.health
         if core is None or health is None or self.tracks_pub is None:
             return
-        self._drain(self.now_s())
+        self._drain(now)
         frames, dropped = self._intake.take(self._budget.frames())
         if dropped:
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
@@ -308,10 +310,13 @@ class MasterNode(ManagedNode):
                                self.frames_dropped_overload, warn=True)
         t_cycle = time.perf_counter()
         newest = -float("inf")
-        for pending in frames:
-            stamp = self._apply(core, health, pending.payload)
-            if stamp is not None:
-                newest = max(newest, stamp)
+        try:
+            for pending in frames:
+                stamp = self._apply(core, health, pending.payload, now)
+                if stamp is not None:
+                    newest = max(newest, stamp)
+        finally:  # one identity update for the cycle's frames
+            self._log_identity_events(core.finish_frames())
         self._budget.spent(len(frames), (time.perf_counter() - t_cycle) * 1e3)
         if newest == -float("inf"):
             return
@@ -340,8 +345,9 @@ class MasterNode(ManagedNode):
         if self._unpublished_stamp is not None and self._publish_allowed(now):
             self._publish(self._unpublished_stamp, now)
 
-    def _apply(self, core: MasterCore, health: NodeHealth, msg: Any) -> float | None:
-        """One camera message into the core; its stamp when applied, None when refused (counted, logged)."""
+    def _apply(self, core: MasterCore, health: NodeHealth, msg: Any, now: float) -> float | None:
+        """One camera message received by ``now`` into the core; its stamp when applied, None when refused
+        (counted, logged)."""
         try:
             record = frame_from_msg(msg)
         except (ValueError, TypeError) as exc:
@@ -353,7 +359,8 @@ class MasterNode(ManagedNode):
                                      f"expected {self.values['world_frame_id']!r}")
             return None
         t0 = time.perf_counter()
-        outcome = core.process_frame(record, self.now_s() if self.values["check_stamps_against_clock"] else None)
+        outcome = core.process_frame(record, now if self.values["check_stamps_against_clock"] else None,
+                                     defer_identity=True)
         if not outcome.accepted:
             self._reject(outcome.code, f"frame from {shown(record.camera_id, 64)} rejected: {outcome.reason}")
             return None
@@ -361,9 +368,11 @@ class MasterNode(ManagedNode):
                                sum(1 for p in record.people if p.embedding is not None))
         for notice in outcome.notices:
             self.get_logger().warning(notice[:_MAX_LOG_CHARS])
-        for ev in outcome.identity_events:
-            self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")
         return record.stamp_s
+
+    def _log_identity_events(self, events: list[Any]) -> None:
+        for ev in events:
+            self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")
 
     def _tick(self) -> None:
         if self.core is None:

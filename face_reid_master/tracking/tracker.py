@@ -59,6 +59,7 @@ IndexArray = NDArray[np.intp]
 
 _PRUNE_MARGIN_S = 1e-6  # history kept slightly beyond max_detection_delay_s
 _TENTATIVE = int(TrackState.TENTATIVE)
+_STATES = {int(s): s for s in TrackState}  # stored state code -> TrackState
 _NO_INDEX = np.zeros(0, dtype=np.intp)
 
 
@@ -220,30 +221,29 @@ class Tracker:
         assert at is not None
         t_out = np.maximum(self._t, at)
         x, P = self._model.predict(self._x, self._P, t_out - self._t)
+        x.flags.writeable = False  # fresh arrays: the snapshots hold read-only views of them
+        P.flags.writeable = False
         window_start = (clock if clock is not None else at) - self._cfg.camera_window_s - EPS_S
         out: list[TrackSnapshot] = []
-        for i in range(n):
-            state = TrackState(int(self._state[i]))
+        for i, (tid, code, t, created, last_seen, hits) in enumerate(zip(
+                self._ids.tolist(), self._state.tolist(), t_out.tolist(), self._created.tolist(),
+                self._last_seen.tolist(), self._hits.tolist(), strict=True)):
+            state = _STATES[code]
             if not include_tentative and state is TrackState.TENTATIVE:
                 continue
             hist = self._hist[i]
-            cov = P[i].copy()
-            pos = x[i, :2].copy()
-            vel = x[i, 2:].copy()
-            for arr in (cov, pos, vel):
-                arr.flags.writeable = False
             out.append(
                 TrackSnapshot(
-                    track_id=int(self._ids[i]),
+                    track_id=tid,
                     state=state,
-                    position_xy=pos,
-                    velocity_xy=vel,
-                    covariance=cov,
-                    stamp_s=float(t_out[i]),
-                    created_s=float(self._created[i]),
-                    last_seen_s=float(self._last_seen[i]),
-                    hits=int(self._hits[i]),
-                    cameras=frozenset(c for c, t in hist.cameras.items() if t >= window_start),
+                    position_xy=x[i, :2],
+                    velocity_xy=x[i, 2:],
+                    covariance=P[i],
+                    stamp_s=t,
+                    created_s=created,
+                    last_seen_s=last_seen,
+                    hits=hits,
+                    cameras=frozenset(c for c, t_cam in hist.cameras.items() if t_cam >= window_start),
                     height_m=hist.height_m,
                 )
             )

@@ -275,3 +275,31 @@ def test_the_online_body_metric_survives_a_restart_and_forgetting_removes_its_pa
         core.tick(1.0)  # the removal is due for a re-fit at once
         assert core.stats.body_metric_refits == 1
         assert not np.allclose(core.body_fused.metric.metric, restored.metric.metric, rtol=1e-6)
+
+
+def test_frames_deferred_to_one_identity_update_per_cycle_give_the_same_identities(embeddings) -> None:
+    """A node applies a cycle's frames with defer_identity and then finish_frames: the events come from
+    finish_frames only, and leave-and-return gives the same faces as one identity update per frame."""
+    a, b = embeddings[IDS[0]], embeddings[IDS[1]]
+
+    def run(cycle: int) -> tuple[list[tuple[int, int]], int, int]:
+        core, events, k = MasterCore(_config()), 0, 0
+        scenes = [({"a": (np.array([0.0, 0.0]), a[:5]), "b": (np.array([0.0, 2.0]), b[:5])}, 0.0, 4.0),
+                  ({}, 4.0, 7.0), ({"a": (np.array([5.0, -1.0]), a[5:])}, 7.0, 11.0)]
+        for who, t0, t1 in scenes:
+            for j, t in enumerate(np.arange(t0, t1, 0.1)):
+                people = tuple(PersonRecord(np.array([s[0] + 0.5 * (t - t0), s[1], 0.0]), 0.05, 1.75,
+                                            e[j % len(e)], 0.9, 0.8) for s, e in who.values())
+                out = core.process_frame(CameraFrameRecord(("cam_a", "cam_b")[k % 2], float(t), people),
+                                         defer_identity=cycle > 1)
+                assert out.accepted and (cycle == 1 or out.identity_events == ())
+                events += len(out.identity_events)
+                k += 1
+                if k % cycle == 0:
+                    events += len(core.finish_frames())
+        events += len(core.finish_frames())
+        return sorted((tr.track_id, tr.face_id) for tr in core.tracks()), len(core.identity.face_ids()), events
+
+    per_frame = run(1)
+    assert per_frame[0] and per_frame[0][0][1] != 0 and per_frame[1] == 2 and per_frame[2] > 0
+    assert run(3) == per_frame
