@@ -389,6 +389,7 @@ class MasterCore:
         self._moved: set[int] = set()  # tracks that moved away from where they appeared
         self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
         self._dirty_faces: dict[int, float] = {}  # face id -> first unsaved change (s)
+        self._write_failures_seen = 0  # background save failures already counted in stats.store_errors
         # frames applied with defer_identity: (deleted, stamp, lost, recovered, tracks given a face observation)
         self._deferred: list[tuple[tuple[int, ...], float, tuple[int, ...], tuple[int, ...], set[int]]] = []
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
@@ -787,6 +788,9 @@ class MasterCore:
             self.store.save_faces(faces)
         except Exception:  # the store logs; identity keeps working in memory
             self.stats.store_errors += 1
+        # a store that writes in the background (storage.write_behind) counts its failures itself
+        self.stats.store_errors += getattr(self.store, "write_failures", 0) - self._write_failures_seen
+        self._write_failures_seen = getattr(self.store, "write_failures", 0)
 
     def _prune_unnamed(self, stamp: float) -> None:
         """Retention: forget unnamed faces the store says are too old (never those on live tracks)."""

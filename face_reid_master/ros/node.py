@@ -11,6 +11,7 @@ dropped and counted when more arrived than ``cycle_budget_ms`` allows) and publi
 
 from __future__ import annotations
 
+import gc
 import re
 import sys
 import time
@@ -150,6 +151,9 @@ class MasterNode(ManagedNode):
         self._timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
         assert self.health is not None
         self.health.start(self.now_s())
+        # What exists now (modules, models, loaded faces) lives as long as the node: out of the collector's full
+        # passes, which would otherwise scan it all and stall a cycle for tens of ms.
+        gc.freeze()
         self.get_logger().info(f"master: publishing {self.tracks_pub.topic_name}")
 
     def deactivate(self) -> None:
@@ -185,11 +189,14 @@ class MasterNode(ManagedNode):
     # ------------------------------------------------------------------ set-up
     def _open_store(self) -> Any:
         from face_reid_master.storage.face_store import FaceStore, default_db_path
+        from face_reid_master.storage.write_behind import WriteBehindStore
 
         path = Path(str(self.values["db_path"])) if self.values["db_path"] else default_db_path()
         retention = float(self.values["retention_unnamed_s"]) or None
         space = str(self.values["embedding_space"])
-        store = FaceStore(path, retention_unnamed_s=retention, embedding_dim=space_dim(space), embedding_space=space)
+        # commits (fsync) on a worker thread: a cycle never waits for the disk
+        store = WriteBehindStore(lambda: FaceStore(path, retention_unnamed_s=retention, embedding_dim=space_dim(space),
+                                                   embedding_space=space))
         if store.recovered_from is not None:
             self.get_logger().error(
                 f"face database {path} was corrupt: moved to {store.recovered_from}, started a fresh one"
