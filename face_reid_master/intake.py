@@ -77,16 +77,20 @@ def _drop_fairly(frames: list[PendingFrame[T]], excess: int) -> list[PendingFram
 
 @dataclass
 class CycleBudget:
-    """How many frames one cycle may apply: ``budget_ms`` over the running mean cost of a frame.
+    """How many frames one cycle may apply: what ``budget_ms`` leaves after the cycle's own cost, over the
+    running mean cost of a frame.
 
-    ``budget_ms``: the time one cycle may spend applying frames (ms, > 0); ``min_frames``: applied however
-    slow frames are (>= 1); ``smoothing``: weight of the newest cost in the running mean (0 < s <= 1).
+    A cycle costs its frames (tracking each) plus a part paid once however many frames it holds (the identity
+    update); both are learnt apart, so a busy cycle is not refused frames it has time for.
+    ``budget_ms``: the time one cycle may spend (ms, > 0); ``min_frames``: applied however slow frames are
+    (>= 1); ``smoothing``: weight of the newest cost in the running means (0 < s <= 1).
     """
 
     budget_ms: float = 40.0
     min_frames: int = 4
     smoothing: float = 0.1
-    mean_cost_ms: float = 0.0
+    mean_cost_ms: float = 0.0  # per frame
+    mean_cycle_ms: float = 0.0  # per cycle, on top of its frames
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.budget_ms) and self.budget_ms > 0):
@@ -98,14 +102,20 @@ class CycleBudget:
 
     def frames(self) -> int:
         """The most frames the next cycle may apply."""
-        if self.mean_cost_ms <= 0.0:  # nothing measured yet: no limit
+        if self.mean_cost_ms <= 0.0 and self.mean_cycle_ms <= 0.0:  # nothing measured yet: no limit
             return _UNLIMITED
-        return max(self.min_frames, int(self.budget_ms / self.mean_cost_ms))
+        return max(self.min_frames, int((self.budget_ms - self.mean_cycle_ms) / max(self.mean_cost_ms, 1e-3)))
 
-    def spent(self, frames: int, elapsed_ms: float) -> None:
-        """Learn from a cycle that applied ``frames`` in ``elapsed_ms``."""
+    def spent(self, frames: int, elapsed_ms: float, cycle_ms: float = 0.0) -> None:
+        """Learn from a cycle that applied ``frames`` in ``elapsed_ms``, of which ``cycle_ms`` were paid once for
+        the whole cycle."""
         if frames <= 0 or not math.isfinite(elapsed_ms) or elapsed_ms < 0:
             return
-        cost = elapsed_ms / frames
-        self.mean_cost_ms = cost if self.mean_cost_ms <= 0 else \
-            (1.0 - self.smoothing) * self.mean_cost_ms + self.smoothing * cost
+        cycle_ms = min(max(cycle_ms, 0.0), elapsed_ms) if math.isfinite(cycle_ms) else 0.0
+        cost = (elapsed_ms - cycle_ms) / frames
+        if self.mean_cost_ms <= 0 and self.mean_cycle_ms <= 0:  # the first measurement
+            self.mean_cost_ms, self.mean_cycle_ms = cost, cycle_ms
+            return
+        w = self.smoothing
+        self.mean_cost_ms = (1.0 - w) * self.mean_cost_ms + w * cost
+        self.mean_cycle_ms = (1.0 - w) * self.mean_cycle_ms + w * cycle_ms

@@ -323,8 +323,10 @@ class MasterNode(ManagedNode):
                 if stamp is not None:
                     newest = max(newest, stamp)
         finally:  # one identity update for the cycle's frames
+            t_identity = time.perf_counter()
             self._log_identity_events(core.finish_frames())
-        self._budget.spent(len(frames), (time.perf_counter() - t_cycle) * 1e3)
+        t_end = time.perf_counter()
+        self._budget.spent(len(frames), (t_end - t_cycle) * 1e3, (t_end - t_identity) * 1e3)
         if newest == -float("inf"):
             return
         now = self.now_s()
@@ -435,6 +437,7 @@ class MasterNode(ManagedNode):
             "frames_dropped_overload": self.frames_dropped_overload,
             "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
             "cycle_frame_cost_ms": self._budget.mean_cost_ms,
+            "cycle_fixed_cost_ms": self._budget.mean_cycle_ms,
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
                                                                        "embeddings_rejected",

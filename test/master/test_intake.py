@@ -58,6 +58,16 @@ def test_budget_is_unlimited_until_measured_then_budget_over_mean_cost() -> None
     assert budget.mean_cost_ms == pytest.approx(0.5 * 2.0 + 0.5 * 1000.0)
 
 
+def test_the_cost_paid_once_per_cycle_is_learnt_apart_from_the_cost_per_frame() -> None:
+    budget = CycleBudget(budget_ms=25.0, min_frames=1, smoothing=1.0)
+    budget.spent(2, 7.0, cycle_ms=5.0)  # 1 ms per frame + 5 ms identity update
+    assert budget.mean_cost_ms == pytest.approx(1.0) and budget.mean_cycle_ms == pytest.approx(5.0)
+    assert budget.frames() == 20  # (25 - 5) / 1, where 25 / 3.5 per frame of this cycle would allow 7
+    budget.spent(4, 3.0, cycle_ms=9.0)  # the part paid once cannot exceed the whole
+    assert budget.mean_cost_ms == pytest.approx(0.0) and budget.mean_cycle_ms == pytest.approx(3.0)
+    assert budget.frames() == 22_000  # a frame is taken to cost at least 1 us, not nothing
+
+
 @pytest.mark.parametrize(("kwargs", "name"), [({"budget_ms": 0.0}, "budget_ms"), ({"budget_ms": math.inf}, "budget_ms"),
                                               ({"min_frames": 0}, "min_frames"), ({"smoothing": 0.0}, "smoothing"),
                                               ({"smoothing": 1.5}, "smoothing")])
