@@ -131,7 +131,7 @@ class IdentityManagerBase:
         *,
         embedding_dim: int = 128,
         max_features_per_face: int = 50,
-        exact_search_max_features: int = 20_000,
+        exact_search_max_features: int = 5_000,
         shortlist_faces: int = 32,
         feature_gate_distance: float | None = None,
         release_after_inconsistent: int = 0,
