@@ -4,9 +4,11 @@ configure opens the face database, reads the gallery and the likelihood and buil
 :class:`~face_reid_master.core.MasterCore` (and the ``~/add_person``, ``~/forget_face``, ``~/list_faces``
 services); activate subscribes to the camera topics (a fixed list and/or every discovered topic matching a
 regex) and, once per cycle, applies every frame received since the last cycle in stamp order (the oldest
-dropped and counted when more arrived than ``cycle_budget_ms`` allows) and publishes
+dropped and counted when more arrived than ``cycle_budget_ms`` allows), runs one identity update for them and
+publishes
 ``face_reid_msgs/NamedTrackArray`` on ``/tracks_named`` (plus RViz markers while someone looks) and
-``/diagnostics``; deactivate / cleanup undo it (cleanup saves every face).
+``/diagnostics``; deactivate / cleanup undo it (cleanup saves every face). Faces are committed by the store's
+worker thread (:mod:`~face_reid_master.storage.write_behind`).
 """
 
 from __future__ import annotations
