@@ -13,7 +13,10 @@ Separate processes on a private ROS domain (discovery on loopback only), the rea
   the master drops the oldest frames and says what fraction;
 - ``latency_sealed`` / ``throughput_6_sealed``: the latency and 6-camera cases on a secured network (frames
   sealed with a network key); ``secured_vs_unsecured`` sets them side by side [secured, unsecured] with the
-  in-process cost of sealing and opening one frame.
+  in-process cost of sealing and opening one frame;
+- ``core_reference``: the master core alone in this process on the 20-camera case's frames: ms per frame and
+  the frames per second one core could apply at that cost (the throughput cases depend on this machine's speed
+  at the time, which varies: compare runs by it).
 
 The master runs on one core, the simulated cameras and the listener on the others (2+ CPUs). Send and receive
 times are ``time.time()`` in both processes (one machine clock). Each CameraFrame carries its send time in
@@ -393,6 +396,43 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
     return out
 
 
+def _core_reference(cameras: int = 20, seconds: float = 2.0) -> dict[str, float]:
+    """The master core alone in this process (no DDS, no store), on the 20-camera case's frames (3 people with
+    faces per frame, people in their camera's own area), one identity update per frame: ms per frame, and how
+    many frames per second one core of this machine could apply at that cost. It tells a slow machine phase
+    from a slow master: the throughput cases depend on it."""
+    from plausible_faces import FaceSpace
+
+    from face_reid_master.core import MasterConfig, MasterCore
+    from face_reid_master.records import CameraFrameRecord, PersonRecord
+
+    config = MasterConfig()
+    core = MasterCore(config)
+    faces = FaceSpace.of(config.embedding_space, within=0.6)
+    rng = np.random.default_rng(0)
+    centres = faces.people(cameras * PEOPLE, rng)
+    views = faces.observe(np.repeat(centres, POOL, axis=0), rng).reshape(cameras, PEOPLE, POOL, -1)
+
+    def frame(k: int, c: int) -> CameraFrameRecord:
+        t = (k + c / cameras) / 30.0
+        return CameraFrameRecord(f"cam{c:02d}", t, tuple(
+            PersonRecord(np.array([10.0 * c + 1.2 * math.cos(0.3 * t + 2.0 * j), 1.2 * math.sin(0.3 * t + 2.0 * j)
+                                   + 3.0 * j, 0.0]), 0.05, 1.75, views[c, j, (k + 7 * j + c) % POOL], 0.9, 0.8)
+            for j in range(PEOPLE)))
+
+    warm, n = int(30 * WARMUP_S), int(30 * seconds)
+    for k in range(warm):
+        for c in range(cameras):
+            core.process_frame(frame(k, c))
+    frames = [frame(k, c) for k in range(warm, warm + n) for c in range(cameras)]
+    t0 = time.perf_counter()
+    for f in frames:
+        core.process_frame(f)
+    ms = (time.perf_counter() - t0) * 1e3 / len(frames)
+    return {"cameras": cameras, "frames": len(frames), "ms_per_frame": round(ms, 3),
+            "frames_per_s_one_core": round(1000.0 / ms, 1)}
+
+
 def _sealing_cost(key: Path, frames: int = 300) -> dict[str, float]:
     """Microseconds to seal a CameraFrame of PEOPLE faces (serialize + AES-GCM) and to open it (the reverse),
     in this process, median over ``frames``."""
@@ -457,6 +497,7 @@ def main() -> int:
         latency_sealed = run_case("latency_sealed", 1, 30.0, 5.0, True, domain_id, work, key=key)
         six_sealed = run_case("throughput_6_sealed", 6, 30.0, args.seconds, True, domain_id, work, key=key)
         sealing = _sealing_cost(key)
+        core_reference = _core_reference()
     finally:
         shutil.rmtree(work, ignore_errors=True)
     base_med = baseline["latency_ms"]["median"]
@@ -477,6 +518,7 @@ def main() -> int:
             "overload_p99_ms": overload["latency_ms"]["p99"], "overload_p99_target_ms": TARGET_P99_MS["overload"],
             "overload_dropped_fraction": overload.get("master_dropped_fraction"),
         },
+        "core_reference": core_reference,
         "secured_vs_unsecured": {
             "seal_plus_open_us_per_frame": sealing,
             "latency_1cam_median_ms": [latency_sealed["latency_ms"]["median"], lat_med],
