@@ -14,7 +14,8 @@ Separate processes on a private ROS domain (discovery on loopback only), the rea
 - ``latency_sealed`` / ``throughput_6_sealed``: the latency and 6-camera cases on a secured network (frames
   sealed with a network key); ``secured_vs_unsecured`` sets them side by side [secured, unsecured] with the
   in-process cost of sealing and opening one frame;
-- ``core_reference``: the master core alone in this process on the 20-camera case's frames: ms per frame and
+- ``core_reference``: the master core alone in this process on the 20-camera case's frames, measured just before
+  that case: ms per frame and
   the frames per second one core could apply at that cost (the throughput cases depend on this machine's speed
   at the time, which varies: compare runs by it).
 
@@ -489,6 +490,7 @@ def main() -> int:
         baseline = run_case("baseline", 1, 30.0, 5.0, False, domain_id, work)
         latency = run_case("latency", 1, 30.0, 5.0, True, domain_id, work)
         six = run_case("throughput_6", 6, 30.0, args.seconds, True, domain_id, work)
+        core_reference = _core_reference()  # just before the case that depends most on this machine's speed
         twenty = run_case("throughput_20", 20, 30.0, args.seconds, True, domain_id, work)
         overload = run_case("overload", args.overload_cameras, 30.0, args.seconds, True, domain_id, work)
         from face_reid_camera.common.sealing import write_network_key
@@ -497,7 +499,6 @@ def main() -> int:
         latency_sealed = run_case("latency_sealed", 1, 30.0, 5.0, True, domain_id, work, key=key)
         six_sealed = run_case("throughput_6_sealed", 6, 30.0, args.seconds, True, domain_id, work, key=key)
         sealing = _sealing_cost(key)
-        core_reference = _core_reference()
     finally:
         shutil.rmtree(work, ignore_errors=True)
     base_med = baseline["latency_ms"]["median"]
