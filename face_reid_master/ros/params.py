@@ -50,8 +50,9 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "a capped cycle's state goes out at most 1/rate later).",
               low=0.0, high=1000.0),
     ParamSpec("cycle_budget_ms", 25.0,
-              "Time one cycle may spend applying frames (ms): frames beyond it (measured cost per frame) are "
-              "dropped oldest-first and counted, so an overloaded master keeps its latency bounded.",
+              "Time one cycle may spend applying frames (ms): frames beyond what it leaves after the cycle's own "
+              "cost (both costs measured) are dropped oldest-first and counted, so an overloaded master keeps its "
+              "latency bounded.",
               low=1.0, high=10000.0),
     ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz).",
               low=0.1, high=1000.0),
