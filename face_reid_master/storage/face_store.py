@@ -41,6 +41,7 @@ from types import TracebackType
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from face_reid_master.identity.predefined_people import check_person_name
 from face_reid_master.identity.records import LearnedFace
@@ -205,9 +206,10 @@ class FaceStore:
         self.salvaged_face_ids: list[int] = []  # faces read back from a corrupt file moved aside
         self._ledger_ids: set[int] = set()
         self._ledger_max = 0
-        # face id -> hash of each stored feature row, as this connection last committed them: a face saved again
-        # rewrites only the rows that changed (the feature bank replaces one row at a time)
-        self._row_hashes: dict[int, list[int]] = {}
+        # face id -> (hash of all its features, hash of each row), as this connection last committed them: a face
+        # saved again rewrites only the rows that changed (the feature bank replaces one row at a time), none
+        # when its features did not change (then only its counters)
+        self._row_hashes: dict[int, tuple[int, list[int]]] = {}
         self._lock_fd: int | None = None
         self._conn: sqlite3.Connection | None = None
         if (not create or self.read_only) and not os.path.lexists(self.path):
@@ -489,6 +491,7 @@ class FaceStore:
             with self._transaction() as conn:
                 for face in salvaged:
                     self._write_face(conn, face, self._encode(face))
+                self._bump_max_face_id(conn, max(f.face_id for f in salvaged))
         stored = set(self.face_ids())
         self.lost_face_ids = sorted(ledger_ids - stored)
         self._ledger_max = max(ledger_max, self._meta_max_face_id(), max(stored, default=0))
@@ -573,7 +576,8 @@ class FaceStore:
         except sqlite3.Error as exc:
             raise FaceStoreError(f"face store {self.path}: {exc}") from exc
 
-    def _encode(self, face: LearnedFace) -> list[tuple[int, int, bytes]]:
+    def _encode(self, face: LearnedFace) -> npt.NDArray[np.float32]:
+        """The face's features as stored (contiguous little-endian float32); ValueError for an invalid face."""
         if not isinstance(face, LearnedFace):
             raise ValueError(f"expected a LearnedFace, got {type(face).__name__}")
         feats = face.features
@@ -583,13 +587,14 @@ class FaceStore:
             )
         if not np.all(np.isfinite(feats)):
             raise ValueError(f"face {face.face_id}: features contain NaN or Inf")
-        raw = np.ascontiguousarray(feats, dtype=_VECTOR_DTYPE)
-        return [(face.face_id, i, raw[i].tobytes()) for i in range(raw.shape[0])]
+        return np.ascontiguousarray(feats, dtype=_VECTOR_DTYPE)
 
-    def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, rows: list[tuple[int, int, bytes]]) -> list[int]:
-        """Upsert the face's row and its feature rows; returns the rows' hashes (for :attr:`_row_hashes` once
-        committed). Only rows that differ from what this connection last committed are written, when the
-        stored row count still matches (else, e.g. after another process touched the face, all of them)."""
+    def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, raw: npt.NDArray[np.float32]
+                    ) -> tuple[int, list[int]]:
+        """Upsert the face's row and its feature rows; returns the hash of all its features and of each row (for
+        :attr:`_row_hashes` once committed). Only rows that differ from what this connection last committed are
+        written (none when no feature changed), when the stored row count still matches (else, e.g. after
+        another process touched the face, all of them)."""
         fid = face.face_id
         conn.execute(
             "INSERT INTO faces(face_id, name, created_s, last_seen_s, n_observations) VALUES (?, ?, ?, ?, ?) "
@@ -597,20 +602,24 @@ class FaceStore:
             "last_seen_s = excluded.last_seen_s, n_observations = excluded.n_observations",
             (fid, face.name, face.created_s, face.last_seen_s, face.n_observations),
         )
-        hashes = [hash(r[2]) for r in rows]
+        digest = hash(raw.tobytes())
         old = self._row_hashes.get(fid)
-        if old is not None and conn.execute("SELECT COUNT(*) FROM features WHERE face_id = ?",
-                                            (fid,)).fetchone()[0] == len(old):
-            changed = [r for i, r in enumerate(rows) if i >= len(old) or old[i] != hashes[i]]
+        same_count = old is not None and conn.execute("SELECT COUNT(*) FROM features WHERE face_id = ?",
+                                                      (fid,)).fetchone()[0] == len(old[1])
+        if same_count and old is not None and old[0] == digest and len(old[1]) == raw.shape[0]:
+            return old  # the features are stored as they are
+        rows = [(fid, i, raw[i].tobytes()) for i in range(raw.shape[0])]
+        hashes = [hash(r[2]) for r in rows]
+        if same_count and old is not None:
+            changed = [r for i, r in enumerate(rows) if i >= len(old[1]) or old[1][i] != hashes[i]]
             conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?) "
                              "ON CONFLICT(face_id, idx) DO UPDATE SET vector = excluded.vector", changed)
-            if len(old) > len(rows):
+            if len(old[1]) > len(rows):
                 conn.execute("DELETE FROM features WHERE face_id = ? AND idx >= ?", (fid, len(rows)))
         else:
             conn.execute("DELETE FROM features WHERE face_id = ?", (fid,))
             conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?)", rows)
-        self._bump_max_face_id(conn, fid)
-        return hashes
+        return digest, hashes
 
     @staticmethod
     def _bump_max_face_id(conn: sqlite3.Connection, face_id: int) -> None:
@@ -704,7 +713,8 @@ class FaceStore:
             return 0
         try:
             with self._transaction() as conn:
-                written = {face.face_id: self._write_face(conn, face, rows) for face, rows in batch}
+                written = {face.face_id: self._write_face(conn, face, raw) for face, raw in batch}
+                self._bump_max_face_id(conn, max(ids))
         except BaseException:
             for fid in ids:  # rolled back: what is stored is not known any more
                 self._row_hashes.pop(fid, None)

@@ -182,6 +182,10 @@ def test_saving_again_rewrites_only_the_rows_that_changed(db: Path) -> None:
         store.save_face(LearnedFace(3, feats, None, 1.0, 3.0, 11))
         assert conn.total_changes - before <= 4  # the face row, 2 feature rows, the id high-water mark
         assert store.load_faces()[0].features.tobytes() == feats.tobytes()
+        before = conn.total_changes
+        store.save_face(LearnedFace(3, feats.copy(), None, 1.0, 3.5, 12))  # features unchanged: counters only
+        assert conn.total_changes - before <= 2
+        assert store.list_faces()[0].n_observations == 12
         store.save_face(LearnedFace(3, feats[:30], None, 1.0, 4.0, 12))  # fewer rows
         assert store.load_faces()[0].features.tobytes() == feats[:30].tobytes()
         store.save_face(LearnedFace(3, feats[:40], None, 1.0, 5.0, 13))  # more rows
