@@ -6,7 +6,10 @@ frames over DDS is in test_camera_node_dds.py.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -91,16 +94,37 @@ def _images(color: np.ndarray, color_enc: str, depth: np.ndarray, depth_enc: str
     return out
 
 
-def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
-    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_diag", "-p", "detect_faces:=false"])
+@contextlib.contextmanager
+def _camera_with_probe(ctx) -> Iterator[tuple[CameraNode, Node, SingleThreadedExecutor]]:
+    """A camera node and a probe node of context ``ctx`` on one executor; all torn down on exit."""
     node = CameraNode(context=ctx)
     probe = Node("probe", context=ctx)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
     executor.add_node(probe)
-    got: list[DiagnosticArray] = []
-    probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
     try:
+        yield node, probe, executor
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def _feed(node: CameraNode, color_bgr: np.ndarray, depth_mm: np.ndarray) -> Any:
+    """One colour + depth frame (and its camera info) straight into the node's callbacks; returns the stamp."""
+    stamp = node.get_clock().now().to_msg()
+    color, depth = _images(color_bgr, "bgr8", depth_mm, "16UC1", stamp)
+    node._on_info(_camera_info(stamp))
+    node._on_color(color)
+    node._on_depth(depth)
+    return stamp
+
+
+def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_diag", "-p", "detect_faces:=false"])
+    with _camera_with_probe(ctx) as (node, probe, executor):
+        got: list[DiagnosticArray] = []
+        probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         stamp = node.get_clock().now().to_msg()
         depth_mm = np.zeros((480, 640), np.uint16)
@@ -131,10 +155,6 @@ def test_diagnostics_report_counts_timings_and_rejections(ros_context) -> None:
         assert float(values["people_per_frame"]) == 0.0
         assert (status.level == b"\x01") == (values["floor_found"] == "False")  # floor lost: WARN
         assert ("floor lost" in status.message) == (values["floor_found"] == "False")
-    finally:
-        executor.shutdown()
-        probe.destroy_node()
-        node.destroy_node()
 
 
 def test_malformed_input_is_logged_counted_and_survived(ros_context) -> None:
@@ -286,35 +306,22 @@ def test_with_a_network_key_frames_go_out_sealed_only(ros_context, tmp_path: Pat
     key = load_network_key(write_network_key(tmp_path / "network.key"))
     ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_sealed", "-p", "detect_faces:=false",
                        "-p", f"network_key_path:={tmp_path / 'network.key'}"])
-    node = CameraNode(context=ctx)
-    probe = Node("probe", context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    executor.add_node(probe)
-    sealed: list = []
-    plain: list = []
-    probe.create_subscription(Sealed, "/face_reid/frames_sealed", sealed.append, 10)
-    probe.create_subscription(CameraFrame, "/face_reid/frames", plain.append, 10)
-    try:
+    with _camera_with_probe(ctx) as (node, probe, executor):
+        sealed: list = []
+        plain: list = []
+        probe.create_subscription(Sealed, "/face_reid/frames_sealed", sealed.append, 10)
+        probe.create_subscription(CameraFrame, "/face_reid/frames", plain.append, 10)
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         assert spin_until(executor, lambda: node.publisher.get_subscription_count() == 1)
-        stamp = node.get_clock().now().to_msg()
         depth_mm = np.zeros((480, 640), np.uint16)
         depth_mm[240:] = 2500
-        color, depth = _images(np.full((480, 640, 3), 90, np.uint8), "bgr8", depth_mm, "16UC1", stamp)
-        node._on_info(_camera_info(stamp))
-        node._on_color(color)
-        node._on_depth(depth)
+        stamp = _feed(node, np.full((480, 640, 3), 90, np.uint8), depth_mm)
         assert spin_until(executor, lambda: len(sealed) == 1)
         frame = open_message(Opener(key), sealed[0], CameraFrame)
         assert frame.camera_id == "cam_sealed" and sealed[0].sender_id == "cam_sealed"
         assert abs(frame.header.stamp.sec + frame.header.stamp.nanosec * 1e-9
                    - (stamp.sec + stamp.nanosec * 1e-9)) < 1e-6  # the camera's stamp, through float seconds
         assert plain == [] and node.publisher.topic_name == "/face_reid/frames_sealed"
-    finally:
-        executor.shutdown()
-        probe.destroy_node()
-        node.destroy_node()
     # a key file others can read is refused at configure, with the reason
     (tmp_path / "network.key").chmod(0o644)
     node = CameraNode(context=ros_context(["--ros-args", "-p", "detect_faces:=false",
@@ -337,22 +344,13 @@ def test_floor_summary_is_published_only_when_asked_for(ros_context) -> None:
                        "-p", "describe_bodies:=false", "-p", "camera_pose_xyz_m:=[0.0, 0.0, 2.4]",
                        "-p", "camera_pose_rpy_rad:=[0.0, 0.4, 0.0]", "-p", "max_frame_age_s:=0.0",
                        "-p", "floor_map_period_s:=1.0", "-p", "floor_map_every_frames:=1"])
-    node = CameraNode(context=ctx)
-    probe = Node("probe", context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    executor.add_node(probe)
-    got: list[FloorOccupancy] = []
-    probe.create_subscription(FloorOccupancy, FLOOR_MAP_TOPIC, got.append, FLOOR_MAP_QOS)
-    try:
+    with _camera_with_probe(ctx) as (node, probe, executor):
+        got: list[FloorOccupancy] = []
+        probe.create_subscription(FloorOccupancy, FLOOR_MAP_TOPIC, got.append, FLOOR_MAP_QOS)
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         pose = CameraPose.from_xyz_rpy(0.0, 0.0, 2.4, 0.0, 0.4, 0.0)
         frame = render_scene([], CameraIntrinsics.kinect_default(640, 480), pose, walls=True, floor_size_m=8.0)
-        stamp = node.get_clock().now().to_msg()
-        color, depth = _images(frame.rgb_bgr, "bgr8", frame.depth_mm, "16UC1", stamp)
-        node._on_info(_camera_info(stamp))
-        node._on_color(color)
-        node._on_depth(depth)
+        _feed(node, frame.rgb_bgr, frame.depth_mm)
         assert spin_until(executor, lambda: len(got) > 0), "no FloorOccupancy from the camera node"
         msg = got[-1]
         assert msg.camera_id == "cam_map" and msg.frames >= 1 and msg.header.frame_id
@@ -364,10 +362,6 @@ def test_floor_summary_is_published_only_when_asked_for(ros_context) -> None:
         assert np.median(xs) == pytest.approx(4.0, abs=0.3)  # the wall ahead, at x = +4 m (within range)
         assert any(name.endswith(FLOOR_MAP_TOPIC) for name, _ in node.get_publisher_names_and_types_by_node(
             node.get_name(), node.get_namespace()))
-    finally:
-        executor.shutdown()
-        probe.destroy_node()
-        node.destroy_node()
     ctx2 = ros_context(["--ros-args", "-p", "camera_id:=cam_off", "-p", "detect_faces:=false"])
     off = CameraNode(context=ctx2)
     try:
