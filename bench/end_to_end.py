@@ -76,6 +76,29 @@ def _is_marked(sec: int, nsec: int) -> bool:
 # Roles (run as child processes)
 
 
+def _face_views(cameras: int, space: str) -> np.ndarray:
+    """(cameras, PEOPLE, POOL, dim) face embeddings of ``space``: each camera's people, POOL views each (different
+    people 1.33, one person's views 0.6 decision distances apart)."""
+    from plausible_faces import FaceSpace
+
+    faces = FaceSpace.of(space, within=0.6)
+    rng = np.random.default_rng(0)
+    centres = faces.people(cameras * PEOPLE, rng)
+    return faces.observe(np.repeat(centres, POOL, axis=0), rng).reshape(cameras, PEOPLE, POOL, -1)
+
+
+def _view(views: np.ndarray, camera: int, person: int, frame: int) -> np.ndarray:
+    """The view of ``person`` that camera ``camera`` sends in its frame ``frame`` (cycling through the pool)."""
+    return views[camera, person, (frame + 7 * person + camera) % POOL]
+
+
+def _walk_xy(camera: int, person: int, t_s: float) -> tuple[float, float]:
+    """Where person ``person`` of camera ``camera`` is ``t_s`` into the run: a slow circle in its camera's own area
+    (areas 10 m apart, people 3 m apart)."""
+    angle = 0.3 * t_s + person * 2.0
+    return 10.0 * camera + 1.2 * math.cos(angle), 1.2 * math.sin(angle) + 3.0 * person
+
+
 def role_publisher(args: argparse.Namespace) -> int:
     """N simulated cameras at R Hz each (phases spread), 3 people per frame with face embeddings.
 
@@ -103,15 +126,11 @@ def role_publisher(args: argparse.Namespace) -> int:
     else:
         pubs = [node.create_publisher(CameraFrame, f"{args.prefix}/cam{c:02d}/face_reid/frames", qos)
                 for c in range(args.cameras)]
-    from plausible_faces import FaceSpace
 
     from face_reid_master.core import MasterConfig
 
     space = MasterConfig().embedding_space  # what the default master compares (cameras send it)
-    faces = FaceSpace.of(space, within=0.6)  # different people 1.33, one person's frames 0.6 decision distances
-    rng = np.random.default_rng(0)
-    centres = faces.people(args.cameras * PEOPLE, rng)
-    views = faces.observe(np.repeat(centres, POOL, axis=0), rng).reshape(args.cameras, PEOPLE, POOL, -1)
+    views = _face_views(args.cameras, space)
     pool = []
     for c in range(args.cameras):
         msgs = []
@@ -123,7 +142,7 @@ def role_publisher(args: argparse.Namespace) -> int:
                 obs = PersonObservation()
                 obs.position_std_m, obs.height_m = 0.05, 1.75
                 obs.face_found, obs.face_score, obs.face_quality = True, 0.9, 0.8
-                obs.embedding = views[c, j, (k + 7 * j + c) % POOL].tolist()
+                obs.embedding = _view(views, c, j, k).tolist()
                 obs.embedding_space = space
                 msg.people.append(obs)
             msgs.append(msg)
@@ -159,10 +178,7 @@ def role_publisher(args: argparse.Namespace) -> int:
             msg.header.stamp.sec, msg.header.stamp.nanosec = _mark_stamp(now)
             t_rel = now - start
             for j, obs in enumerate(msg.people):
-                # each person walks a slow circle in its camera's own area (areas 10 m apart, people 3 m apart)
-                angle = 0.3 * t_rel + j * 2.0
-                obs.position_world.x = float(10.0 * c + 1.2 * math.cos(angle))
-                obs.position_world.y = float(1.2 * math.sin(angle) + 3.0 * j)
+                obs.position_world.x, obs.position_world.y = _walk_xy(c, j, t_rel)
             pub.publish(msg if sealers is None else seal_message(sealers[c], msg))
             stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
         else:
@@ -402,23 +418,18 @@ def _core_reference(cameras: int = 20, seconds: float = 2.0) -> dict[str, float]
     faces per frame, people in their camera's own area), one identity update per frame: ms per frame, and how
     many frames per second one core of this machine could apply at that cost. It tells a slow machine phase
     from a slow master: the throughput cases depend on it."""
-    from plausible_faces import FaceSpace
 
     from face_reid_master.core import MasterConfig, MasterCore
     from face_reid_master.records import CameraFrameRecord, PersonRecord
 
     config = MasterConfig()
     core = MasterCore(config)
-    faces = FaceSpace.of(config.embedding_space, within=0.6)
-    rng = np.random.default_rng(0)
-    centres = faces.people(cameras * PEOPLE, rng)
-    views = faces.observe(np.repeat(centres, POOL, axis=0), rng).reshape(cameras, PEOPLE, POOL, -1)
+    views = _face_views(cameras, config.embedding_space)
 
     def frame(k: int, c: int) -> CameraFrameRecord:
         t = (k + c / cameras) / 30.0
         return CameraFrameRecord(f"cam{c:02d}", t, tuple(
-            PersonRecord(np.array([10.0 * c + 1.2 * math.cos(0.3 * t + 2.0 * j), 1.2 * math.sin(0.3 * t + 2.0 * j)
-                                   + 3.0 * j, 0.0]), 0.05, 1.75, views[c, j, (k + 7 * j + c) % POOL], 0.9, 0.8)
+            PersonRecord(np.array([*_walk_xy(c, j, t), 0.0]), 0.05, 1.75, _view(views, c, j, k), 0.9, 0.8)
             for j in range(PEOPLE)))
 
     warm, n = int(30 * WARMUP_S), int(30 * seconds)

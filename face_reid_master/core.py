@@ -499,8 +499,8 @@ class MasterCore:
         deferred, self._deferred = self._deferred, []
         for deleted, stamp, lost, recovered, _ in deferred[:-1]:
             self._track_events(deleted, stamp, lost, recovered)
-        deleted, stamp, lost, recovered, _ = deferred[-1]
-        stamp = max(stamp, *(d[1] for d in deferred))
+        deleted, _, lost, recovered, _ = deferred[-1]
+        stamp = max(d[1] for d in deferred)
         events = self._identity_step(deleted, stamp, lost, recovered)
         for *_, touched_tracks in deferred:
             for track_id in touched_tracks:

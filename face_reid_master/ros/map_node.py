@@ -249,7 +249,7 @@ def _run_once(args: argparse.Namespace, ros_argv: list[str]) -> int:
         if node.trigger_configure() != TransitionCallbackReturn.SUCCESS or \
                 node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
             print(f"[face-reid-map] FATAL: cannot start: {node.failure}", file=sys.stderr)
-            return (status := 2)
+            return 2
         why = _wait_once(node, [c for c in args.cameras.split(",") if c], args.timeout, args.settle)
         if why:
             print(f"face-reid-map: {why}", file=sys.stderr)

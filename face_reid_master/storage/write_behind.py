@@ -45,7 +45,6 @@ class WriteBehindStore:
         self._pending: dict[int, LearnedFace] = {}
         self._scheduled = False
         self.write_failures = 0  # save batches that raised (logged)
-        self.faces_written = 0
 
     def save_faces(self, faces: Iterable[LearnedFace]) -> int:
         """Hand ``faces`` to the worker (a newer snapshot of a face replaces one not yet written); how many."""
@@ -65,7 +64,7 @@ class WriteBehindStore:
         with self._lock:
             batch, self._pending, self._scheduled = list(self._pending.values()), {}, False
         try:
-            self.faces_written += self._store.save_faces(batch)
+            self._store.save_faces(batch)
         except Exception as exc:  # the frame loop carries on; the next save of these faces may succeed
             self.write_failures += 1
             _LOG.error("face store: saving faces %s failed: %s", [f.face_id for f in batch][:20],
