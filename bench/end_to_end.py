@@ -429,7 +429,8 @@ def _core_reference(cameras: int = 20, seconds: float = 2.0) -> dict[str, float]
     def frame(k: int, c: int) -> CameraFrameRecord:
         t = (k + c / cameras) / 30.0
         return CameraFrameRecord(f"cam{c:02d}", t, tuple(
-            PersonRecord(np.array([*_walk_xy(c, j, t), 0.0]), 0.05, 1.75, _view(views, c, j, k), 0.9, 0.8)
+            PersonRecord(np.array([*_walk_xy(c, j, t), 0.0]), 0.05, 1.75, _view(views, c, j, k), 0.9, 0.8,
+                         config.embedding_space)
             for j in range(PEOPLE)))
 
     warm, n = int(30 * WARMUP_S), int(30 * seconds)

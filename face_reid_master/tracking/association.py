@@ -98,13 +98,15 @@ class Associator:
         r2: FloatArray,
         stamp: float,
         appearance: FloatArray | None = None,
+        alike: NDArray[np.intp] | None = None,
     ) -> Matches:
         """Associate detections ``z`` (M, 2) with variances ``r2`` (M,) at ``stamp`` to N tracks.
 
         ``x_pred`` (N, 4) / ``P_pred`` (N, 4, 4): the tracks predicted to ``stamp``; ``state`` (N,)
         their :class:`TrackState`; ``t_last`` (N,) / ``z_last`` (N, 2): stamp and position of each
         track's newest measurement at or before ``stamp`` (its first one if it was born later).
-        ``appearance`` (N, M): body-appearance distances (NaN = unknown; None = none known).
+        ``appearance`` (N, M): body-appearance distances (NaN = unknown; None = none known); ``alike`` (M,): how many
+        tracks look like each detection (below ``appearance_match_distance``), when these N are not all of them.
         """
         d2, log_det = mahalanobis_sq(x_pred[:, :2], P_pred[:, :2, :2], z, r2)
         dist2 = ((z[None, :, :] - x_pred[:, None, :2]) ** 2).sum(axis=2)
@@ -156,18 +158,19 @@ class Associator:
                 cols_l.append(c_)
                 free_c[c_] = False
         if looks_alike is not None and free_c.any():
-            self._reattach(looks_alike, appearance, state, t_last, z_last, z, stamp, free_c, rows_l, cols_l)
+            unique = (looks_alike.sum(axis=0) if alike is None else alike) == 1  # no other track looks like it
+            self._reattach(looks_alike, unique, appearance, state, t_last, z_last, z, stamp, free_c, rows_l, cols_l)
         rows = np.concatenate(rows_l) if rows_l else _EMPTY
         cols = np.concatenate(cols_l) if cols_l else _EMPTY
         return Matches(rows, cols, near)
 
     def _reattach(
-        self, looks_alike: NDArray[np.bool_], appearance: FloatArray, state: NDArray[np.int8], t_last: FloatArray,
-        z_last: FloatArray, z: FloatArray, stamp: float, free_c: NDArray[np.bool_], rows_l: list[IndexArray],
-        cols_l: list[IndexArray],
+        self, looks_alike: NDArray[np.bool_], unique: NDArray[np.bool_], appearance: FloatArray,
+        state: NDArray[np.int8], t_last: FloatArray, z_last: FloatArray, z: FloatArray, stamp: float,
+        free_c: NDArray[np.bool_], rows_l: list[IndexArray], cols_l: list[IndexArray],
     ) -> None:
         """Pass 3: LOST tracks still unmatched take a free detection that looks like them and like no other
-        track, within walking reach of their last detection (no position gate: a hidden person reappears
+        track (``unique``), within walking reach of their last detection (no position gate: a hidden person reappears
         where the prediction is not)."""
         taken = np.zeros(state.shape[0], dtype=bool)
         for r_ in rows_l:
@@ -177,7 +180,6 @@ class Associator:
             return
         reach = self._sep + self._max_speed * np.maximum(stamp - t_last[lost], 0.0)
         dist2_last = ((z[None, :, :] - z_last[lost][:, None, :]) ** 2).sum(axis=2)
-        unique = looks_alike.sum(axis=0) == 1  # no other track looks like the detection too
         ok = looks_alike[lost] & unique[None, :] & (dist2_last < reach[:, None] ** 2) & free_c[None, :]
         if ok.any():
             r_, c_ = gnn(appearance[lost], ok)

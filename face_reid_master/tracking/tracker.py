@@ -58,7 +58,9 @@ FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.intp]
 
 _PRUNE_MARGIN_S = 1e-6  # history kept slightly beyond max_detection_delay_s
+_DUE_MARGIN_S = 1e-6  # lifecycle checks start this much before a transition is due (rounding of the time tests)
 _TENTATIVE = int(TrackState.TENTATIVE)
+_LOST = int(TrackState.LOST)
 _STATES = {int(s): s for s in TrackState}  # stored state code -> TrackState
 _NO_INDEX = np.zeros(0, dtype=np.intp)
 
@@ -95,6 +97,7 @@ class Tracker:
         self._zmeas = np.zeros((0, 2))  # position of each track's newest measurement
         self._hist: list[TrackHistory] = []
         self._looks: list[AppearanceGallery] = []  # body-appearance embeddings per track
+        self._quiet_until = -math.inf  # no lifecycle transition can fall due before this stamp
 
     # ------------------------------------------------------------------ read-only properties
     @property
@@ -264,7 +267,7 @@ class Tracker:
     def _expire_before(self, stamp: float) -> tuple[int, ...]:
         """Delete the tracks that time out by ``stamp`` when it is newer than the clock."""
         clock = self._clock.now
-        if clock is None or stamp <= clock or not self._ids.shape[0]:
+        if clock is None or stamp <= clock or not self._ids.shape[0] or stamp < self._quiet_until:
             return ()
         return self._delete(expired(self._state, self._created, self._last_seen, stamp, self._cfg))
 
@@ -292,16 +295,41 @@ class Tracker:
 
     def _match(self, z: FloatArray, r2: FloatArray, stamp: float, appearance: NDArray[np.float32] | None
                ) -> _Matched:
-        """Predict the tracks to ``stamp`` and associate the detections (association.Associator)."""
+        """Predict the tracks that could take a detection to ``stamp`` and associate the detections
+        (association.Associator); the others (beyond every gate and reach) are left out of both."""
         m = z.shape[0]
         if m == 0 or self._ids.shape[0] == 0:
             return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
         late = self._t > stamp
         x_a, P_a, t_a, z_a = self._anchors(stamp, late)
-        x_pred, P_pred = self._model.predict(x_a, P_a, stamp - t_a)
-        looks = None if appearance is None else appearance_distances(self._looks, appearance)
-        matches = self._associate(x_pred, P_pred, self._state, t_a, z_a, z, r2, stamp, looks)
-        return _Matched(matches, x_pred, P_pred, late)
+        cand = self._candidates(x_a, t_a, z_a, z, stamp, reattach=appearance is not None)
+        looks = alike = None
+        if appearance is not None:  # every track's distances: pass 3 needs how many tracks look alike
+            looks_all = appearance_distances(self._looks, appearance)
+            alike = (looks_all < self._cfg.appearance_match_distance).sum(axis=0)  # NaN compares False
+            looks = looks_all[cand]
+        if cand.shape[0] == 0:
+            return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
+        x_pred, P_pred = self._model.predict(x_a[cand], P_a[cand], stamp - t_a[cand])
+        local = self._associate(x_pred, P_pred, self._state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike)
+        rows = local.rows
+        return _Matched(Matches(cand[rows], local.cols, local.near), x_pred[rows], P_pred[rows], late)
+
+    def _candidates(self, x_a: FloatArray, t_a: FloatArray, z_a: FloatArray, z: FloatArray, stamp: float,
+                    reattach: bool) -> IndexArray:
+        """Tracks that some detection could join in a pass of the association: within ``max_gate_distance_m``
+        (or ``min_person_separation_m``) of the predicted position, or within walking reach of the last
+        detection (capped as in pass 2; uncapped for LOST tracks when pass 3 can re-attach them)."""
+        cfg = self._cfg
+        dt = stamp - t_a
+        mean = x_a[:, :2] + dt[:, None] * x_a[:, 2:]  # the predicted position, as the Kalman prediction makes it
+        radius = max(cfg.max_gate_distance_m, cfg.min_person_separation_m)
+        reach = cfg.min_person_separation_m + cfg.max_speed_mps * np.maximum(dt, 0.0)
+        cap = max(cfg.max_gate_distance_m, cfg.min_person_separation_m)
+        reach = np.where(reattach & (self._state == _LOST), reach, np.minimum(reach, cap))
+        near_pred = (((z[None, :, :] - mean[:, None, :]) ** 2).sum(axis=2) <= radius * radius).any(axis=1)
+        near_last = (((z[None, :, :] - z_a[:, None, :]) ** 2).sum(axis=2) < (reach * reach)[:, None]).any(axis=1)
+        return np.flatnonzero(near_pred | near_last)
 
     def _remember_looks(self, appearance: NDArray[np.float32], rows: IndexArray, cols: IndexArray,
                         created: list[int], created_cols: list[int]) -> None:
@@ -335,7 +363,7 @@ class Tracker:
         if r_io.shape[0]:
             z_io = z[c_io]
             r2_io = r2[c_io]
-            x_new, P_new = self._model.update(x_pred[r_io], P_pred[r_io], z_io, r2_io)
+            x_new, P_new = self._model.update(x_pred[in_order], P_pred[in_order], z_io, r2_io)
             self._x[r_io] = x_new
             self._P[r_io] = P_new
             self._t[r_io] = stamp
@@ -350,12 +378,14 @@ class Tracker:
                 stamp,
                 z[c_late],
                 r2[c_late],
-                x_pred[r_late],
-                P_pred[r_late],
+                x_pred[~in_order],
+                P_pred[~in_order],
                 cutoff,
             )
             for i, head in zip(r_late.tolist(), heads, strict=True):
                 self._t[i], self._zmeas[i], self._x[i], self._P[i] = head.stamp_s, head.z, head.x, head.P
+        if (self._state[rows] == _LOST).any():
+            self._quiet_until = -math.inf  # recovered at the next tick
         self._last_seen[rows] = np.maximum(self._last_seen[rows], stamp)
         self._created[rows] = np.minimum(self._created[rows], stamp)
         self._hits[rows] += 1
@@ -433,12 +463,15 @@ class Tracker:
                 )
             )
         self._stats.tracks_created += k
+        self._quiet_until = -math.inf  # tentative tracks: confirmed, merged or expired at any tick
         return ids
 
     def _tick(self) -> tuple[tuple[int, ...], tuple[int, ...], tuple[int, ...], tuple[int, ...]]:
-        """Apply lifecycle transitions at the clock; returns (confirmed, lost, recovered, deleted) ids."""
+        """Apply lifecycle transitions at the clock; returns (confirmed, lost, recovered, deleted) ids.
+
+        Skipped while the clock is before ``_quiet_until`` (nothing can fall due: see :meth:`_next_due`)."""
         now = self._clock.now
-        if self._ids.shape[0] == 0 or now is None:
+        if self._ids.shape[0] == 0 or now is None or now < self._quiet_until:
             return (), (), (), ()
         tr = transitions(self._state, self._hits, self._created, self._last_seen, self._x, self._t, now, self._cfg)
         ids = self._ids
@@ -447,7 +480,22 @@ class Tracker:
         recovered_ids = tuple(int(i) for i in ids[tr.recovered])
         self._stats.tracks_merged += tr.merged
         self._stats.tracks_confirmed += len(confirmed_ids)
-        return confirmed_ids, lost_ids, recovered_ids, self._delete(tr.dead)
+        deleted = self._delete(tr.dead)
+        self._quiet_until = self._next_due()
+        return confirmed_ids, lost_ids, recovered_ids, deleted
+
+    def _next_due(self) -> float:
+        """Earliest stamp at which a transition could fall due without a new detection (a little early): never
+        while a track is tentative, else the first confirmed track to become LOST or LOST one to expire.  Later
+        detections only postpone these; a LOST track detected or a new track resets it."""
+        state = self._state
+        if state.shape[0] == 0:
+            return math.inf
+        if (state == _TENTATIVE).any():
+            return -math.inf
+        cfg = self._cfg
+        wait = np.where(state == _LOST, cfg.lost_after_s + cfg.delete_after_s, cfg.lost_after_s)
+        return float((self._last_seen + wait).min()) - EPS_S - _DUE_MARGIN_S
 
     def _delete(self, dead: NDArray[np.bool_]) -> tuple[int, ...]:
         """Remove the ``dead`` tracks; returns their ids."""
@@ -475,6 +523,6 @@ class _Matched:
     """Association of one frame plus the predictions it used (None when there was nothing to match)."""
 
     matches: Matches
-    x_pred: FloatArray | None
+    x_pred: FloatArray | None  # the matched tracks' predictions, row k for matches.rows[k]
     P_pred: FloatArray | None
     late: NDArray[np.bool_] | None  # tracks predicted from their history (newest posterior after the frame)

@@ -101,3 +101,24 @@ def test_a_lost_track_does_not_take_a_detection_that_also_looks_like_another_tra
                                  np.stack([LOOK[0], LOOK[0]]))
     assert back.track_of_detection()[1] == other
     assert back.track_of_detection()[0] != lost  # it looks like both tracks: not proof enough
+
+
+def test_a_look_alike_far_from_every_detection_still_stops_a_lost_track_taking_one() -> None:
+    """Only tracks near some detection are associated, but "looks like no other track" counts every track."""
+    tracker = Tracker(TrackerConfig(lost_after_s=0.5, delete_after_s=5.0))
+    twin = np.stack([LOOK[0]])
+    for k in range(10):  # the first person, then hidden
+        tracker.update_arrays(np.array([[0.05 * k, 0.0]]), np.array([0.05]), np.array([np.nan]), 0.1 * k, "c", twin)
+    for k in range(25):  # someone dressed alike, 8 m off, seen by another camera until just before
+        tracker.update_arrays(np.array([[8.0, 2.0 + 0.02 * k]]), np.array([0.05]), np.array([np.nan]),
+                              1.0 + 0.08 * k, "d", twin)
+    lost, _ = tracker.track_ids()
+    back = tracker.update_arrays(np.array([[0.2, 0.6]]), np.array([0.05]), np.array([np.nan]), 3.0, "c", twin)
+    assert back.track_of_detection().get(0) != lost
+    alone = Tracker(TrackerConfig(lost_after_s=0.5, delete_after_s=5.0))  # without the twin it is taken back
+    for k in range(10):
+        alone.update_arrays(np.array([[0.05 * k, 0.0]]), np.array([0.05]), np.array([np.nan]), 0.1 * k, "c", twin)
+    (track,) = alone.track_ids()
+    alone.advance(3.0 - 1e-3)
+    assert alone.update_arrays(np.array([[0.2, 0.6]]), np.array([0.05]), np.array([np.nan]), 3.0, "c",
+                               twin).track_of_detection() == {0: track}
