@@ -92,29 +92,16 @@ def track_from_msg(t: Any, to_seconds: Callable[[float], float] | None = None) -
     )
 
 
-def tracks_to_msg(tracks: list[NamedTrackRecord], stamp_s: float, frame_id: str,
-                  reuse: dict[int, Any] | None = None) -> Any:
-    """Core tracks -> face_reid_msgs/NamedTrackArray.
-
-    ``reuse``: track id -> its NamedTrack of the previous call, overwritten in place (building a rosidl message
-    costs more than filling one); tracks that are gone are dropped from it. Only for a publisher that
-    serializes the message before the next call.
-    """
+def tracks_to_msg(tracks: list[NamedTrackRecord], stamp_s: float, frame_id: str) -> Any:
+    """Core tracks -> face_reid_msgs/NamedTrackArray (the master publishes the same message serialized by
+    :func:`face_reid_master.ros.track_cdr.tracks_to_cdr`)."""
     from face_reid_msgs.msg import NamedTrack, NamedTrackArray
 
     out = NamedTrackArray()
     out.header.frame_id = frame_id
     set_stamp(out.header.stamp, max(0.0, stamp_s))
-    if reuse is not None:
-        alive = {int(tr.track_id) for tr in tracks}
-        for gone in [tid for tid in reuse if tid not in alive]:
-            del reuse[gone]
     for tr in tracks:
-        m = None if reuse is None else reuse.get(int(tr.track_id))
-        if m is None:
-            m = NamedTrack()
-            if reuse is not None:
-                reuse[int(tr.track_id)] = m
+        m = NamedTrack()
         m.track_id, m.face_id, m.name = int(tr.track_id), int(tr.face_id), tr.name
         m.identity_confidence = float(tr.identity_confidence)
         m.face_observations = int(tr.face_observations)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
@@ -28,15 +29,16 @@ from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
 from face_reid_camera.common.sealing import SealError
-from face_reid_camera.common.stamps import stamp_to_seconds
+from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.ros.sealed import open_message, open_request
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.ros import params as master_params
-from face_reid_master.ros.convert import frame_from_msg, markers_for, tracks_to_msg
+from face_reid_master.ros.convert import frame_from_msg, markers_for
 from face_reid_master.ros.people_topics import PeopleTopics
+from face_reid_master.ros.track_cdr import tracks_to_cdr
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
@@ -66,7 +68,6 @@ class MasterNode(ManagedNode):
         self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
-        self._track_msgs: dict[int, Any] = {}  # track id -> its NamedTrack, refilled on every publish
         self._clocks = ClockOffsets()
         self._timers: list[Any] = []
         self.tracks_pub: Any = None
@@ -399,16 +400,19 @@ class MasterNode(ManagedNode):
             return
         tracks = self.core.tracks()
         frame_id = str(self.values["world_frame_id"])
-        msg = tracks_to_msg(tracks, stamp_s, frame_id, self._track_msgs)
-        self.tracks_pub.publish(msg)
-        if self.people_topics is not None:
-            self.people_topics.publish(tracks, msg.header.stamp, now_s)
+        self.tracks_pub.publish(tracks_to_cdr(tracks, stamp_s, frame_id))  # serialized here: see track_cdr
         self._unpublished_stamp = None
         if self.health is not None:
             self.health.published()
         # Markers are for a person looking at RViz: building them for nobody costs the master time.
-        if self.markers_pub is not None and self.markers_pub.get_subscription_count() > 0:
-            self.markers_pub.publish(markers_for(tracks, msg.header.stamp, frame_id))
+        markers = self.markers_pub is not None and self.markers_pub.get_subscription_count() > 0
+        if self.people_topics is None and not markers:
+            return
+        stamp = set_stamp(Time(), max(0.0, stamp_s))
+        if self.people_topics is not None:
+            self.people_topics.publish(tracks, stamp, now_s)
+        if markers:
+            self.markers_pub.publish(markers_for(tracks, stamp, frame_id))
 
     def _reject(self, reason: str, message: str) -> None:
         total = self.health.reject(reason) if self.health is not None else 0

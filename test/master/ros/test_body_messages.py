@@ -85,21 +85,3 @@ def test_the_master_core_counts_bodies_and_rejects_malformed_ones_and_other_spac
     assert len(outcome.notices) == 1 and "'c'" in outcome.notices[0] and "'s'" in outcome.notices[0]
     again = core.process_frame(CameraFrameRecord("c", 1.1, people), now_s=1.1)
     assert core.stats.bodies_rejected_space == 2 and not again.notices
-
-
-def test_reused_track_messages_equal_fresh_ones_and_forget_gone_tracks() -> None:
-    from face_reid_master.records import NamedTrackRecord
-    from face_reid_master.ros.convert import tracks_to_msg
-
-    def track(tid: int, x: float, name: str = "") -> NamedTrackRecord:
-        return NamedTrackRecord(tid, tid * 10, name, 0.9, 3, np.array([x, 1.0]), np.array([0.1, 0.0]),
-                                np.eye(4) * x, 1.7, 1, 5.0, 6.0, ("cam_a",), "face")
-
-    reuse: dict = {}
-    first = tracks_to_msg([track(1, 1.0), track(2, 2.0, "Alice")], 6.0, "world", reuse)
-    assert set(reuse) == {1, 2}
-    kept = reuse[1]
-    second = tracks_to_msg([track(1, 3.0), track(3, 4.0)], 7.0, "world", reuse)
-    assert set(reuse) == {1, 3} and reuse[1] is kept  # refilled in place; track 2 forgotten
-    assert second == tracks_to_msg([track(1, 3.0), track(3, 4.0)], 7.0, "world")  # as if built afresh
-    assert first.tracks[1].name == "Alice" and second.tracks[0].position.x == 3.0
