@@ -565,7 +565,7 @@ class MasterCore:
             std[i] = person.position_std_m
         valid = np.isfinite(xy).all(axis=1) & np.isfinite(std) & (std > 0)
         st.detections_rejected_position += int(n - np.count_nonzero(valid))
-        person_index = [int(i) for i in np.flatnonzero(valid)]
+        person_index = np.flatnonzero(valid).tolist()
         tracker_input = (
             xy[valid],
             std[valid],
@@ -586,7 +586,7 @@ class MasterCore:
         st.embeddings_rejected_length += len(in_space) - len(good_len)
         if not good_len:
             return *tracker_input, embeddings, person_index
-        stacked = np.stack([v for _, _, v in good_len])
+        stacked = np.array([v for _, _, v in good_len])  # same-length rows (checked above)
         finite = np.isfinite(stacked).all(axis=1)
         plausible = finite & plausible_norms(stacked, cfg.embedding_space)  # NaN / Inf lengths fail the range
         st.embeddings_rejected_norm += int(np.count_nonzero(finite & ~plausible))

@@ -92,14 +92,20 @@ def parse_space(space: str) -> tuple[EmbeddingSpace, ...]:
 
 def plausible_norms(rows: NDArray[np.floating], space: str) -> NDArray[np.bool_]:
     """Per row of ``rows`` (n, dim) of ``space``: whether every component's length lies in its embedder's
-    :attr:`EmbeddingSpace.norm_range`."""
-    ok = np.ones(rows.shape[0], dtype=bool)
-    start = 0
-    for part in parse_space(space):
-        norms = np.linalg.norm(rows[:, start:start + part.dim], axis=1)
-        ok &= (norms >= part.norm_range[0]) & (norms <= part.norm_range[1])
-        start += part.dim
-    return ok
+    :attr:`EmbeddingSpace.norm_range` (False for all when ``dim`` is not the space's)."""
+    starts, low, high = _norm_ranges(space)
+    if rows.ndim != 2 or rows.shape[1] != space_dim(space):
+        return np.zeros(rows.shape[0] if rows.ndim else 0, dtype=bool)
+    norms = np.sqrt(np.add.reduceat(rows * rows, starts, axis=1))  # (n, components)
+    return ((norms >= low) & (norms <= high)).all(axis=1)
+
+
+@lru_cache(maxsize=64)
+def _norm_ranges(space: str) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+    """Where each component of ``space`` starts, and its norm range (low, high)."""
+    parts = parse_space(space)
+    starts = np.cumsum([0] + [p.dim for p in parts[:-1]]).astype(np.intp)
+    return starts, np.array([p.norm_range[0] for p in parts]), np.array([p.norm_range[1] for p in parts])
 
 
 def space_dim(space: str) -> int:

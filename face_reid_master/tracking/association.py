@@ -48,10 +48,14 @@ def gnn(cost: FloatArray, feasible: NDArray[np.bool_]) -> tuple[IndexArray, Inde
     Infeasible pairs cost more than any set of feasible ones, so the result has the maximum number
     of feasible matches and, among those, the minimum total cost (OpenPTrack-style GNN).
     """
-    rows_ok = np.flatnonzero(feasible.any(axis=1))
+    per_row = feasible.sum(axis=1)
+    rows_ok = np.flatnonzero(per_row)
     if rows_ok.shape[0] == 0:
         return _EMPTY, _EMPTY
-    cols_ok = np.flatnonzero(feasible.any(axis=0))
+    per_col = feasible.sum(axis=0)
+    if per_row.max() == 1 and per_col.max() == 1:  # no two pairs compete: the feasible pairs are the assignment
+        return rows_ok, feasible[rows_ok].argmax(axis=1)
+    cols_ok = np.flatnonzero(per_col)
     sub = cost[np.ix_(rows_ok, cols_ok)]
     sub_feasible = feasible[np.ix_(rows_ok, cols_ok)]
     lo, hi = sub[sub_feasible].min(), sub[sub_feasible].max()
