@@ -19,6 +19,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from itertools import accumulate
 from typing import NamedTuple
 
 import numpy as np
@@ -436,12 +437,12 @@ class IdentityManagerBase:
         if not ident:
             return {}
         obs = np.concatenate([rows[tid] for tid in ident])
-        slots = np.concatenate([np.full(rows[tid].shape[0], self._faces[self._tracks[tid].face_id].slot, np.intp)
-                                for tid in ident])
+        counts = [rows[tid].shape[0] for tid in ident]
+        slots = np.repeat(np.array([self._faces[self._tracks[tid].face_id].slot for tid in ident], np.intp), counts)
         keep = self._bank.own_min_distances(obs, slots) <= gate
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
-        bounds = np.cumsum([rows[tid].shape[0] for tid in ident])[:-1]
-        return dict(zip(ident, np.split(keep, bounds), strict=True))
+        ends = list(accumulate(counts))
+        return {tid: keep[end - n:end] for tid, n, end in zip(ident, counts, ends, strict=True)}
 
     def _swapped_rows(self, track: TrackEntry, chunks: list[Chunk], keep: npt.NDArray[np.bool_]
                       ) -> list[Chunk] | None:
@@ -449,6 +450,9 @@ class IdentityManagerBase:
         ``release_after_inconsistent`` long, the chunks from the run's start on (None: no swap)."""
         k = self.release_after_inconsistent
         if not k:
+            return None
+        if keep.size and keep.all():  # every observation consistent: any run is over
+            track.inconsistent.clear()
             return None
         start = 0
         for c in chunks:
