@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
@@ -67,6 +68,7 @@ class MasterNode(ManagedNode):
         self._service_calls: dict[str, int] = {}
         self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
+        self._unmatched: set[str] = set()  # camera topics said to have only publishers that do not match
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._clocks = ClockOffsets()
         self._timers: list[Any] = []
@@ -147,7 +149,7 @@ class MasterNode(ManagedNode):
             self._subscribe(topic)
         if self._regex is not None:
             self._discover()
-            self._timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
+        self._timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
         self._timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
         if self._min_publish_interval_s:
             self._timers.append(self.create_timer(self._min_publish_interval_s, self._flush))
@@ -166,6 +168,7 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             self.destroy_subscription(sub)
         self._subscribed = {}
+        self._unmatched.clear()
         self._intake.clear()  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
@@ -234,13 +237,41 @@ class MasterNode(ManagedNode):
     def _subscribe(self, topic: str) -> None:
         if topic in self._subscribed:
             return
+        # Without rclpy's default QoS-event handlers (two per subscription, each walked by the executor on every
+        # cycle): publishers that do not match are found by _warn_unmatched instead.
+        events = SubscriptionEventCallbacks(use_default_callbacks=False)
         if self._openers:
-            self._subscribed[topic] = self.create_subscription(Sealed, topic, self._on_sealed, self._frame_qos)
+            self._subscribed[topic] = self.create_subscription(Sealed, topic, self._on_sealed, self._frame_qos,
+                                                               event_callbacks=events)
         else:
-            self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos)
+            self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos,
+                                                               event_callbacks=events)
         self.get_logger().info(f"subscribed to camera topic {topic}")
 
+    @property
+    def unmatched_camera_topics(self) -> frozenset[str]:
+        """Camera topics with a publisher the master's subscription does not match (see _warn_unmatched)."""
+        return frozenset(self._unmatched)
+
+    def _warn_unmatched(self) -> None:
+        """Say once per camera topic when it has publishers but none is matched: their QoS is incompatible with the
+        master's reliable subscription (a best-effort camera publisher), so its frames never arrive."""
+        for topic, sub in self._subscribed.items():
+            if sub.get_publisher_count() > 0:
+                self._unmatched.discard(topic)
+                continue
+            offered = self.get_publishers_info_by_topic(topic)
+            if not offered or topic in self._unmatched:
+                continue
+            self._unmatched.add(topic)
+            policies = sorted({str(info.qos_profile.reliability.name).lower() for info in offered})
+            self.get_logger().warning(
+                f"camera topic {shown(topic, 128)}: {len(offered)} publisher(s) offering reliability "
+                f"{'/'.join(policies)} do not match the master's subscription (reliable, depth 50): their frames "
+                "are not received; publish camera frames reliable")
+
     def _discover(self) -> None:
+        self._warn_unmatched()
         if self._regex is None:
             return
         for name, types in self.get_topic_names_and_types():

@@ -393,3 +393,40 @@ def test_a_camera_whose_clock_is_behind_is_reported(ros_context, tmp_path: Path)
         assert "chrony" in report.message and "'cam_b'" in report.message and report.level == 1
     finally:
         node.destroy_node()
+
+
+def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_path: Path) -> None:
+    """The camera subscriptions carry no QoS-event handlers (cost per cycle): a publisher whose QoS cannot match
+    the master's reliable subscription is found from the graph instead, said once, and cleared when matched."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from face_reid_msgs.msg import CameraFrame
+
+    node = _master(ros_context, tmp_path, "persist_faces:=false")
+    camera = Node("best_effort_camera", context=node.context)
+    executor = SingleThreadedExecutor(context=node.context)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        assert all(len(sub.event_handlers) == 0 for sub in node._subscribed.values())
+        executor.add_node(node)
+        executor.add_node(camera)
+        lossy = camera.create_publisher(CameraFrame, CAM,
+                                        QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT))
+
+        def seen() -> bool:
+            node._warn_unmatched()
+            return CAM in node.unmatched_camera_topics
+
+        assert spin_until(executor, seen, 20.0)
+        camera.destroy_publisher(lossy)
+        camera.create_publisher(CameraFrame, CAM, QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
+
+        def matched() -> bool:
+            node._warn_unmatched()
+            return CAM not in node.unmatched_camera_topics
+
+        assert spin_until(executor, matched, 20.0)
+    finally:
+        executor.shutdown()
+        camera.destroy_node()
+        node.destroy_node()
