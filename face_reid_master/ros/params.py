@@ -39,7 +39,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("max_seal_age_s", 30.0,
               "With a network key: a sealed frame or request sealed further than this from the master's clock "
               "is refused (s; replays, senders whose clock is off).", low=0.1, high=86400.0),
-    ParamSpec("topic_discovery_period_s", 2.0, "How often new camera topics are looked for (s).",
+    ParamSpec("topic_discovery_period_s", 2.0,
+              "How often new camera topics are looked for and unmatched camera publishers checked (s).",
               low=0.05, high=3600.0),
     ParamSpec("known_camera_ids", [""], "Accepted camera ids (list; [''] = accept any camera)."),
     ParamSpec("tracks_topic", "/tracks_named", "Where face_reid_msgs/NamedTrackArray is published."),
