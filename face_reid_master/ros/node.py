@@ -4,9 +4,9 @@ configure opens the face database, reads the gallery and the likelihood and buil
 :class:`~face_reid_master.core.MasterCore` (and the ``~/add_person``, ``~/forget_face``, ``~/list_faces``
 services); activate subscribes to the camera topics (a fixed list and/or every discovered topic matching a
 regex) and, once per cycle, applies every frame received since the last cycle in stamp order (the oldest
-dropped and counted when more arrived than ``cycle_budget_ms`` allows), runs one identity update for them and
-publishes
-``face_reid_msgs/NamedTrackArray`` on ``/tracks_named`` (plus RViz markers while someone looks) and
+dropped and counted when more arrived than ``cycle_budget_ms`` allows), publishes
+``face_reid_msgs/NamedTrackArray`` on ``/tracks_named`` (serialized by :mod:`~face_reid_master.ros.track_cdr`;
+plus RViz markers while someone looks), then runs one identity update for the cycle's frames; and publishes
 ``/diagnostics``; deactivate / cleanup undo it (cleanup saves every face). Faces are committed by the store's
 worker thread (:mod:`~face_reid_master.storage.write_behind`).
 """
@@ -248,11 +248,6 @@ class MasterNode(ManagedNode):
                                                                event_callbacks=events)
         self.get_logger().info(f"subscribed to camera topic {topic}")
 
-    @property
-    def unmatched_camera_topics(self) -> frozenset[str]:
-        """Camera topics with a publisher the master's subscription does not match (see _warn_unmatched)."""
-        return frozenset(self._unmatched)
-
     def _warn_unmatched(self) -> None:
         """Say once per camera topic when it has publishers but none is matched: their QoS is incompatible with the
         master's reliable subscription (a best-effort camera publisher), so its frames never arrive."""
@@ -476,6 +471,7 @@ class MasterNode(ManagedNode):
             "tracks_identified": sum(1 for t in tracks if t.face_id),
             "tracks_static_clutter": core.static_clutter_tracks,
             "camera_topics": len(self._subscribed),
+            "camera_topics_unmatched": len(self._unmatched),
             "frames_applied": stats["frames_applied"],
             "frames_dropped_overload": self.frames_dropped_overload,
             "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
@@ -489,6 +485,10 @@ class MasterNode(ManagedNode):
         extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         warnings = [] if self._subscribed else ["no camera topic found yet"]
+        if self._unmatched:
+            warnings.append(f"{len(self._unmatched)} camera topic(s) whose publishers do not match the master's "
+                            f"reliable subscription, e.g. {shown(min(self._unmatched), 64)}: publish camera frames "
+                            "reliable")
         limit = float(self.values["clock_offset_warning_s"])
         off = self._clocks.beyond(limit)
         extra["cameras_clock_off"] = len(off)

@@ -1,8 +1,7 @@
 """The /tracks_named message as CDR bytes, written directly from the core's tracks.
 
-``Publisher.publish(bytes)`` sends them as they are. Building a NamedTrackArray of rosidl objects and having
-rclpy convert and serialize it cost the master ~15-20 us per track on every cycle, several times what packing
-the same bytes costs; subscribers get the same message (the tests compare with rclpy's ``serialize_message``).
+``Publisher.publish(bytes)`` sends them as they are, without the rosidl objects rclpy would build, convert and
+serialize on every cycle; subscribers get the same message (the tests compare with rclpy's ``serialize_message``).
 Layout: plain CDR, little endian (the encoding Fast DDS gives ROS 2 messages), each primitive aligned to its size
 from the end of the 4-byte encapsulation header.
 """
@@ -76,7 +75,7 @@ def _stamp(stamp_s: float) -> tuple[int, int]:
 
 
 def _covariance(cov: NDArray[np.float64]) -> bytes:
-    """The 16 float64 of a 4x4 covariance, little endian (the tracker's arrays already are: no copy)."""
+    """The 16 float64 of a 4x4 covariance, little endian (the tracker's arrays already are: no conversion)."""
     if cov.dtype == _F8 and cov.size == 16 and cov.flags.c_contiguous:
         return cov.tobytes()
     return np.asarray(cov, dtype=_F8).reshape(16).tobytes()

@@ -303,13 +303,13 @@ class Tracker:
         late = self._t > stamp
         x_a, P_a, t_a, z_a = self._anchors(stamp, late)
         cand = self._candidates(x_a, t_a, z_a, z, stamp, reattach=appearance is not None)
+        if cand.shape[0] == 0:
+            return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
         looks = alike = None
         if appearance is not None:  # every track's distances: pass 3 needs how many tracks look alike
             looks_all = appearance_distances(self._looks, appearance)
             alike = (looks_all < self._cfg.appearance_match_distance).sum(axis=0)  # NaN compares False
             looks = looks_all[cand]
-        if cand.shape[0] == 0:
-            return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
         x_pred, P_pred = self._model.predict(x_a[cand], P_a[cand], stamp - t_a[cand])
         local = self._associate(x_pred, P_pred, self._state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike)
         rows = local.rows
@@ -323,10 +323,9 @@ class Tracker:
         cfg = self._cfg
         dt = stamp - t_a
         mean = x_a[:, :2] + dt[:, None] * x_a[:, 2:]  # the predicted position, as the Kalman prediction makes it
-        radius = max(cfg.max_gate_distance_m, cfg.min_person_separation_m)
+        radius = max(cfg.max_gate_distance_m, cfg.min_person_separation_m)  # also the cap of pass 2's reach
         reach = cfg.min_person_separation_m + cfg.max_speed_mps * np.maximum(dt, 0.0)
-        cap = max(cfg.max_gate_distance_m, cfg.min_person_separation_m)
-        reach = np.where(reattach & (self._state == _LOST), reach, np.minimum(reach, cap))
+        reach = np.where(reattach & (self._state == _LOST), reach, np.minimum(reach, radius))
         near_pred = (((z[None, :, :] - mean[:, None, :]) ** 2).sum(axis=2) <= radius * radius).any(axis=1)
         near_last = (((z[None, :, :] - z_a[:, None, :]) ** 2).sum(axis=2) < (reach * reach)[:, None]).any(axis=1)
         return np.flatnonzero(near_pred | near_last)

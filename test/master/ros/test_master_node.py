@@ -415,15 +415,17 @@ def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_
 
         def seen() -> bool:
             node._warn_unmatched()
-            return CAM in node.unmatched_camera_topics
+            return node.diagnostics(node.now_s()).values["camera_topics_unmatched"] == "1"
 
         assert spin_until(executor, seen, 20.0)
+        report = node.diagnostics(node.now_s())
+        assert CAM in report.message and "reliable" in report.message and report.level == 1
         camera.destroy_publisher(lossy)
         camera.create_publisher(CameraFrame, CAM, QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
 
         def matched() -> bool:
             node._warn_unmatched()
-            return CAM not in node.unmatched_camera_topics
+            return node.diagnostics(node.now_s()).values["camera_topics_unmatched"] == "0"
 
         assert spin_until(executor, matched, 20.0)
     finally:
