@@ -63,3 +63,5 @@ def test_plausible_norms_checks_each_component_of_a_joint_space() -> None:
                      np.concatenate([dlib, sface * 0.5]), np.zeros(256)])
     assert plausible_norms(rows, JOINT).tolist() == [True, False, False, False]
     assert plausible_norms(rows[:, :128], DLIB_SPACE).tolist() == [True, False, True, False]
+    assert plausible_norms(rows[:, :200], JOINT).tolist() == [False] * 4  # not the space's length: none plausible
+    assert plausible_norms(rows.astype(np.float32), JOINT).tolist() == [True, False, False, False]
