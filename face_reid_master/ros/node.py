@@ -24,20 +24,23 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import MarkerArray
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
 from face_reid_camera.common.sealing import SealError
-from face_reid_camera.common.stamps import set_stamp, stamp_to_seconds
+from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.ros.sealed import open_message, open_request
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
+from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.convert import frame_from_msg, markers_for
+from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
@@ -245,7 +248,7 @@ class MasterNode(ManagedNode):
                                                                event_callbacks=events)
         else:
             self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos,
-                                                               event_callbacks=events)
+                                                               event_callbacks=events, raw=True)
         self.get_logger().info(f"subscribed to camera topic {topic}")
 
     def _warn_unmatched(self) -> None:
@@ -274,11 +277,12 @@ class MasterNode(ManagedNode):
             if wanted in types and self._regex.search(name):
                 self._subscribe(name)
 
-    def _on_frame(self, msg: Any) -> None:
-        """A camera message: a cycle with it and everything else already waiting (the cycle drains every camera
-        subscription, so the executor finds nothing left for the messages that came meanwhile)."""
+    def _on_frame(self, frame: bytes | Any) -> None:
+        """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
+        (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
+        meanwhile)."""
         now = self.now_s()
-        self._receive(msg, now)
+        self._receive(frame, now)
         self._cycle(now)
 
     @property
@@ -305,16 +309,19 @@ class MasterNode(ManagedNode):
             return None
         return frame
 
-    def _receive(self, msg: Any, now: float) -> None:
+    def _receive(self, frame: bytes | Any, now: float) -> None:
+        """A camera frame (CDR bytes or a CameraFrame message) read into a record and queued for the next cycle;
+        one that cannot be read is refused (counted as malformed, logged)."""
         if self.health is not None:
             self.health.frame_in(now)
         try:
-            stamp = stamp_to_seconds(msg.header.stamp)
-        except (ValueError, TypeError, AttributeError):
-            stamp = float("nan")  # the core rejects it and counts it
-        self._intake.add(PendingFrame(str(msg.camera_id), stamp, msg))
+            record, processing_ms = _read_frame(frame)
+        except (ValueError, TypeError, AttributeError) as exc:
+            self._reject("malformed", f"malformed CameraFrame: {exc}")
+            return
+        self._intake.add(PendingFrame(record.camera_id, record.stamp_s, record))
         try:
-            self._clocks.observe(str(msg.camera_id), stamp, time.time(), float(msg.processing_time_ms) * 1e-3)
+            self._clocks.observe(record.camera_id, record.stamp_s, time.time(), processing_ms * 1e-3)
         except (TypeError, ValueError):
             pass
 
@@ -324,10 +331,10 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             try:
                 with sub.handle:
-                    while (taken := sub.handle.take_message(sub.msg_type, False)) is not None:
-                        msg = taken[0] if not self._openers else self._unseal(taken[0])
-                        if msg is not None:
-                            self._receive(msg, now)
+                    while (taken := sub.handle.take_message(sub.msg_type, not self._openers)) is not None:
+                        frame = taken[0] if not self._openers else self._unseal(taken[0])
+                        if frame is not None:
+                            self._receive(frame, now)
             except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
                 self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
                                    1, warn=True)
@@ -389,14 +396,9 @@ class MasterNode(ManagedNode):
         if self._unpublished_stamp is not None and self._publish_allowed(now):
             self._publish(self._unpublished_stamp, now)
 
-    def _apply(self, core: MasterCore, health: NodeHealth, msg: Any, now: float) -> float | None:
-        """One camera message received by ``now`` into the core; its stamp when applied, None when refused
+    def _apply(self, core: MasterCore, health: NodeHealth, record: CameraFrameRecord, now: float) -> float | None:
+        """One camera frame received by ``now`` into the core; its stamp when applied, None when refused
         (counted, logged)."""
-        try:
-            record = frame_from_msg(msg)
-        except (ValueError, TypeError) as exc:
-            self._reject("malformed", f"malformed CameraFrame: {exc}")
-            return None
         if record.frame_id != self.values["world_frame_id"]:
             self._reject("frame_id", f"frame from {shown(record.camera_id, 64)} is in frame "
                                      f"{shown(record.frame_id, 64)}, "
@@ -591,6 +593,16 @@ class MasterNode(ManagedNode):
             response.num_features.append(int(face.features.shape[0]))
             response.last_seen_s.append(float(face.last_seen_s))
         return response
+
+
+def _read_frame(frame: bytes | Any) -> tuple[CameraFrameRecord, float]:
+    """A camera frame's record and ``processing_time_ms``: CDR bytes read directly (rclpy reads an encoding other
+    than plain little-endian CDR), a CameraFrame message converted. ValueError / TypeError when it is not one."""
+    if isinstance(frame, bytes):
+        if is_plain_cdr(frame):
+            return frame_from_cdr(frame)
+        frame = deserialize_message(frame, CameraFrame)
+    return frame_from_msg(frame), float(frame.processing_time_ms)
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up
