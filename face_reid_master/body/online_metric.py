@@ -29,7 +29,6 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.background_threads import lower_this_thread
 from face_reid_master.body.linear_metric import LinearMetric
 from face_reid_master.body.metric_file import BodyFeatureMetric
 
@@ -318,8 +317,7 @@ class OnlineBodyMetric:
             version, removals = self.pool.version, self.pool.removals
             if self.background:
                 if self._executor is None:
-                    self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="body-metric-refit",
-                                                        initializer=lower_this_thread)
+                    self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="body-metric-refit")
                 self._job = _Job(self._executor.submit(work), version, removals)
             else:
                 try:

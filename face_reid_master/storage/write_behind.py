@@ -22,7 +22,6 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from face_reid_master.background_threads import lower_this_thread
 from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.face_store import FaceStore
 
@@ -36,7 +35,7 @@ class WriteBehindStore:
     """``open_store`` (called on the worker; its exception is raised here) wrapped as described above."""
 
     def __init__(self, open_store: Callable[[], FaceStore]) -> None:
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="face-store", initializer=lower_this_thread)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="face-store")
         try:
             self._store = self._pool.submit(open_store).result()
         except BaseException:

@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-import os
-import sys
 import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from face_reid_master.background_threads import BACKGROUND_NICE
 from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.face_store import FaceStore, FaceStoreLockedError
 from face_reid_master.storage.write_behind import WriteBehindStore
@@ -95,17 +92,5 @@ def test_body_pairs_handed_over_are_stored_after_their_faces(tmp_path: Path) -> 
         loaded = store.load_body_pairs("sub")  # on the worker, after both writes
         assert [(p, a, b) for _, p, a, b, _ in loaded] == [(True, 1, 1), (False, 1, 2)]
         assert store.forget(2) and [(a, b) for _, _, a, b, _ in store.load_body_pairs("sub")] == [(1, 1)]
-    finally:
-        store.close()
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness is Linux's")
-def test_the_worker_runs_below_the_frame_loops_priority(tmp_path: Path) -> None:
-    mine = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-    store = WriteBehindStore(lambda: FaceStore(tmp_path / "faces.db", embedding_dim=DIM))
-    try:
-        worker = store._pool.submit(threading.get_native_id).result()
-        assert os.getpriority(os.PRIO_PROCESS, worker) == min(19, mine + BACKGROUND_NICE)
-        assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == mine  # the caller's is unchanged
     finally:
         store.close()
