@@ -10,7 +10,7 @@ from typing import Any
 
 from face_reid_camera.common.sealing import Opener, Sealed, Sealer, SealError
 
-__all__ = ["open_message", "open_request", "seal_message", "seal_request"]
+__all__ = ["open_message", "open_payload", "open_request", "seal_message", "seal_request"]
 
 
 def seal_message(sealer: Sealer, msg: Any, purpose: str | None = None) -> Any:
@@ -34,13 +34,19 @@ def open_message(opener: Opener, sealed_msg: Any, msg_type: type, now_s: float |
     used (not sealed with this key, replayed, stale, or not a ``msg_type`` inside)."""
     from rclpy.serialization import deserialize_message
 
-    sealed = Sealed(str(sealed_msg.sender_id), int(sealed_msg.counter), bytes(sealed_msg.nonce),
-                    bytes(sealed_msg.ciphertext))
-    payload = opener.open(sealed, now_s, purpose)
+    payload = open_payload(opener, sealed_msg, now_s, purpose)
     try:
         return deserialize_message(payload, msg_type)
     except Exception as exc:  # a key holder sealed something else
         raise SealError("malformed", f"the sealed payload is not a {msg_type.__name__}: {exc}") from exc
+
+
+def open_payload(opener: Opener, sealed_msg: Any, now_s: float | None = None, purpose: str | None = None) -> bytes:
+    """The serialized message inside a face_reid_msgs/Sealed (not read: the caller knows its type);
+    :class:`SealError` when it must not be used (not sealed with this key, replayed, stale)."""
+    sealed = Sealed(str(sealed_msg.sender_id), int(sealed_msg.counter), bytes(sealed_msg.nonce),
+                    bytes(sealed_msg.ciphertext))
+    return opener.open(sealed, now_s, purpose)
 
 
 def _request_purpose(request: Any) -> str:

@@ -33,7 +33,7 @@ from face_reid_camera.common.embedding_spaces import embedder_for_space, space_d
 from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import open_message, open_request
+from face_reid_camera.ros.sealed import open_payload, open_request
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
@@ -292,38 +292,41 @@ class MasterNode(ManagedNode):
 
     def _on_sealed(self, sealed: Any) -> None:
         """A sealed camera message (secured network): opened, then queued like a plain one."""
-        frame = self._unseal(sealed)
-        if frame is not None:
-            self._on_frame(frame)
+        now = self.now_s()
+        if self._receive_sealed(sealed, now):
+            self._cycle(now)
 
-    def _unseal(self, sealed: Any) -> Any:
-        """The CameraFrame inside a sealed message, or None (refused, counted by reason, logged)."""
+    def _receive_sealed(self, sealed: Any, now: float) -> bool:
+        """The CameraFrame inside a sealed message received (True), or refused (counted by reason, logged)."""
+        sender = str(sealed.sender_id)
         try:
-            frame = open_message(self._openers["frames"], sealed, CameraFrame, time.time())
+            payload = open_payload(self._openers["frames"], sealed, time.time())
         except SealError as exc:
-            self._reject(f"sealed_{exc.code}", f"sealed frame from {shown(str(sealed.sender_id), 64)} refused: {exc}")
-            return None
-        if frame.camera_id != sealed.sender_id:
-            self._reject("sealed_sender_mismatch", f"sealed by {shown(str(sealed.sender_id), 64)} but says camera "
-                                                   f"{shown(frame.camera_id, 64)}")
-            return None
-        return frame
+            self._reject(f"sealed_{exc.code}", f"sealed frame from {shown(sender, 64)} refused: {exc}")
+            return False
+        return self._receive(payload, now, sender)
 
-    def _receive(self, frame: bytes | Any, now: float) -> None:
-        """A camera frame (CDR bytes or a CameraFrame message) read into a record and queued for the next cycle;
-        one that cannot be read is refused (counted as malformed, logged)."""
+    def _receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None) -> bool:
+        """A camera frame (CDR bytes or a CameraFrame message; ``sealed_by``: the sender of the seal it came in)
+        read into a record and queued for the next cycle (True); one that cannot be read, or sealed by another
+        camera than it names, is refused (counted, logged)."""
         if self.health is not None:
             self.health.frame_in(now)
         try:
             record, processing_ms = _read_frame(frame)
         except (ValueError, TypeError, AttributeError) as exc:
-            self._reject("malformed", f"malformed CameraFrame: {exc}")
-            return
+            self._reject("malformed" if sealed_by is None else "sealed_malformed", f"malformed CameraFrame: {exc}")
+            return False
+        if sealed_by is not None and record.camera_id != sealed_by:
+            self._reject("sealed_sender_mismatch", f"sealed by {shown(sealed_by, 64)} but says camera "
+                                                   f"{shown(record.camera_id, 64)}")
+            return False
         self._intake.add(PendingFrame(record.camera_id, record.stamp_s, record))
         try:
             self._clocks.observe(record.camera_id, record.stamp_s, time.time(), processing_ms * 1e-3)
         except (TypeError, ValueError):
             pass
+        return True
 
     def _drain(self, now: float) -> None:
         """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
@@ -332,9 +335,10 @@ class MasterNode(ManagedNode):
             try:
                 with sub.handle:
                     while (taken := sub.handle.take_message(sub.msg_type, not self._openers)) is not None:
-                        frame = taken[0] if not self._openers else self._unseal(taken[0])
-                        if frame is not None:
-                            self._receive(frame, now)
+                        if self._openers:
+                            self._receive_sealed(taken[0], now)
+                        else:
+                            self._receive(taken[0], now)
             except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
                 self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
                                    1, warn=True)

@@ -88,6 +88,15 @@ def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) 
         forged_pub.publish(overheard[-1])
         assert spin_until(executor, lambda: master.health.rejected.get("sealed_replayed", 0) == replays + 1)
         assert master.core.stats.frames_applied == 8
+        # a key holder's seal still has to match the camera the frame names, and hold a CameraFrame
+        other = Sealer(key, "cam_d")
+        forged_pub.publish(seal_message(other, _frame("cam_a", 1.0, mallory)))
+        garbage = other.seal(b"\x00\x01\x00\x00" + b"\xff" * 11)
+        forged_pub.publish(Sealed(sender_id=garbage.sender_id, counter=garbage.counter, nonce=garbage.nonce,
+                                  ciphertext=garbage.ciphertext))
+        assert spin_until(executor, lambda: master.health.rejected.get("sealed_sender_mismatch", 0) == 1
+                          and master.health.rejected.get("sealed_malformed", 0) == 1)
+        assert master.core.stats.frames_applied == 8
 
         add = stranger.create_client(AddPerson, "/face_reid_master/add_person")
         forget = stranger.create_client(ForgetFace, "/face_reid_master/forget_face")
