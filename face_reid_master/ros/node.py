@@ -605,7 +605,10 @@ def _read_frame(frame: bytes | Any) -> tuple[CameraFrameRecord, float]:
     if isinstance(frame, bytes):
         if is_plain_cdr(frame):
             return frame_from_cdr(frame)
-        frame = deserialize_message(frame, CameraFrame)
+        try:
+            frame = deserialize_message(frame, CameraFrame)
+        except Exception as exc:  # rclpy raises RMWError (a RuntimeError) for bytes that are not one
+            raise ValueError(f"not a CameraFrame in an encoding rclpy reads: {str(exc)[:200]}") from exc
     return frame_from_msg(frame), float(frame.processing_time_ms)
 
 

@@ -22,6 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
 from rclpy.time import Time
 
 from face_reid_master.records import CameraFrameRecord, PersonRecord
@@ -243,11 +244,16 @@ def test_bad_frames_are_rejected_counted_and_reported(ros_context, tmp_path: Pat
         short.people[0].face_found = True
         short.people[0].embedding = [0.1] * 12
         _feed(node, short)  # accepted, embedding refused
+        raw = serialize_message(_frame(now))  # what the camera subscription delivers: the CDR bytes
+        _feed(node, raw)  # accepted
+        _feed(node, raw[:-3])  # truncated
+        _feed(node, b"\x00\x00\x00\x00" + b"\xff" * 40)  # big endian (read by rclpy), not a CameraFrame
         values = node.diagnostics(node.now_s()).values
+        assert values["rejected_malformed"] == "2"
         assert values["rejected_unknown_camera"] == "1" and values["rejected_frame_id"] == "1"
         assert values["rejected_stale_stamp"] == "1" and values["rejected_future_stamp"] == "1"
         assert values["embeddings_rejected_nonfinite"] == "1" and values["embeddings_rejected_length"] == "1"
-        assert values["frames_applied"] == "2" and values["tracks"] == "0"  # a track needs 3 detections
+        assert values["frames_applied"] == "3" and values["tracks"] == "1"  # its 3 detections confirm a track
         assert values["body_metric_refits"] == "0" and values["body_pairs_mined"] == "0"  # the online update's
         assert node.core.identity.face_ids() == []
     finally:
