@@ -14,6 +14,8 @@ Separate processes on a private ROS domain (discovery on loopback only), the rea
 - ``latency_sealed`` / ``throughput_6_sealed``: the latency and 6-camera cases on a secured network (frames
   sealed with a network key); ``secured_vs_unsecured`` sets them side by side [secured, unsecured] with the
   in-process cost of sealing and opening one frame;
+- ``frame_read_us``: the in-process cost of reading one received frame's bytes into the core's record, as the
+  master does (``cdr``) and through rclpy's message (``rclpy_message``, what it did before);
 - ``core_reference``: the master core alone in this process on the 20-camera case's frames, measured just before
   that case: ms per frame and
   the frames per second one core could apply at that cost (the throughput cases depend on this machine's speed
@@ -446,29 +448,59 @@ def _core_reference(cameras: int = 20, seconds: float = 2.0) -> dict[str, float]
             "frames_per_s_one_core": round(1000.0 / ms, 1)}
 
 
-def _sealing_cost(key: Path, frames: int = 300) -> dict[str, float]:
-    """Microseconds to seal a CameraFrame of PEOPLE faces (serialize + AES-GCM) and to open it (the reverse),
-    in this process, median over ``frames``."""
+def _bench_frame_msg() -> Any:
+    """A CameraFrame of PEOPLE faces (256 values each), as the simulated cameras send."""
     import rclpy  # noqa: F401 - the message types need the ROS libraries loaded
 
-    from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
-    from face_reid_camera.ros.sealed import open_message, seal_message
     from face_reid_master.records import CameraFrameRecord, PersonRecord
     from face_reid_master.ros.convert import frame_record_to_msg
-    from face_reid_msgs.msg import CameraFrame
 
-    secret = load_network_key(key)
-    sealer, opener = Sealer(secret, "cam00"), Opener(secret)
     rng = np.random.default_rng(0)
     people = tuple(PersonRecord(np.zeros(3), 0.05, 1.75, rng.normal(size=256).astype(np.float32), 0.9, 0.8)
                    for _ in range(PEOPLE))
-    msg = frame_record_to_msg(CameraFrameRecord("cam00", time.time(), people), time.time())
+    return frame_record_to_msg(CameraFrameRecord("cam00", time.time(), people), time.time())
+
+
+def _median_us(fn: Any, frames: int) -> float:
+    times = []
+    for _ in range(frames):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return round(float(np.median(times)) * 1e6, 1)
+
+
+def _frame_read_cost(frames: int = 300) -> dict[str, float]:
+    """Microseconds to read a received CameraFrame's bytes into the core's record: as the master does
+    (``frame_from_cdr``) and through rclpy's message (``deserialize_message`` + ``frame_from_msg``), medians
+    over ``frames`` in this process."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from face_reid_master.ros.convert import frame_from_msg
+    from face_reid_master.ros.frame_cdr import frame_from_cdr
+    from face_reid_msgs.msg import CameraFrame
+
+    data = serialize_message(_bench_frame_msg())
+    return {"cdr": _median_us(lambda: frame_from_cdr(data), frames),
+            "rclpy_message": _median_us(lambda: frame_from_msg(deserialize_message(data, CameraFrame)), frames)}
+
+
+def _sealing_cost(key: Path, frames: int = 300) -> dict[str, float]:
+    """Microseconds to seal a CameraFrame of PEOPLE faces (serialize + AES-GCM) and to open it as the master does
+    (AES-GCM + ``frame_from_cdr``), medians over ``frames`` in this process."""
+    from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
+    from face_reid_camera.ros.sealed import open_payload, seal_message
+    from face_reid_master.ros.frame_cdr import frame_from_cdr
+
+    secret = load_network_key(key)
+    sealer, opener = Sealer(secret, "cam00"), Opener(secret)
+    msg = _bench_frame_msg()
     seal_t, open_t = [], []
     for _ in range(frames):
         t0 = time.perf_counter()
         sealed = seal_message(sealer, msg)
         t1 = time.perf_counter()
-        open_message(opener, sealed, CameraFrame)
+        frame_from_cdr(open_payload(opener, sealed))
         t2 = time.perf_counter()
         seal_t.append(t1 - t0)
         open_t.append(t2 - t1)
@@ -511,6 +543,7 @@ def main() -> int:
         latency_sealed = run_case("latency_sealed", 1, 30.0, 5.0, True, domain_id, work, key=key)
         six_sealed = run_case("throughput_6_sealed", 6, 30.0, args.seconds, True, domain_id, work, key=key)
         sealing = _sealing_cost(key)
+        frame_read = _frame_read_cost()
     finally:
         shutil.rmtree(work, ignore_errors=True)
     base_med = baseline["latency_ms"]["median"]
@@ -532,6 +565,7 @@ def main() -> int:
             "overload_dropped_fraction": overload.get("master_dropped_fraction"),
         },
         "core_reference": core_reference,
+        "frame_read_us": frame_read,
         "secured_vs_unsecured": {
             "seal_plus_open_us_per_frame": sealing,
             "latency_1cam_median_ms": [latency_sealed["latency_ms"]["median"], lat_med],
