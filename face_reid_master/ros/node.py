@@ -85,6 +85,8 @@ class MasterNode(ManagedNode):
         self._publish_tokens = 2.0
         self._intake: FrameIntake[Any] = FrameIntake()
         self._budget = CycleBudget()
+        self._identity_period_s = 0.0
+        self._identity_done_s = -float("inf")  # time.monotonic() of the last identity update
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -121,6 +123,7 @@ class MasterNode(ManagedNode):
         rate = float(values["max_publish_rate_hz"])
         self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
         self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
+        self._identity_period_s = float(values["identity_period_s"])
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
         self._services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
@@ -367,11 +370,19 @@ class MasterNode(ManagedNode):
                 t_publish = time.perf_counter()
                 self._publish_cycle(newest)
                 publish_s = time.perf_counter() - t_publish
-        finally:  # one identity update for the cycle's frames
+        finally:  # one identity update for the frames applied since the last one, at most every identity_period_s
             t_identity = time.perf_counter()
-            self._log_identity_events(core.finish_frames())
+            if time.monotonic() - self._identity_done_s >= self._identity_period_s:
+                self._finish_frames()
         t_end = time.perf_counter()
         self._budget.spent(len(frames), (t_end - t_cycle - publish_s) * 1e3, (t_end - t_identity) * 1e3)
+
+    def _finish_frames(self) -> None:
+        """The identity update of the frames applied since the last one (MasterCore.finish_frames), its events
+        logged."""
+        if self.core is not None:
+            self._identity_done_s = time.monotonic()
+            self._log_identity_events(self.core.finish_frames())
 
     def _publish_cycle(self, newest: float) -> None:
         """Publish the state after a cycle's frames (``newest``: the newest stamp applied), within the rate cap."""
@@ -427,6 +438,7 @@ class MasterNode(ManagedNode):
     def _tick(self) -> None:
         if self.core is None:
             return
+        self._finish_frames()  # what waits for the identity update (frames stopped within identity_period_s)
         now = self.now_s()
         if self.values["check_stamps_against_clock"]:
             # Lag by the tracker's delay bound so that frames in flight still arrive in order.
@@ -524,6 +536,7 @@ class MasterNode(ManagedNode):
                     request = open_request(self._openers["requests"], request, time.time())
                 except SealError as exc:
                     raise ValueError(f"refused: {exc}") from exc
+            self._finish_frames()  # the request acts on the face table as the frames applied so far left it
             handler(request, response)
         except ValueError as exc:
             response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]

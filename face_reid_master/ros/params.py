@@ -55,6 +55,11 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "cost (both costs measured) are dropped oldest-first and counted, so an overloaded master keeps its "
               "latency bounded.",
               low=1.0, high=10000.0),
+    ParamSpec("identity_period_s", 0.03,
+              "The face table is updated at most once per this period (s; 0 = every cycle): the frames applied "
+              "in between wait for the next update, so a name can follow its track's position by this much (the "
+              "tick applies what waits when frames stop). Fewer, larger updates cost the master less per frame.",
+              low=0.0, high=1.0),
     ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz).",
               low=0.1, high=1000.0),
     ParamSpec("check_stamps_against_clock", True, "Reject stale/future frames using the node clock (bool)."),

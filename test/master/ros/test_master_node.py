@@ -38,9 +38,12 @@ CAM = "/cam_a/face_reid/frames"
 
 
 def _master(ros_context, tmp_path: Path, *extra: str) -> MasterNode:
-    """A master node on a temporary database, comparing dlib embeddings (what these tests send) unless set."""
+    """A master node on a temporary database, comparing dlib embeddings (what these tests send) unless set, its
+    face table updated every cycle (identity_period_s 0) unless set."""
     if not any(p.startswith("embedding_space:=") for p in extra):
         extra = ("embedding_space:=dlib_resnet_v1", *extra)
+    if not any(p.startswith("identity_period_s:=") for p in extra):
+        extra = ("identity_period_s:=0.0", *extra)
     ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", f"camera_topics:=[{CAM}]",
                        "-p", "camera_topic_regex:=''", *[a for p in extra for a in ("-p", p)]])
     return MasterNode(context=ctx)
@@ -298,6 +301,27 @@ def test_a_cycle_applies_its_frames_in_stamp_order_and_publishes_once(ros_contex
         assert stats.frames_applied == 8 and stats.frames_rejected_tracker_late == 0
         assert node.health.messages_published == published + 1
         assert len(node.core.tracks()) == 1  # one person seen 8 times, not 8 tracks
+    finally:
+        node.destroy_node()
+
+
+def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context, tmp_path: Path) -> None:
+    """Cycles within identity_period_s of the last identity update leave their frames' face evidence waiting
+    (tracks move, no face yet); the next update after the period, or the tick, applies all of it."""
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false", "persist_faces:=false",
+                   "identity_period_s:=1.0")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        _feed(node, _frame(100.0, emb=_unit(2)))  # the first cycle updates (none before it)
+        for k in range(1, 6):
+            _feed(node, _frame(100.0 + 0.1 * k, emb=_unit(2)))
+        assert node.core.stats.frames_applied == 6 and len(node.core.tracks()) == 1
+        assert node.core.identity.face_ids() == []  # 5 observations wait for the next update
+        node._tick()
+        assert node.core.identity.face_ids() == [1]
+        node._identity_done_s -= 1.0  # the period has passed: the next cycle updates again
+        _feed(node, _frame(100.6, emb=_unit(2)))
+        assert node.core._deferred == []
     finally:
         node.destroy_node()
 
