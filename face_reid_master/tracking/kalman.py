@@ -123,7 +123,8 @@ class ConstantVelocityModel:
         K = P[:, :, :2] @ S_inv  # (k, 4, 2); P H^T = first two columns of P
         y = z - x[:, :2]
         x_new = x + (K @ y[:, :, None])[:, :, 0]
-        I_KH = np.tile(_EYE4, (k, 1, 1))
+        I_KH = np.empty((k, 4, 4))
+        I_KH[:] = _EYE4  # (np.tile costs several times as much for the few tracks of a frame)
         I_KH[:, :, :2] -= K
         P_new = I_KH @ P @ I_KH.transpose(0, 2, 1) + r2[:, None, None] * (K @ K.transpose(0, 2, 1))
         return x_new, P_new
