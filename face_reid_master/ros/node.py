@@ -6,7 +6,8 @@ services); activate subscribes to the camera topics (a fixed list and/or every d
 regex) and, once per cycle, applies every frame received since the last cycle in stamp order (the oldest
 dropped and counted when more arrived than ``cycle_budget_ms`` allows), publishes
 ``face_reid_msgs/NamedTrackArray`` on ``/tracks_named`` (serialized by :mod:`~face_reid_master.ros.track_cdr`;
-plus RViz markers while someone looks), then runs one identity update for the cycle's frames; and publishes
+plus RViz markers while someone looks), then, at most once per ``identity_period_s``, one identity update for
+the frames applied since the last; and publishes
 ``/diagnostics``; deactivate / cleanup undo it (cleanup saves every face). Faces are committed by the store's
 worker thread (:mod:`~face_reid_master.storage.write_behind`).
 """
