@@ -110,7 +110,7 @@ class GotoNode(ManagedNode):
         self.counts = {"tracks_msgs": 0, "goals": 0, "refusals": 0, "requests": 0}
         self.rejected: dict[str, int] = {}
         self._subs: list[Any] = []
-        self._timers: list[Any] = []
+        self._own_timers: list[Any] = []
         self._service: Any = None
         self.goal_pub: Any = None
         self.status_pub: Any = None
@@ -150,18 +150,18 @@ class GotoNode(ManagedNode):
                                                        self._on_robot_pose, reliable))
         if values["names_service"]:
             self._names_client = self.create_client(ListFaces, str(values["names_service"]))
-            self._timers.append(self.create_timer(1.0, self._ask_names))
+            self._own_timers.append(self.create_timer(1.0, self._ask_names))
         self._started_s = self.now_s()
         self._decide(self.now_s(), announce=True)
 
     def deactivate(self) -> None:
         for sub in self._subs:
             self.destroy_subscription(sub)
-        for timer in self._timers:
+        for timer in self._own_timers:
             self.destroy_timer(timer)
         if self._service is not None:
             self.destroy_service(self._service)
-        self._subs, self._timers, self._service = [], [], None
+        self._subs, self._own_timers, self._service = [], [], None
         if self._names_client is not None:
             self.destroy_client(self._names_client)
             self._names_client = None

@@ -89,7 +89,7 @@ class MapNode(ManagedNode):
         self._last_summary_s: float | None = None
         self._started_s = 0.0
         self._subs: dict[str, Any] = {}
-        self._timers: list[Any] = []
+        self._own_timers: list[Any] = []
         self.publisher: Any = None
 
     # ------------------------------------------------------------------ lifecycle
@@ -106,7 +106,7 @@ class MapNode(ManagedNode):
         qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.publisher = self.create_publisher(OccupancyGrid, str(self.values["output_topic"]), qos)
-        self._timers = [self.create_timer(float(self.values["discovery_period_s"]), self.discover),
+        self._own_timers = [self.create_timer(float(self.values["discovery_period_s"]), self.discover),
                         self.create_timer(float(self.values["publish_period_s"]), self.publish_grid)]
         self._started_s = self.now_s()
         self.discover()
@@ -120,9 +120,9 @@ class MapNode(ManagedNode):
                 self.get_logger().error(f"cannot save the camera map to {path}: {exc}")
         for sub in self._subs.values():
             self.destroy_subscription(sub)
-        for timer in self._timers:
+        for timer in self._own_timers:
             self.destroy_timer(timer)
-        self._subs, self._timers = {}, []
+        self._subs, self._own_timers = {}, []
         if self.publisher is not None:
             self.destroy_publisher(self.publisher)
             self.publisher = None

@@ -68,14 +68,14 @@ class MasterNode(ManagedNode):
         self._photos: Any = None  # PhotoEmbedder of the master's space, loaded on first use
         self.store: Any = None
         self.health: NodeHealth | None = None
-        self._services: list[Any] = []
+        self._own_services: list[Any] = []
         self._service_calls: dict[str, int] = {}
         self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
         self._unmatched: set[str] = set()  # camera topics said to have only publishers that do not match
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._clocks = ClockOffsets()
-        self._timers: list[Any] = []
+        self._own_timers: list[Any] = []
         self.tracks_pub: Any = None
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
@@ -126,9 +126,9 @@ class MasterNode(ManagedNode):
         self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
         self._identity_period_s = float(values["identity_period_s"])
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
-        self._services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
+        self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
-            self._services += [self.create_service(AddPerson, "~/add_person", self._add_person),
+            self._own_services += [self.create_service(AddPerson, "~/add_person", self._add_person),
                                self.create_service(ForgetFace, "~/forget_face", self._forget_face)]
             if not values["network_key_path"]:
                 self.get_logger().warning(
@@ -156,11 +156,11 @@ class MasterNode(ManagedNode):
             self._subscribe(topic)
         if self._regex is not None:
             self._discover()
-        self._timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
-        self._timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
+        self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
+        self._own_timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
         if self._min_publish_interval_s:
-            self._timers.append(self.create_timer(self._min_publish_interval_s, self._flush))
-        self._timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
+            self._own_timers.append(self.create_timer(self._min_publish_interval_s, self._flush))
+        self._own_timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
         assert self.health is not None
         self.health.start(self.now_s())
         # What exists now (modules, models, loaded faces) lives as long as the node: out of the collector's full
@@ -169,9 +169,9 @@ class MasterNode(ManagedNode):
         self.get_logger().info(f"master: publishing {self.tracks_pub.topic_name}")
 
     def deactivate(self) -> None:
-        for timer in self._timers:
+        for timer in self._own_timers:
             self.destroy_timer(timer)
-        self._timers = []
+        self._own_timers = []
         for sub in self._subscribed.values():
             self.destroy_subscription(sub)
         self._subscribed = {}
@@ -185,9 +185,9 @@ class MasterNode(ManagedNode):
             self.people_topics.deactivate()
 
     def cleanup(self) -> None:
-        for srv in self._services:
+        for srv in self._own_services:
             self.destroy_service(srv)
-        self._services = []
+        self._own_services = []
         if self.core is not None:
             self.core.flush()
         if self.store is not None:

@@ -379,6 +379,44 @@ def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path:
         node.destroy_node()
 
 
+def test_lifecycle_and_parameter_services_answer_and_timers_survive_reactivation(ros_context, tmp_path: Path) -> None:
+    """The node's own entity lists are not rclpy's: its lifecycle and parameter services are waited on (a
+    ``ros2 lifecycle`` / ``ros2 param`` call is answered), each timer is waited on once, and a deactivate /
+    activate keeps /diagnostics going (the node's timer list had been rclpy's: the services were dropped from
+    the executor, every timer listed twice, and deactivating destroyed the diagnostics timer)."""
+    from lifecycle_msgs.srv import GetState
+    from rcl_interfaces.srv import ListParameters
+
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
+    probe = Node("probe", context=node.context)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    got: list[DiagnosticArray] = []
+    probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        timers = list(node.timers)
+        assert len(timers) == len({id(t) for t in timers}) >= 4
+        services = {s.srv_name.rsplit("/", 1)[-1] for s in node.services}  # waited on by the executor
+        assert {"get_state", "change_state", "list_parameters", "set_parameters", "list_faces"} <= services
+        for srv_type, name, check in ((GetState, "/face_reid_master/get_state", lambda r: r.current_state.label),
+                                      (ListParameters, "/face_reid_master/list_parameters",
+                                       lambda r: "identity_period_s" in r.result.names)):
+            client = probe.create_client(srv_type, name)
+            assert spin_until(executor, client.service_is_ready)
+            future = client.call_async(srv_type.Request())
+            assert spin_until(executor, future.done) and check(future.result()), name
+        assert node.trigger_deactivate() == OK and node.trigger_activate() == OK
+        assert len(list(node.timers)) == len(timers)
+        got.clear()
+        assert spin_until(executor, lambda: bool(got), timeout_s=10.0)  # diagnostics go on after reactivation
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
 @pytest.mark.parametrize("override,expected", [
     ("posterior_threshold:=1.2", "parameter 'posterior_threshold' must be in [0.5, 0.999), got 1.2"),
     ("method:=bayse", "parameter 'method' must be one of bayes, threshold; got 'bayse'"),
