@@ -349,12 +349,18 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
         node.destroy_node()
 
 
-def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path: Path) -> None:
+def _master_with_probe(ros_context, tmp_path: Path) -> tuple[MasterNode, Node, SingleThreadedExecutor]:
+    """A master (stamps not checked against the clock) and a probe node, both in one executor."""
     node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
     probe = Node("probe", context=node.context)
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     executor.add_node(probe)
+    return node, probe, executor
+
+
+def test_diagnostics_are_published_with_the_master_fields(ros_context, tmp_path: Path) -> None:
+    node, probe, executor = _master_with_probe(ros_context, tmp_path)
     got: list[DiagnosticArray] = []
     tracks: list[NamedTrackArray] = []
     probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
@@ -387,11 +393,7 @@ def test_lifecycle_and_parameter_services_answer_and_timers_survive_reactivation
     from lifecycle_msgs.srv import GetState
     from rcl_interfaces.srv import ListParameters
 
-    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false")
-    probe = Node("probe", context=node.context)
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    executor.add_node(probe)
+    node, probe, executor = _master_with_probe(ros_context, tmp_path)
     got: list[DiagnosticArray] = []
     probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
     try:
