@@ -87,6 +87,8 @@ class MasterNode(ManagedNode):
         self._intake: FrameIntake[Any] = FrameIntake()
         self._budget = CycleBudget()
         self._identity_period_s = 0.0
+        self._min_cycle_period_s = 0.0
+        self._cycle_began_s = -float("inf")  # time.monotonic() when the last cycle began
         self._identity_done_s = -float("inf")  # time.monotonic() of the last identity update
 
     # ------------------------------------------------------------------ lifecycle
@@ -125,6 +127,7 @@ class MasterNode(ManagedNode):
         self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
         self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
         self._identity_period_s = float(values["identity_period_s"])
+        self._min_cycle_period_s = float(values["min_cycle_period_s"])
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
         self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
@@ -285,6 +288,7 @@ class MasterNode(ManagedNode):
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
         (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
         meanwhile)."""
+        self._wait_for_cycle()
         now = self.now_s()
         self._receive(frame, now)
         self._cycle(now)
@@ -294,8 +298,15 @@ class MasterNode(ManagedNode):
         """Frames dropped for overload since start (oldest first, fairly across cameras)."""
         return self._intake.dropped
 
+    def _wait_for_cycle(self) -> None:
+        """Sleep out what is left of min_cycle_period_s since the last cycle began (messages queue meanwhile)."""
+        wait = self._cycle_began_s + self._min_cycle_period_s - time.monotonic()
+        if wait > 0.0:
+            time.sleep(min(wait, self._min_cycle_period_s))
+
     def _on_sealed(self, sealed: Any) -> None:
         """A sealed camera message (secured network): opened, then queued like a plain one."""
+        self._wait_for_cycle()
         now = self.now_s()
         if self._receive_sealed(sealed, now):
             self._cycle(now)
@@ -353,6 +364,7 @@ class MasterNode(ManagedNode):
         core, health = self.core, self.health
         if core is None or health is None or self.tracks_pub is None:
             return
+        self._cycle_began_s = time.monotonic()
         self._drain(now)
         frames, dropped = self._intake.take(self._budget.frames())
         if dropped:

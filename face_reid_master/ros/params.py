@@ -55,6 +55,11 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "cost (both costs measured) are dropped oldest-first and counted, so an overloaded master keeps its "
               "latency bounded.",
               low=1.0, high=10000.0),
+    ParamSpec("min_cycle_period_s", 0.005,
+              "A camera message that comes sooner than this after the last cycle began waits out the rest (s; "
+              "0 = a cycle per message): the frames arriving meanwhile join its cycle, so a busy master pays the "
+              "executor's, the drain's and the cycle's fixed costs once for several frames, at up to this much "
+              "latency.", low=0.0, high=0.1),
     ParamSpec("identity_period_s", 0.03,
               "The face table is updated at most once per this period (s; 0 = every cycle): the frames applied "
               "in between wait for the next update, so a name can follow its track's position by this much (the "

@@ -326,6 +326,31 @@ def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context,
         node.destroy_node()
 
 
+def test_a_message_sooner_than_min_cycle_period_waits_for_its_cycle(ros_context, tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A camera message that comes within min_cycle_period_s of the last cycle's start sleeps out the rest before
+    its cycle (so that the messages arriving meanwhile join it); one after the period does not wait."""
+    import face_reid_master.ros.node as node_module
+
+    slept: list[float] = []
+    real_sleep = time.sleep
+    monkeypatch.setattr(node_module.time, "sleep", lambda s: (slept.append(s), real_sleep(s)))
+    node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false", "persist_faces:=false",
+                   "min_cycle_period_s:=0.1")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        _feed(node, _frame(10.0))
+        assert slept == []  # no cycle before it
+        node._cycle_began_s = time.monotonic()  # a cycle began just now
+        _feed(node, _frame(10.1))
+        assert len(slept) == 1 and 0.05 < slept[0] <= 0.1
+        node._cycle_began_s -= 1.0  # long ago
+        _feed(node, _frame(10.2))
+        assert len(slept) == 1 and node.core.stats.frames_applied == 3
+    finally:
+        node.destroy_node()
+
+
 def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context, tmp_path: Path) -> None:
     """More frames than the cycle budget allows: the oldest are dropped (each camera keeps its newest),
     counted in the stats and /diagnostics, and what is applied is the newest."""
