@@ -132,7 +132,7 @@ class MasterNode(ManagedNode):
         self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
             self._own_services += [self.create_service(AddPerson, "~/add_person", self._add_person),
-                               self.create_service(ForgetFace, "~/forget_face", self._forget_face)]
+                                   self.create_service(ForgetFace, "~/forget_face", self._forget_face)]
             if not values["network_key_path"]:
                 self.get_logger().warning(
                     "admin services on (admin_services: true) without a network key: any participant of this "
@@ -287,7 +287,7 @@ class MasterNode(ManagedNode):
     def _on_frame(self, frame: bytes | Any) -> None:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
         (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
-        meanwhile)."""
+        meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
         self._receive(frame, now)
