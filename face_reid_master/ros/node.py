@@ -172,6 +172,7 @@ class MasterNode(ManagedNode):
         self.get_logger().info(f"master: publishing {self.tracks_pub.topic_name}")
 
     def deactivate(self) -> None:
+        self._finish_frames()  # the face table as the applied frames leave it (no tick runs while inactive)
         for timer in self._own_timers:
             self.destroy_timer(timer)
         self._own_timers = []
@@ -300,9 +301,9 @@ class MasterNode(ManagedNode):
 
     def _wait_for_cycle(self) -> None:
         """Sleep out what is left of min_cycle_period_s since the last cycle began (messages queue meanwhile)."""
-        wait = self._cycle_began_s + self._min_cycle_period_s - time.monotonic()
+        wait = self._cycle_began_s + self._min_cycle_period_s - time.monotonic()  # <= the period (monotonic clock)
         if wait > 0.0:
-            time.sleep(min(wait, self._min_cycle_period_s))
+            time.sleep(wait)
 
     def _on_sealed(self, sealed: Any) -> None:
         """A sealed camera message (secured network): opened, then queued like a plain one."""

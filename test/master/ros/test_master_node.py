@@ -307,7 +307,7 @@ def test_a_cycle_applies_its_frames_in_stamp_order_and_publishes_once(ros_contex
 
 def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context, tmp_path: Path) -> None:
     """Cycles within identity_period_s of the last identity update leave their frames' face evidence waiting
-    (tracks move, no face yet); the next update after the period, or the tick, applies all of it."""
+    (tracks move, no face yet); the next update after the period, the tick or a deactivation applies all of it."""
     node = _master(ros_context, tmp_path, "check_stamps_against_clock:=false", "persist_faces:=false",
                    "identity_period_s:=1.0")
     try:
@@ -321,6 +321,10 @@ def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context,
         assert node.core.identity.face_ids() == [1]
         node._identity_done_s -= 1.0  # the period has passed: the next cycle updates again
         _feed(node, _frame(100.6, emb=_unit(2)))
+        assert node.core._deferred == []
+        _feed(node, _frame(100.7, emb=_unit(2)))  # within the period again: waits
+        assert len(node.core._deferred) == 1
+        assert node.trigger_deactivate() == OK
         assert node.core._deferred == []
     finally:
         node.destroy_node()
