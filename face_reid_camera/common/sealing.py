@@ -4,8 +4,10 @@ The Fast DDS of the PyPI wheels has no security plugins (SROS2 fails), so face-r
 every camera frame (and every admin request) is sealed with the network's 32-byte key, shared by the hosts of
 one network (``face-reid-keys new``). Sealing encrypts (embeddings are biometric data) and authenticates
 (the tag covers the sender id and a counter too): a participant without the key can neither read nor forge.
-Replays are refused: a sender's counter (its wall clock in ns, strictly increasing) must grow, and be within
-``max_age_s`` of the receiver's clock. Pure Python (the ``cryptography`` package), no rclpy.
+Replays are refused: a sender's counter (its wall clock in ns, strictly increasing) must grow, be within
+``max_age_s`` of the receiver's clock, and (for a receiver that sets ``not_before_s``, e.g. its start) be newer
+than the receiver itself, so a message captured before a restart is not accepted again after it. Pure Python
+(the ``cryptography`` package), no rclpy.
 """
 
 from __future__ import annotations
@@ -88,12 +90,16 @@ class Opener:
     """Checks and opens sealed payloads of one ``purpose``; remembers each sender's newest counter.
 
     ``max_age_s``: a counter (the sender's clock) further than this from the receiver's clock, in either
-    direction, is refused (s, > 0): replays of old messages after a restart, and senders whose clock is off.
+    direction, is refused (s, > 0): old recordings, and senders whose clock is off. ``not_before_s``: a counter
+    older than this wall-clock time (s since the epoch; the receiver's start) is refused as ``replayed``: the
+    newest counters seen die with the process, so without it a message captured before a restart would open
+    again after it.
     """
 
     key: bytes
     purpose: str = "frames"
     max_age_s: float = 30.0
+    not_before_s: float = 0.0
     _newest: dict[str, int] = field(default_factory=dict, repr=False)
     _aes: Any = field(default=None, repr=False)
 
@@ -122,6 +128,9 @@ class Opener:
         age = now - sealed.counter * 1e-9
         if abs(age) > self.max_age_s:
             raise SealError("stale", f"sealed {age:+.1f} s from this host's clock (more than {self.max_age_s:g} s)")
+        if sealed.counter * 1e-9 < self.not_before_s:
+            raise SealError("replayed", f"sealed {self.not_before_s - sealed.counter * 1e-9:.1f} s before this "
+                                        "receiver started (a replay from before a restart, or a sender's clock behind)")
         last = self._newest.pop(sealed.sender_id, 0)
         if sealed.counter <= last:
             self._newest[sealed.sender_id] = last

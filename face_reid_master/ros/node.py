@@ -117,7 +117,8 @@ class MasterNode(ManagedNode):
 
             key = load_network_key(str(values["network_key_path"]))
             age = float(values["max_seal_age_s"])
-            self._openers = {purpose: Opener(key, purpose, age) for purpose in ("frames", "requests")}
+            started = time.time()  # nothing sealed before this configure is accepted (replays across restarts)
+            self._openers = {purpose: Opener(key, purpose, age, started) for purpose in ("frames", "requests")}
             self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted")
         else:
             self.get_logger().warning(

@@ -120,3 +120,11 @@ def test_face_reid_keys_makes_and_checks_a_key(tmp_path: Path, capsys: pytest.Ca
     assert main(["new", str(path)]) == 2 and "not overwritten" in capsys.readouterr().err
     path.chmod(0o640)
     assert main(["check", str(path)]) == 2 and "chmod 600" in capsys.readouterr().err
+
+
+def test_a_receiver_refuses_what_was_sealed_before_it_started_so_a_restart_reopens_no_replay() -> None:
+    captured = Sealer(KEY, "admin").seal(PAYLOAD)  # overheard before the receiver (re)started
+    restarted = Opener(KEY, not_before_s=time.time())
+    assert _code(restarted, captured) == "replayed"  # within max_age_s, but older than the receiver
+    assert restarted.open(Sealer(KEY, "admin").seal(PAYLOAD)) == PAYLOAD  # what is sealed now still opens
+    assert Opener(KEY).open(captured) == PAYLOAD  # without not_before_s only the counters in memory protect

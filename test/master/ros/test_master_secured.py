@@ -130,3 +130,25 @@ def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) 
         executor.shutdown()
         for node in (camera, stranger, master):
             node.destroy_node()
+
+
+def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_restart(ros_context,
+                                                                                     tmp_path: Path) -> None:
+    key = load_network_key(write_network_key(tmp_path / "network.key"))
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
+                       "-p", f"network_key_path:={tmp_path / 'network.key'}", "-p", "admin_services:=true",
+                       "-p", "body_appearance_tracking:=false"])
+    admin = Sealer(key, "admin")
+    early = seal_request(admin, AddPerson.Request(name="Early", embeddings=_face(3).tolist()))
+    master = MasterNode(context=ctx)
+    try:
+        assert master.trigger_configure() == OK
+        reply = master._add_person(early, AddPerson.Response())
+        assert not reply.success and "before this receiver started" in reply.message
+        sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=_face(1).tolist()))
+        assert master._add_person(sealed, AddPerson.Response()).success
+        assert master.trigger_cleanup() == OK and master.trigger_configure() == OK  # a restart of the master
+        reply = master._add_person(sealed, AddPerson.Response())  # captured off the wire, replayed after it
+        assert not reply.success and "before this receiver started" in reply.message
+    finally:
+        master.destroy_node()
