@@ -95,3 +95,24 @@ def colcon_build(workspace: Path, timeout_s: float = 900.0) -> None:
     result = subprocess.run([colcon, "build", "--event-handlers", "console_direct-"], cwd=workspace, env=env,
                             capture_output=True, text=True, timeout=timeout_s)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+
+
+def call_handler(handler, request, response, timeout_s: float = 60.0):
+    """The response of a node's service callback called directly (outside an executor): an ``async`` one is
+    driven until it returns (it waits for a worker thread meanwhile)."""
+    import inspect
+    import time
+
+    result = handler(request, response)
+    if not inspect.iscoroutine(result):
+        return result
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            result.send(None)
+        except StopIteration as stop:
+            return stop.value
+        if time.monotonic() > deadline:
+            result.close()
+            raise TimeoutError(f"{getattr(handler, '__name__', handler)} did not answer in {timeout_s:g} s")
+        time.sleep(0.005)

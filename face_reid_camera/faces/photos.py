@@ -36,7 +36,9 @@ __all__ = [
     "PhotoError",
     "ProgressBar",
     "ProgressCallback",
+    "RequestPhotos",
     "decode_photo",
+    "embed_request_photos",
     "image_size",
     "list_identity_photos",
     "progress_bar",
@@ -207,6 +209,40 @@ def read_confined_photo(root: str | Path, requested: str, max_bytes: int) -> byt
     if len(data) > max_bytes:
         raise PhotoError(f"photo {quoted} is more than {max_bytes} bytes")
     return data
+
+
+@dataclass
+class RequestPhotos:
+    """What the photos of one add-person request gave: an embedding per usable photo, and why others were not."""
+
+    embeddings: list[np.ndarray]
+    notes: list[str]
+
+
+def embed_request_photos(embedder: PhotoEmbedder, root: str | Path, paths: list[str], max_bytes: int,
+                         max_pixels: int, pixel_budget: int) -> RequestPhotos:
+    """Each photo of ``paths`` read inside ``root`` (:func:`read_confined_photo`), decoded and embedded, one at a
+    time; a photo that is unreadable, larger than ``max_pixels``, without a face, or beyond the request's
+    ``pixel_budget`` (pixels decoded so far, by the headers) is skipped with a note. Bounds the time and memory
+    one request can take."""
+    out = RequestPhotos([], [])
+    spent = 0
+    for path in paths:
+        try:
+            data = read_confined_photo(root, path, max_bytes)
+            width, height = image_size(data) or (0, 0)
+            if spent + width * height > pixel_budget and width * height <= max_pixels:
+                raise PhotoError(f"{shown(path)} is beyond this request's budget of {pixel_budget} pixels")
+            spent += width * height
+            found = embedder.embed_photo(decode_photo(data, shown(path), max_pixels, jpeg_png_only=True))
+        except PhotoError as exc:
+            out.notes.append(f"skipped: {exc}")
+            continue
+        if found is None:
+            out.notes.append(f"skipped {shown(path)}: no face found")
+        else:
+            out.embeddings.append(found.embedding)
+    return out
 
 
 def list_identity_photos(root: str | Path) -> tuple[dict[str, list[Path]], list[Path]]:

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -56,6 +57,8 @@ Parameters (all declared with descriptions and ranges; `ros2 param describe` lis
 
 _MAX_REPLY_CHARS = 1000  # service replies are cut to this
 _MAX_LOG_CHARS = 300  # log lines about a request are cut to this
+_MAX_PHOTO_PIXELS = 40_000_000  # an add-person photo larger than this (by its header) is refused: 40 MP
+_REQUEST_PIXEL_BUDGET = 200_000_000  # pixels one add-person request may decode in all (a few seconds of work)
 
 
 class MasterNode(ManagedNode):
@@ -66,6 +69,7 @@ class MasterNode(ManagedNode):
         self.values: dict[str, Any] = {}
         self.core: MasterCore | None = None
         self._photos: Any = None  # PhotoEmbedder of the master's space, loaded on first use
+        self._admin_worker: Any = None  # the thread that decodes add-person photos (off the frame path)
         self.store: Any = None
         self.health: NodeHealth | None = None
         self._own_services: list[Any] = []
@@ -132,8 +136,11 @@ class MasterNode(ManagedNode):
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
         self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
-            self._own_services += [self.create_service(AddPerson, "~/add_person", self._add_person),
-                                   self.create_service(ForgetFace, "~/forget_face", self._forget_face)]
+            # their own callback group: while a request waits for its photos, frames and timers go on
+            admin = MutuallyExclusiveCallbackGroup()
+            self._own_services += [
+                self.create_service(AddPerson, "~/add_person", self._add_person, callback_group=admin),
+                self.create_service(ForgetFace, "~/forget_face", self._forget_face, callback_group=admin)]
             if not values["network_key_path"]:
                 self.get_logger().warning(
                     "admin services on (admin_services: true) without a network key: any participant of this "
@@ -536,23 +543,23 @@ class MasterNode(ManagedNode):
         return health.report(now_s, extra, warnings)
 
     # ------------------------------------------------------------------ services
-    def _add_person(self, request: Any, response: Any) -> Any:
-        return self._handle("add_person", self._do_add_person, request, response)
+    async def _add_person(self, request: Any, response: Any) -> Any:
+        return await self._handle("add_person", self._do_add_person, request, response)
 
-    def _forget_face(self, request: Any, response: Any) -> Any:
-        return self._handle("forget_face", self._do_forget_face, request, response)
+    async def _forget_face(self, request: Any, response: Any) -> Any:
+        return await self._handle("forget_face", self._do_forget_face, request, response)
 
-    def _handle(self, what: str, handler: Any, request: Any, response: Any) -> Any:
-        """Run a service handler: a refused request (ValueError) or any other error is reported in the
-        response and logged (cut), never raised into the executor."""
+    async def _handle(self, what: str, handler: Any, request: Any, response: Any) -> Any:
+        """Run a service handler (a coroutine: the executor goes on with frames while it waits): a refused request
+        (ValueError) or any other error is reported in the response and logged (cut), never raised into the
+        executor."""
         try:
             if self._openers:  # secured: only what a holder of the network key sealed is done
                 try:
                     request = open_request(self._openers["requests"], request, time.time())
                 except SealError as exc:
                     raise ValueError(f"refused: {exc}") from exc
-            self._finish_frames()  # the request acts on the face table as the frames applied so far left it
-            handler(request, response)
+            await handler(request, response)
         except ValueError as exc:
             response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]
         except Exception as exc:  # a request must never take the node down
@@ -564,8 +571,29 @@ class MasterNode(ManagedNode):
         self.get_logger().info(f"{what}: {response.message[:_MAX_LOG_CHARS]}", throttle_duration_sec=1.0)
         return response
 
-    def _do_add_person(self, request: Any, response: Any) -> None:
-        from face_reid_camera.faces.photos import PhotoError, decode_photo, read_confined_photo
+    async def _off_the_frame_path(self, work: Any) -> Any:
+        """``work()`` on the admin worker thread; the executor serves frames meanwhile (rclpy resumes the awaiting
+        service coroutine when the worker's result arrives)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        from rclpy.task import Future
+
+        if self._admin_worker is None:
+            self._admin_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="face_reid_admin")
+        done: Future[Any] = Future(executor=self.executor)
+        done.add_done_callback(lambda _: None)  # its completion wakes the executor, which resumes the coroutine
+
+        def finished(job: Any) -> None:
+            if job.exception() is not None:
+                done.set_exception(job.exception())
+            else:
+                done.set_result(job.result())
+
+        self._admin_worker.submit(work).add_done_callback(finished)
+        return await done
+
+    async def _do_add_person(self, request: Any, response: Any) -> None:
+        from face_reid_camera.faces.photos import embed_request_photos
         from face_reid_master.identity.predefined_people import check_person_name
 
         name = check_person_name(request.name.strip())
@@ -582,27 +610,25 @@ class MasterNode(ManagedNode):
         emb = np.asarray(request.embeddings, dtype=np.float32)
         rows: list[np.ndarray] = list(emb.reshape(-1, dim)) if emb.size else []
         notes: list[str] = []
-        for path in request.image_paths:
-            try:
-                data = read_confined_photo(str(self.values["photo_root"]), path, int(self.values["max_photo_bytes"]))
-                found = self._photo_embedder().embed_photo(decode_photo(data, shown(path), jpeg_png_only=True))
-            except PhotoError as exc:
-                notes.append(f"skipped: {exc}")
-                continue
-            if found is None:
-                notes.append(f"skipped {shown(path)}: no face found")
-            else:
-                rows.append(found.embedding)
+        if request.image_paths:  # read, decoded and embedded off the frame path, within the request's pixel budget
+            paths, root, max_bytes = [str(p) for p in request.image_paths], str(self.values["photo_root"]), int(
+                self.values["max_photo_bytes"])
+            photos = await self._off_the_frame_path(lambda: embed_request_photos(
+                self._photo_embedder(), root, paths, max_bytes, _MAX_PHOTO_PIXELS, _REQUEST_PIXEL_BUDGET))
+            rows += photos.embeddings
+            notes += photos.notes
         try:
             if not rows:
                 raise ValueError("no usable face embedding")
+            self._finish_frames()  # the request acts on the face table as the frames applied so far left it
             self._core().add_person(name, np.stack(rows))
         except ValueError as exc:
             raise ValueError("; ".join([str(exc), *notes])[:_MAX_REPLY_CHARS]) from None
         response.success, response.num_embeddings = True, len(rows)
         response.message = "; ".join([f"added {name} with {len(rows)} embeddings", *notes])[:_MAX_REPLY_CHARS]
 
-    def _do_forget_face(self, request: Any, response: Any) -> None:
+    async def _do_forget_face(self, request: Any, response: Any) -> None:
+        self._finish_frames()  # the request acts on the face table as the frames applied so far left it
         core = self._core()
         if not request.face_id and not request.name:
             raise ValueError("give a face_id or a name")

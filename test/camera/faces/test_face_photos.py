@@ -17,6 +17,7 @@ from face_reid_camera.faces.photos import (
     PhotoEmbedding,
     PhotoError,
     ProgressBar,
+    embed_request_photos,
     progress_bar,
     read_photo,
 )
@@ -312,3 +313,20 @@ def _refusal(root: Path, requested: str) -> BaseException:
     except BaseException as exc:  # returned to the test thread
         return exc
     return AssertionError("not refused")
+
+
+def test_a_requests_photos_stay_within_its_pixel_budget(photo_embedder: PhotoEmbedder, tmp_path: Path) -> None:
+    photo = _photos("deepface_id02")[0]
+    image = cv2.imread(str(photo))
+    h, w = image.shape[:2]
+    for name in ("a.jpg", "b.jpg", "c.jpg"):
+        cv2.imwrite(str(tmp_path / name), image)
+    (tmp_path / "none.jpg").write_bytes(b"not an image")
+    done = embed_request_photos(photo_embedder, tmp_path, ["a.jpg", "none.jpg", "b.jpg", "c.jpg", "../x.jpg"],
+                                max_bytes=10_000_000, max_pixels=10_000_000, pixel_budget=2 * w * h)
+    assert len(done.embeddings) == 2  # a and b; c is beyond the budget of two photos
+    assert len(done.notes) == 3
+    assert "not a JPEG or PNG" in done.notes[0] and "budget" in done.notes[1] and "outside" in done.notes[2]
+    small = embed_request_photos(photo_embedder, tmp_path, ["a.jpg"], 10_000_000, max_pixels=w * h - 1,
+                                 pixel_budget=10 * w * h)
+    assert not small.embeddings and f"more than {w * h - 1}" in small.notes[0]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import spin_until, start_up_output
+from conftest import call_handler, spin_until, start_up_output
 
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.srv")
@@ -219,14 +219,16 @@ def test_add_person_survives_hostile_photo_paths_names_and_sizes(ros_context, tm
         ):
             replies: list = []
             worker = threading.Thread(
-                target=lambda r=req, out=replies: out.append(node._add_person(r, AddPerson.Response())), daemon=True)
+                target=lambda r=req, out=replies: out.append(call_handler(node._add_person, r, AddPerson.Response())),
+                daemon=True)
             worker.start()
             worker.join(30.0)
             assert replies, f"{why}: the service handler froze"
             assert not replies[0].success and why in replies[0].message, (why, replies[0].message[:300])
             assert len(replies[0].message) <= 1000
         assert node.core.people.names() == []  # nothing stored by any of them
-        reply = node._add_person(AddPerson.Request(name="Alice", image_paths=["alice.jpg"]), AddPerson.Response())
+        reply = call_handler(node._add_person, AddPerson.Request(name="Alice", image_paths=["alice.jpg"]),
+                             AddPerson.Response())
         assert reply.success and reply.num_embeddings == 1 and node.core.people.names() == ["Alice"]
         assert node._service_refusals["add_person"] == 13 and node._service_calls["add_person"] == 14
     finally:
@@ -530,4 +532,52 @@ def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_
     finally:
         executor.shutdown()
         camera.destroy_node()
+        node.destroy_node()
+
+
+def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_context, tmp_path: Path) -> None:
+    """Photos are decoded on the admin worker: the executor goes on publishing /tracks_named meanwhile (before, a
+    request of eight 81-megapixel PNGs left /tracks_named silent for 18 s). Photos beyond the request's pixel
+    budget, or larger than a photo may be, are skipped with a reason."""
+    import cv2
+
+    from conftest import FACES_DIR
+
+    from face_reid_master.ros import node as node_module
+
+    root = tmp_path / "gallery"
+    root.mkdir()
+    face = cv2.imread(str(sorted((FACES_DIR / "deepface_id02").glob("*.jpg"))[0]))
+    big = cv2.resize(face, (4000, 4000), interpolation=cv2.INTER_LINEAR)  # 16 MP each: a slow request
+    for k in range(6):
+        cv2.imwrite(str(root / f"big{k}.jpg"), big)
+    huge = f"{node_module._MAX_PHOTO_PIXELS // 1000 + 1}x1000.png"  # over the photo cap by its header alone
+    (root / huge).write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR"
+                              + (node_module._MAX_PHOTO_PIXELS // 1000 + 1).to_bytes(4, "big")
+                              + (1000).to_bytes(4, "big") + b"\x08\x02\x00\x00\x00" + bytes(64))
+    node = _master(ros_context, tmp_path, "admin_services:=true", f"photo_root:={root}", "tick_rate_hz:=20.0")
+    client = Node("admin", context=node.context)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    executor.add_node(client)
+    received: list[float] = []
+    client.create_subscription(NamedTrackArray, "/tracks_named", lambda _: received.append(time.monotonic()), 10)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        assert spin_until(executor, lambda: len(received) >= 2)  # /tracks_named flows
+        add = client.create_client(AddPerson, "/face_reid_master/add_person")
+        assert spin_until(executor, add.service_is_ready)
+        paths = [f"big{k}.jpg" for k in range(6)] + [huge]
+        future = add.call_async(AddPerson.Request(name="Alice", image_paths=paths))
+        before = len(received)
+        assert spin_until(executor, future.done, timeout_s=120.0)
+        during = len(received) - before
+        reply = future.result()
+        assert reply.success, reply.message
+        assert during >= 5, f"only {during} /tracks_named messages while the request ran: {reply.message}"
+        assert reply.num_embeddings == 6 or "budget" in reply.message  # 6 x 16 MP fit the 200 MP budget
+        assert f"more than {node_module._MAX_PHOTO_PIXELS}" in reply.message  # the huge PNG, by its header
+    finally:
+        executor.shutdown()
+        client.destroy_node()
         node.destroy_node()
