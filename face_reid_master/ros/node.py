@@ -57,6 +57,9 @@ Parameters (all declared with descriptions and ranges; `ros2 param describe` lis
 
 _MAX_REPLY_CHARS = 1000  # service replies are cut to this
 _MAX_LOG_CHARS = 300  # log lines about a request are cut to this
+# A camera message (plain or sealed) larger than this is refused before it is read: a frame of 50 people with
+# 256-d embeddings and body descriptors is ~0.2 MB, and the bound keeps what a stranger's traffic costs small.
+MAX_FRAME_BYTES = 1 << 20
 _MAX_PHOTO_PIXELS = 40_000_000  # an add-person photo larger than this (by its header) is refused: 40 MP
 _REQUEST_PIXEL_BUDGET = 200_000_000  # pixels one add-person request may decode in all (a few seconds of work)
 
@@ -77,6 +80,9 @@ class MasterNode(ManagedNode):
         self._service_refusals: dict[str, int] = {}
         self._subscribed: dict[str, Any] = {}
         self._unmatched: set[str] = set()  # camera topics said to have only publishers that do not match
+        self._refused_topics: set[str] = set()  # camera topics not subscribed (cap reached, unknown camera)
+        self._max_topics = 0
+        self._known_cameras: frozenset[str] = frozenset()  # known_camera_ids ({} = any)
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._clocks = ClockOffsets()
         self._own_timers: list[Any] = []
@@ -133,6 +139,8 @@ class MasterNode(ManagedNode):
         self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
         self._identity_period_s = float(values["identity_period_s"])
         self._min_cycle_period_s = float(values["min_cycle_period_s"])
+        self._max_topics = int(values["max_camera_topics"])
+        self._known_cameras = frozenset(master_params.clean_list(values["known_camera_ids"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
         self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
         if values["admin_services"]:
@@ -188,6 +196,7 @@ class MasterNode(ManagedNode):
             self.destroy_subscription(sub)
         self._subscribed = {}
         self._unmatched.clear()
+        self._refused_topics.clear()
         self._intake.clear()  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
@@ -254,14 +263,19 @@ class MasterNode(ManagedNode):
 
     # ------------------------------------------------------------------ camera topics
     def _subscribe(self, topic: str) -> None:
-        if topic in self._subscribed:
+        if topic in self._subscribed or topic in self._refused_topics:
+            return
+        if len(self._subscribed) >= self._max_topics:  # memory before authentication: DDS buffers per topic
+            self._refused_topics.add(topic)
+            self._reject("topic_cap", f"camera topic {shown(topic, 128)} not subscribed: already "
+                                      f"{len(self._subscribed)} camera topics (max_camera_topics)")
             return
         # Without rclpy's default QoS-event handlers (two per subscription, each walked by the executor on every
         # cycle): publishers that do not match are found by _warn_unmatched instead.
         events = SubscriptionEventCallbacks(use_default_callbacks=False)
         if self._openers:
             self._subscribed[topic] = self.create_subscription(Sealed, topic, self._on_sealed, self._frame_qos,
-                                                               event_callbacks=events)
+                                                               event_callbacks=events, raw=True)
         else:
             self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos,
                                                                event_callbacks=events, raw=True)
@@ -290,7 +304,12 @@ class MasterNode(ManagedNode):
             return
         for name, types in self.get_topic_names_and_types():
             wanted = "face_reid_msgs/msg/Sealed" if self._openers else "face_reid_msgs/msg/CameraFrame"
-            if wanted in types and self._regex.search(name):
+            if wanted in types and self._regex.search(name) and name not in self._refused_topics:
+                if self._known_cameras and self._known_cameras.isdisjoint(name.split("/")):
+                    self._refused_topics.add(name)  # a stranger's topic: not even buffered
+                    self._reject("topic_unknown_camera", f"camera topic {shown(name, 128)} not subscribed: none of "
+                                 "its namespaces is a known_camera_ids entry (list it in camera_topics)")
+                    continue
                 self._subscribe(name)
 
     def _on_frame(self, frame: bytes | Any) -> None:
@@ -313,29 +332,45 @@ class MasterNode(ManagedNode):
         if wait > 0.0:
             time.sleep(wait)
 
-    def _on_sealed(self, sealed: Any) -> None:
-        """A sealed camera message (secured network): opened, then queued like a plain one."""
+    def _on_sealed(self, sealed: bytes) -> None:
+        """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one."""
         self._wait_for_cycle()
         now = self.now_s()
         if self._receive_sealed(sealed, now):
             self._cycle(now)
 
-    def _receive_sealed(self, sealed: Any, now: float) -> bool:
-        """The CameraFrame inside a sealed message received (True), or refused (counted by reason, logged)."""
+    def _receive_sealed(self, raw: bytes, now: float) -> bool:
+        """The CameraFrame inside a sealed message's CDR bytes received (True), or refused (counted by reason,
+        logged): an oversized one before it is even read."""
+        if self.health is not None:
+            self.health.frame_in(now)
+        if len(raw) > MAX_FRAME_BYTES:
+            self._reject("oversized", f"sealed message of {len(raw)} bytes refused unread (more than "
+                                      f"{MAX_FRAME_BYTES})")
+            return False
+        try:
+            sealed = deserialize_message(raw, Sealed)
+        except Exception as exc:  # rclpy raises RMWError for bytes that are not one
+            self._reject("sealed_malformed", f"not a face_reid_msgs/Sealed: {str(exc)[:200]}")
+            return False
         sender = str(sealed.sender_id)
         try:
             payload = open_payload(self._openers["frames"], sealed, time.time())
         except SealError as exc:
             self._reject(f"sealed_{exc.code}", f"sealed frame from {shown(sender, 64)} refused: {exc}")
             return False
-        return self._receive(payload, now, sender)
+        return self._receive(payload, now, sender, counted=True)
 
-    def _receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None) -> bool:
+    def _receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None, counted: bool = False) -> bool:
         """A camera frame (CDR bytes or a CameraFrame message; ``sealed_by``: the sender of the seal it came in)
         read into a record and queued for the next cycle (True); one that cannot be read, or sealed by another
         camera than it names, is refused (counted, logged)."""
-        if self.health is not None:
+        if self.health is not None and not counted:
             self.health.frame_in(now)
+        if isinstance(frame, bytes) and len(frame) > MAX_FRAME_BYTES:
+            self._reject("oversized", f"camera message of {len(frame)} bytes refused unread (more than "
+                                      f"{MAX_FRAME_BYTES})")
+            return False
         try:
             record, processing_ms = _read_frame(frame)
         except (ValueError, TypeError, AttributeError) as exc:
@@ -358,7 +393,7 @@ class MasterNode(ManagedNode):
         for sub in self._subscribed.values():
             try:
                 with sub.handle:
-                    while (taken := sub.handle.take_message(sub.msg_type, not self._openers)) is not None:
+                    while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
                         if self._openers:
                             self._receive_sealed(taken[0], now)
                         else:
@@ -525,6 +560,10 @@ class MasterNode(ManagedNode):
         extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         warnings = [] if self._subscribed else ["no camera topic found yet"]
+        extra["camera_topics_refused"] = len(self._refused_topics)
+        if self._refused_topics:
+            warnings.append(f"{len(self._refused_topics)} camera topic(s) not subscribed (max_camera_topics "
+                            f"reached, or not named after a known camera), e.g. {shown(min(self._refused_topics), 64)}")
         if self._unmatched:
             warnings.append(f"{len(self._unmatched)} camera topic(s) whose publishers do not match the master's "
                             f"reliable subscription, e.g. {shown(min(self._unmatched), 64)}: publish camera frames "
@@ -671,9 +710,31 @@ def _read_frame(frame: bytes | Any) -> tuple[CameraFrameRecord, float]:
 _GIL_SWITCH_INTERVAL_S = 0.0005
 
 
+_DDS_PROFILE = Path(__file__).with_name("fastdds_master.xml")
+_M_MMAP_THRESHOLD = -3  # glibc mallopt: allocations above the threshold are mmapped, and unmapped when freed
+_MMAP_THRESHOLD_BYTES = 128 * 1024
+
+
+def bound_dds_memory() -> None:
+    """Before rclpy starts: the master's Fast DDS profile (samples freed once taken) unless the user gives one, and
+    a fixed glibc mmap threshold (glibc raises it after large frees, and then keeps freed messages in its heap):
+    memory that refused traffic took goes back to the system."""
+    import ctypes
+    import os
+
+    if "FASTDDS_DEFAULT_PROFILES_FILE" not in os.environ and _DDS_PROFILE.is_file():
+        os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(_DDS_PROFILE)
+        os.environ["RMW_FASTRTPS_USE_QOS_FROM_XML"] = "1"  # rmw_fastrtps then takes the memory policy from it
+    try:
+        ctypes.CDLL(None).mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
+    except (OSError, AttributeError):  # not glibc: its allocator's own policy applies
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point."""
     sys.setswitchinterval(_GIL_SWITCH_INTERVAL_S)
+    bound_dds_memory()
     return run_node("face-reid-master", USAGE, master_params.TABLE, MasterNode, argv)
 
 

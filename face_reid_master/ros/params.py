@@ -43,6 +43,10 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "How often new camera topics are looked for and unmatched camera publishers checked (s).",
               low=0.05, high=3600.0),
     ParamSpec("known_camera_ids", [""], "Accepted camera ids (list; [''] = accept any camera)."),
+    ParamSpec("max_camera_topics", 64,
+              "At most this many camera topics are subscribed (each buffers messages before they are checked; "
+              "with known_camera_ids, discovered topics must have a known camera id as a namespace) (count).",
+              low=1, high=10_000),
     ParamSpec("tracks_topic", "/tracks_named", "Where face_reid_msgs/NamedTrackArray is published."),
     ParamSpec("markers_topic", "/tracks_named/markers",
               "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off)."),

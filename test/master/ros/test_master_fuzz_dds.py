@@ -35,7 +35,7 @@ def test_fuzzed_master_keeps_the_walker_and_stores_nothing_forged(ros_domain_id:
     db = tmp_path / "faces.db"
     master = procs.start(["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}",
                           "-p", "embedding_space:=dlib_resnet_v1", "-p", f"network_key_path:={key or EMPTY}",
-                          "-p", "known_camera_ids:=[walker]" if not secured else "known_camera_ids:=['']",
+                          "-p", "known_camera_ids:=[walker, fuzz1, fuzz2]" if not secured else "known_camera_ids:=['']",
                           "-p", "admin_services:=true", "-p", "topic_discovery_period_s:=0.5",
                           "-p", "body_appearance_tracking:=false", "-p", "stats_log_period_s:=2.0"],
                          ros_domain_id, tmp_path / "master.log")

@@ -540,7 +540,6 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
     request of eight 81-megapixel PNGs left /tracks_named silent for 18 s). Photos beyond the request's pixel
     budget, or larger than a photo may be, are skipped with a reason."""
     import cv2
-
     from conftest import FACES_DIR
 
     from face_reid_master.ros import node as node_module

@@ -152,3 +152,62 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
         assert not reply.success and "before this receiver started" in reply.message
     finally:
         master.destroy_node()
+
+
+def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_context, tmp_path: Path) -> None:
+    """Memory before authentication: a message larger than MAX_FRAME_BYTES is refused before it is read (no
+    deserialization, no decryption), and at most max_camera_topics camera topics are subscribed."""
+    from face_reid_master.ros.node import MAX_FRAME_BYTES
+
+    write_network_key(tmp_path / "network.key")
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
+                       "-p", f"network_key_path:={tmp_path / 'network.key'}", "-p", "max_camera_topics:=2",
+                       "-p", "topic_discovery_period_s:=0.1", "-p", "body_appearance_tracking:=false"])
+    master = MasterNode(context=ctx)
+    stranger = Node("stranger", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    for node in (master, stranger):
+        executor.add_node(node)
+    try:
+        assert master.trigger_configure() == OK and master.trigger_activate() == OK
+        pubs = [stranger.create_publisher(Sealed, f"/s{k}/face_reid/frames_sealed", 10) for k in range(3)]
+        assert spin_until(executor, lambda: len(master._subscribed) == 2 and len(master._refused_topics) == 1)
+        assert spin_until(executor, lambda: sum(p.get_subscription_count() for p in pubs) == 2)
+        big = Sealed(sender_id="s0", counter=time.time_ns(), nonce=bytes(12), ciphertext=bytes(MAX_FRAME_BYTES + 1))
+        matched = [p for p in pubs if p.get_subscription_count() > 0]
+        matched[0].publish(big)
+        assert spin_until(executor, lambda: master.health.rejected.get("oversized", 0) == 1)
+        assert master.health.rejected.get("sealed_forged", 0) == 0  # refused before any decryption
+        report = master.diagnostics(master.now_s())
+        assert report.values["camera_topics_refused"] == "1" and report.values["rejected_oversized"] == "1"
+        assert "not subscribed (max_camera_topics" in report.message
+    finally:
+        executor.shutdown()
+        for node in (stranger, master):
+            node.destroy_node()
+
+
+def test_with_known_cameras_only_their_topics_are_subscribed(ros_context, tmp_path: Path) -> None:
+    write_network_key(tmp_path / "network.key")
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
+                       "-p", f"network_key_path:={tmp_path / 'network.key'}", "-p", "known_camera_ids:=[cam_a]",
+                       "-p", "topic_discovery_period_s:=0.1", "-p", "body_appearance_tracking:=false"])
+    master = MasterNode(context=ctx)
+    stranger = Node("stranger", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    for node in (master, stranger):
+        executor.add_node(node)
+    try:
+        assert master.trigger_configure() == OK and master.trigger_activate() == OK
+        for name in ("/cam_a/face_reid/frames_sealed", "/evil/face_reid/frames_sealed"):
+            stranger.create_publisher(Sealed, name, 10)
+        assert spin_until(executor, lambda: master.health.rejected.get("topic_unknown_camera", 0) == 1
+                          and len(master._subscribed) == 1)
+        assert set(master._subscribed) == {"/cam_a/face_reid/frames_sealed"}
+        for _ in range(5):  # discovery goes on: the refused topic is neither subscribed nor counted again
+            master._discover()
+        assert master.health.rejected["topic_unknown_camera"] == 1
+    finally:
+        executor.shutdown()
+        for node in (stranger, master):
+            node.destroy_node()
