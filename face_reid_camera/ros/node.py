@@ -23,7 +23,7 @@ from face_reid_camera.pipeline import CameraPipeline
 from face_reid_camera.ros import params as camera_params
 from face_reid_camera.ros.convert import frame_to_msg, intrinsics_from_camera_info
 from face_reid_camera.ros.floor_map import FloorMapOutput
-from face_reid_camera.ros.frame_sync import StampSynchronizer
+from face_reid_camera.ros.frame_sync import DROP_MEANINGS, DROP_REASONS, RESET_BACKWARD_S, StampSynchronizer
 from face_reid_camera.ros.image_codec import ImageDecodeError, decode_image, depth_to_metres, to_bgr
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.ros.sealed import seal_message
@@ -36,7 +36,8 @@ RGB-D frames in, face_reid_msgs/CameraFrame out, status on /diagnostics.
 Parameters (all declared with descriptions and ranges; `ros2 param describe` lists them):
 """
 
-REJECT_REASONS = ("bad_color", "bad_depth", "no_camera_info", "stale", "size_mismatch", "pipeline_errors")
+REJECT_REASONS = ("bad_color", "bad_depth", "no_camera_info", "stale", "size_mismatch", "pipeline_errors",
+                  *DROP_REASONS)
 
 
 class CameraNode(ManagedNode):
@@ -62,6 +63,7 @@ class CameraNode(ManagedNode):
         self._pub_lock = threading.Lock()
         self._superseded = 0
         self._dropped_reported = 0
+        self._stamp_drops_reported: dict[str, int] = {}
         self._floor_found: bool | None = None
         self._floor_check: Any = None  # FloorCheck of the last frame the pose was checked on
         self._floor_map: FloorMapOutput | None = None  # floor occupancy output (floor_map_period_s > 0)
@@ -99,7 +101,9 @@ class CameraNode(ManagedNode):
         self._camera_frame_id = str(values["camera_frame_id"])
         self._floor_map = FloorMapOutput.from_values(self, values, config.camera_id, pose,
                                                      str(values["world_frame_id"]))
-        self._sync = StampSynchronizer(float(values["sync_slop_s"]))
+        self._sync = StampSynchronizer(float(values["sync_slop_s"]), max_age_s=float(values["max_frame_age_s"]),
+                                       on_drop=self._reject)
+        self._stamp_drops_reported = {}
         self._sealer = None
         if values["network_key_path"]:
             from face_reid_camera.common.sealing import Sealer, load_network_key
@@ -214,13 +218,26 @@ class CameraNode(ManagedNode):
 
     def _on_color(self, msg: Any) -> None:
         img = self._decode(msg, to_bgr, "bad_color", "colour")
-        if img is not None and self._sync is not None:
-            self._offer(self._sync.add_color(stamp_to_seconds(msg.header.stamp), img))
+        if img is not None:
+            self._pair(True, msg, img)
 
     def _on_depth(self, msg: Any) -> None:
         depth = self._decode(msg, depth_to_metres, "bad_depth", "depth")
-        if depth is not None and self._sync is not None:
-            self._offer(self._sync.add_depth(stamp_to_seconds(msg.header.stamp), depth))
+        if depth is not None:
+            self._pair(False, msg, depth)
+
+    def _pair(self, is_color: bool, msg: Any, image: np.ndarray) -> None:
+        """Hand an image to the synchroniser with this node's clock as the receive time; offer a completed pair."""
+        sync = self._sync
+        if sync is None:
+            return
+        resets = sync.stats.resets
+        add = sync.add_color if is_color else sync.add_depth
+        pair = add(stamp_to_seconds(msg.header.stamp), image, self.now_s())
+        if sync.stats.resets != resets:
+            self.log_throttled("sync_reset", f"image stamps went back by more than {RESET_BACKWARD_S:g} s (a bag "
+                               "loop or a clock jump): colour/depth pairing restarted", sync.stats.resets, warn=True)
+        self._offer(pair)
 
     def _decode(self, msg: Any, convert: Any, reason: str, what: str) -> np.ndarray | None:
         """The image of a sensor_msgs/Image through ``convert`` (to BGR / to metres), or None: rejected, counted."""
@@ -344,7 +361,7 @@ class CameraNode(ManagedNode):
             "frames_superseded": self._superseded,
             "unpaired_color": sync.stats.dropped_color if sync else 0,
             "unpaired_depth": sync.stats.dropped_depth if sync else 0,
-            "out_of_order": sync.stats.rejected_out_of_order if sync else 0,
+            "sync_resets": sync.stats.resets if sync else 0,
             "camera_info_received": self._intrinsics is not None,
             "floor_found": self._floor_found if self._floor_found is not None else "no frame yet",
             "body_errors": self.pipeline.body_errors if self.pipeline is not None else 0,
@@ -357,6 +374,12 @@ class CameraNode(ManagedNode):
                           "pose_tilt_deg": check.pose_tilt_deg, "floor_tilt_deg": check.floor_tilt_deg})
         for reason in REJECT_REASONS:
             extra.setdefault(f"rejected_{reason}", health.rejected.get(reason, 0))
+        stamp_drops = {r: health.rejected.get(r, 0) - self._stamp_drops_reported.get(r, 0) for r in DROP_REASONS}
+        self._stamp_drops_reported = {r: health.rejected.get(r, 0) for r in DROP_REASONS}
+        if any(stamp_drops.values()):
+            warnings.append("images dropped for their stamps since the last report: " + ", ".join(
+                f"{n} {r} ({DROP_MEANINGS[r]})" for r, n in stamp_drops.items() if n) +
+                "; check the camera driver's stamps and this host's clock")
         return health.report(now_s, extra, warnings)
 
 

@@ -67,7 +67,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec("sync_slop_s", 0.02, "Max stamp difference between a colour and a depth image of one pair (s).",
               low=0.0, high=1.0),
-    ParamSpec("max_frame_age_s", 0.5, "Drop pairs older than this when processing starts (s; 0 = never).",
+    ParamSpec("max_frame_age_s", 0.5, "Drop images stamped longer ago than this on arrival, and pairs older "
+              "than this when processing starts (s; 0 = never).",
               low=0.0, high=3600.0),
     ParamSpec("face_score_threshold", 0.6, "Minimum face detector score (0..1).", low=0.0, high=1.0,
               low_open=True),

@@ -370,3 +370,41 @@ def test_floor_summary_is_published_only_when_asked_for(ros_context) -> None:
             off.get_name(), off.get_namespace()))
     finally:
         off.destroy_node()
+
+
+def test_one_pair_stamped_an_hour_ahead_does_not_silence_the_camera(ros_context) -> None:
+    """The attack: one colour+depth pair stamped +1 h, then valid pairs. Each valid pair is published; the
+    forged one is dropped, counted and named on /diagnostics (the code before published 1 frame of 6: the
+    forged one, then the pairing's last stamp stayed an hour ahead and every valid pair was refused)."""
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_stamps", "-p", "detect_faces:=false",
+                       "-p", "describe_bodies:=false", "-p", "max_frame_age_s:=5.0"])
+    node = CameraNode(context=ctx)
+    sent: list = []
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        node.publisher.publish = sent.append  # what the node would send, in order
+        depth_mm = np.zeros((480, 640), np.uint16)
+        depth_mm[240:] = 2500
+        bgr = np.full((480, 640, 3), 90, np.uint8)
+
+        def feed(ahead_s: float) -> float:
+            stamp_s = node.now_s() + ahead_s
+            stamp = Time(nanoseconds=int(stamp_s * 1e9)).to_msg()
+            node._on_info(_camera_info(stamp))
+            for msg in _images(bgr, "bgr8", depth_mm, "16UC1", stamp):
+                (node._on_color if msg.encoding == "bgr8" else node._on_depth)(msg)
+            assert spin_until_idle(node, node.health.frames_in)  # processed before the next: none superseded
+            return stamp_s
+
+        feed(3600.0)
+        valid = [feed(0.0) for _ in range(5)]
+        assert len(sent) == 5, f"{len(sent)} published of 5 valid pairs"
+        assert [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in sent] == pytest.approx(valid, abs=1e-6)
+        report = node.diagnostics(node.now_s())
+        assert report.values["rejected_stamp_future"] == "2" and report.values["rejected_total"] == "2"
+        assert report.values["rejected_stamp_past"] == report.values["rejected_stamp_out_of_order"] == "0"
+        assert report.values["sync_resets"] == "0" and report.values["frames_processed"] == "5"
+        assert report.level == 1 and "2 stamp_future (stamped more than 2 s ahead" in report.message, report.message
+        assert "stamp" not in node.diagnostics(node.now_s()).message  # said once per report period, not forever
+    finally:
+        node.destroy_node()
