@@ -25,8 +25,8 @@ RESET_BACKWARD_S = 1.0
 
 DROP_REASONS = ("stamp_future", "stamp_past", "stamp_out_of_order")
 DROP_MEANINGS = {
-    "stamp_future": f"stamped more than {MAX_STAMP_FUTURE_S:g} s ahead of this node's clock",
-    "stamp_past": "stamped longer ago than max_frame_age_s",
+    "stamp_future": f"stamped more than {MAX_STAMP_FUTURE_S:g} s after they were received",
+    "stamp_past": "stamped longer than max_frame_age_s before they were received",
     "stamp_out_of_order": "stamped before a frame already paired",
 }
 

@@ -5,12 +5,15 @@ replays them through the pipeline offline (``face-reid-replay BAG``).
 Topics are found by type when not given: the depth image is the ``sensor_msgs/Image`` whose encoding is
 16UC1 / 32FC1 (or whose name says depth), the colour image another Image topic, the camera info the
 ``CameraInfo`` next to the depth topic (else the only one). Colour and depth are paired by stamp as the
-camera node pairs them (``StampSynchronizer``); a registered depth smaller than the colour is fine (the
+camera node pairs them (``StampSynchronizer``), with the recording's own clock (each message's record time:
+when the recorder received it) as the receive clock: a stamp far ahead of it is dropped as the live node would
+drop it (no age limit: offline nothing is late); a registered depth smaller than the colour is fine (the
 pipeline scales the intrinsics).
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from face_reid_camera.camera_model import CameraIntrinsics
-from face_reid_camera.ros.frame_sync import StampSynchronizer
+from face_reid_camera.common.stamps import stamp_to_seconds
+from face_reid_camera.ros.frame_sync import DROP_MEANINGS, StampSynchronizer
 from face_reid_camera.ros.image_codec import decode_image, depth_to_metres, to_bgr
 
 __all__ = ["BagTopics", "bag_frames", "is_bag"]
@@ -39,10 +43,6 @@ class BagTopics:
     color: str = ""
     depth: str = ""
     info: str = ""
-
-
-def _stamp(msg: Any) -> float:
-    return float(msg.header.stamp.sec) + float(msg.header.stamp.nanosec) * 1e-9
 
 
 def _choose(reader: Any, want: BagTopics) -> BagTopics:
@@ -81,13 +81,14 @@ def bag_frames(path: Path, topics: BagTopics = BagTopics(), slop_s: float = 0.02
         wanted = [c for c in reader.connections if c.topic in (chosen.color, chosen.depth, chosen.info)]
         sync: StampSynchronizer[Any, Any] = StampSynchronizer(slop_s)
         intrinsics: CameraIntrinsics | None = None
-        for conn, _, raw in reader.messages(connections=wanted):
+        for conn, record_ns, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic == chosen.info:
                 k = [float(v) for v in msg.k]
                 intrinsics = CameraIntrinsics(k[0], k[4], k[2], k[5], int(msg.width), int(msg.height))
                 continue
-            pair = (sync.add_color if conn.topic == chosen.color else sync.add_depth)(_stamp(msg), msg)
+            add = sync.add_color if conn.topic == chosen.color else sync.add_depth
+            pair = add(stamp_to_seconds(msg.header.stamp), msg, record_ns * 1e-9)
             if pair is None or intrinsics is None:
                 continue
             stamp, color_msg, depth_msg = pair
@@ -96,6 +97,11 @@ def bag_frames(path: Path, topics: BagTopics = BagTopics(), slop_s: float = 0.02
             dh, dw = depth.shape[:2]
             hint = intrinsics if (intrinsics.width, intrinsics.height) == (dw, dh) else intrinsics.scaled(dw, dh)
             yield ReplayFrame(f"{stamp:.6f}", depth, color, hint)
+        drops = {reason: n for reason, n in sync.stats.rejected.items() if n}
+        if drops:
+            print(f"face-reid-replay: recording {path}: images dropped for their stamps: " + ", ".join(
+                f"{n} {reason} ({DROP_MEANINGS[reason]})" for reason, n in drops.items()),
+                file=sys.stderr)
 
 
 def _image(msg: Any) -> np.ndarray:

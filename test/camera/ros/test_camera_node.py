@@ -404,7 +404,8 @@ def test_one_pair_stamped_an_hour_ahead_does_not_silence_the_camera(ros_context)
         assert report.values["rejected_stamp_future"] == "2" and report.values["rejected_total"] == "2"
         assert report.values["rejected_stamp_past"] == report.values["rejected_stamp_out_of_order"] == "0"
         assert report.values["sync_resets"] == "0" and report.values["frames_processed"] == "5"
-        assert report.level == 1 and "2 stamp_future (stamped more than 2 s ahead" in report.message, report.message
+        assert report.level == 1, report.message
+        assert "2 stamp_future (stamped more than 2 s after they were received)" in report.message, report.message
         assert "stamp" not in node.diagnostics(node.now_s()).message  # said once per report period, not forever
     finally:
         node.destroy_node()

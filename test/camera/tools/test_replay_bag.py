@@ -21,7 +21,9 @@ COLOR, DEPTH, INFO = "/camera/color/image_raw", "/camera/aligned_depth_to_color/
     "/camera/aligned_depth_to_color/camera_info"
 
 
-def _write_bag(path: Path, storage: str, shuffle: bool = False) -> int:
+def _write_bag(path: Path, storage: str, shuffle: bool = False, forged: dict[int, float] | None = None) -> int:
+    """The desk frames 0.1 s apart, recorded at their stamps (+ 0-2 us); ``forged``: frame -> seconds added to the
+    stamps of its colour and depth images (not to their record time)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -37,6 +39,8 @@ def _write_bag(path: Path, storage: str, shuffle: bool = False) -> int:
         for k, depth_path in enumerate(frames):
             t_ns = 1_700_000_000_000_000_000 + k * 100_000_000
             header = Header(stamp=Time(sec=t_ns // 10**9, nanosec=t_ns % 10**9), frame_id="camera_color_optical_frame")
+            f_ns = t_ns + int((forged or {}).get(k, 0.0) * 1e9)
+            image_header = Header(stamp=Time(sec=f_ns // 10**9, nanosec=f_ns % 10**9), frame_id=header.frame_id)
             depth = cv2.imread(str(depth_path), cv2.IMREAD_UNCHANGED)
             color = cv2.imread(str(depth_path).replace("_depth_mm.png", "_rgb.png"), cv2.IMREAD_COLOR)
             k_matrix = np.array([kinect.fx, 0, kinect.cx, 0, kinect.fy, kinect.cy, 0, 0, 1.0])
@@ -45,9 +49,9 @@ def _write_bag(path: Path, storage: str, shuffle: bool = False) -> int:
                                   d=np.zeros(5), k=k_matrix,
                                   r=np.eye(3).reshape(-1), p=np.zeros(12), binning_x=0, binning_y=0,
                                   roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))),
-                (DEPTH, Image(header=header, height=480, width=640, encoding="16UC1", is_bigendian=0, step=1280,
+                (DEPTH, Image(header=image_header, height=480, width=640, encoding="16UC1", is_bigendian=0, step=1280,
                               data=np.frombuffer(depth.astype("<u2").tobytes(), np.uint8))),
-                (COLOR, Image(header=header, height=480, width=640, encoding="bgr8", is_bigendian=0, step=1920,
+                (COLOR, Image(header=image_header, height=480, width=640, encoding="bgr8", is_bigendian=0, step=1920,
                               data=np.frombuffer(color.tobytes(), np.uint8))),
             ]
             if shuffle:
@@ -85,3 +89,16 @@ def test_topics_can_be_named_and_wrong_ones_are_explained(tmp_path: Path, capsys
     assert main([str(tmp_path / "bag"), "--no-faces", "--no-bodies", "--depth-topic", "/nope"]) == 1
     err = capsys.readouterr().err
     assert "topic '/nope' is not in the recording" in err and "no frame could be read" in err
+
+
+def test_one_pair_stamped_an_hour_ahead_of_its_recording_does_not_silence_the_replay(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The record time is the replay's receive clock: the forged first pair is dropped and said so on stderr, the
+    frames after it replay (the code before replayed only the forged one: its stamp stayed the pairing's last)."""
+    n = _write_bag(tmp_path / "bag", "SQLITE3", forged={0: 3600.0})
+    assert main([str(tmp_path / "bag"), "--no-faces", "--no-bodies"]) == 0
+    out = capsys.readouterr()
+    names = [float(line["frame"]) for line in _lines(out.out)]
+    assert names == pytest.approx([1_700_000_000.0 + 0.1 * k for k in range(1, n)], abs=1e-6)
+    assert "images dropped for their stamps: 2 stamp_future (stamped more than 2 s after they were received)" \
+        in out.err
