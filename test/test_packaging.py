@@ -23,7 +23,7 @@ def _installed_non_editable() -> bool:
 def test_ros2_run_entry_points_and_data_are_installed() -> None:
     index = PREFIX / "share" / "ament_index" / "resource_index" / "packages"
     for pkg, exes in {
-        "face_reid_camera": ["face-reid-camera", "face-reid-replay", "face-reid-keys"],
+        "face_reid_camera": ["face-reid-camera", "face-reid-replay", "face-reid-keys", "face-reid-state"],
         "face_reid_master": ["face-reid-master", "face-reid-faces", "face-reid-calibrate", "face-reid-up",
                              "face-reid-goto", "face-reid-map", "face-reid-align-map"],
     }.items():

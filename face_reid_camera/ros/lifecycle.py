@@ -3,6 +3,12 @@ the start-up walk to ACTIVE (``autostart``), throttled logging of rejected input
 
 Subclasses implement ``configure`` / ``activate`` / ``deactivate`` / ``cleanup`` (plain methods; an
 exception in ``configure`` fails the transition with its message in :attr:`ManagedNode.failure`).
+
+Control: a node with a network key (``network_key_path``) offers neither the standard lifecycle services
+(``~/change_state`` ...) nor the parameter services (``~/set_parameters`` ...), which anyone on the DDS domain
+could call; it takes transitions only through ``~/change_state_sealed`` (face_reid_msgs/ChangeState, sealed with
+the key: ``face-reid-state``). Without a key the standard services stay, with a warning. A ``shutdown``
+transition ends the process.
 """
 
 from __future__ import annotations
@@ -17,13 +23,17 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.node import LifecycleNodeMixin
+from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.parameter_service import ParameterService
 
 from face_reid_camera.common.diagnostics import DiagnosticReport
 from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable
 from face_reid_camera.common.stamps import set_stamp
+from face_reid_camera.common.transitions import QUERY, TransitionError, plan
 
-__all__ = ["ManagedNode", "descriptor_for", "report_to_msg", "run_node"]
+__all__ = ["ManagedNode", "descriptor_for", "network_key_override", "report_to_msg", "run_node"]
 
 _TYPES = {
     "bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER, "float": Parameter.Type.DOUBLE,
@@ -32,6 +42,16 @@ _TYPES = {
 _INT64 = 2**63 - 1
 LOG_THROTTLE_S = 5.0
 _MAX_LOG_CHARS = 300
+_DEFAULT_SEAL_AGE_S = 30.0  # a sealed transition request older (or newer) than this is refused, without max_seal_age_s
+_REPLY_LINGER_S = 0.5  # after a shutdown transition, the executor spins this long so the reply reaches the caller
+
+
+def network_key_override(overrides: dict[str, Parameter[Any]]) -> str:
+    """The ``network_key_path`` a node is started with (its parameter overrides: command line, params files,
+    constructor), '' when none: whether the node is secured must be known before its services exist."""
+    given = overrides.get("network_key_path")
+    value = given.value if given is not None else ""
+    return value if isinstance(value, str) else ""
 
 
 def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
@@ -68,8 +88,19 @@ class ManagedNode(LifecycleNode):
     """A lifecycle node whose parameters come from one :class:`ParamTable`."""
 
     def __init__(self, table: ParamTable, **kwargs: Any) -> None:
-        super().__init__(table.node_name, **kwargs)
+        # LifecycleNode.__init__ in two steps: the node's overrides say whether it is secured, and only then are
+        # the lifecycle and parameter services created (not at all when it is)
+        Node.__init__(self, table.node_name, start_parameter_services=False, **kwargs)
+        self.network_key_path = network_key_override(self._parameter_overrides)
+        self.secured = bool(self.network_key_path)
+        LifecycleNodeMixin.__init__(self, enable_communication_interface=not self.secured)
+        if not self.secured:
+            self._open_parameter_service = ParameterService(self)  # what Node.__init__ would have made
         self.table = table
+        self.finished = False  # shut down (a shutdown transition): run_node ends the process
+        self.control_requests = 0  # ~/change_state_sealed requests received
+        self.control_refusals = 0  # ... of which refused (not sealed with the key, replayed, not allowed)
+        self._control_opener: Any = None
         self.failure = ""  # why the last transition failed (for the FATAL line at start-up)
         self.quiet_failures = False  # run_node reports start-up failures itself, as one FATAL line
         self._configured = False
@@ -94,6 +125,65 @@ class ManagedNode(LifecycleNode):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diagnostics_pub: Any = None
         self._diagnostics_timer: Any = None
+        if self.secured:
+            self._offer_sealed_control()
+
+    def warn_if_open(self) -> None:
+        """The start-up warning of an unsecured node (run_node, once the node is up): who can control it."""
+        if not self.secured:
+            self.get_logger().warning(
+                f"UNSECURED: no network_key_path: the lifecycle services ({self.get_fully_qualified_name()}/"
+                "change_state ...) and parameter services (get_parameters, set_parameters ...) are open to any "
+                "participant of this DDS domain: anyone can stop this node, or change and read its parameters")
+
+    # ------------------------------------------------------------------ operator control (secured)
+    def _offer_sealed_control(self) -> None:
+        """``~/change_state_sealed``: transitions asked for by a holder of the network key (loaded now: a missing
+        or unsafe key file stops the node from starting, ValueError)."""
+        from face_reid_camera.common.sealing import Opener, load_network_key
+        from face_reid_msgs.srv import ChangeState
+
+        age = float(self.get_parameter("max_seal_age_s").value) if self.has_parameter("max_seal_age_s") else (
+            _DEFAULT_SEAL_AGE_S)
+        # nothing sealed before this process started is accepted (a request captured earlier, replayed)
+        self._control_opener = Opener(load_network_key(self.network_key_path), "requests", age, time.time())
+        self.create_service(ChangeState, "~/change_state_sealed", self._on_change_state_sealed)
+        self.get_logger().info(
+            "secured: no lifecycle or parameter services; transitions only through ~/change_state_sealed, sealed "
+            "with the network key (face-reid-state)")
+
+    def state_label(self) -> str:
+        """The current lifecycle state: unconfigured, inactive, active or finalized (or a transition state)."""
+        return str(self._state_machine.current_state[1])
+
+    def _on_change_state_sealed(self, request: Any, response: Any) -> Any:
+        from face_reid_camera.common.sealing import SealError
+        from face_reid_camera.ros.sealed import open_request
+
+        self.control_requests += 1
+        try:
+            inner = open_request(self._control_opener, request, time.time())
+            name = inner.transition.strip().lower()
+            plan(name, self.state_label())  # refused here when not allowed from this state
+            if name == QUERY:
+                response.success, response.message = True, f"state {self.state_label()}"
+            else:
+                self.failure = ""
+                done = getattr(self, f"trigger_{name}")() == TransitionCallbackReturn.SUCCESS
+                response.success = done
+                response.message = f"{name}: done" if done else f"{name} failed: {self.failure or 'see the log'}"
+        except (SealError, TransitionError) as exc:
+            response.success, response.message = False, f"refused: {exc}"
+        except Exception as exc:  # a request must never take the node down
+            response.success, response.message = False, f"internal error: {type(exc).__name__}: {str(exc)[:200]}"
+        response.state = self.state_label()
+        if response.success:
+            self.get_logger().info(f"change_state_sealed: {response.message} (now {response.state})")
+        else:
+            self.control_refusals += 1
+            self.log_throttled("change_state_sealed", f"change_state_sealed: {response.message}",
+                               self.control_refusals, warn=True)
+        return response
 
     # ------------------------------------------------------------------ parameters
     def _warn_unknown_overrides(self) -> None:
@@ -157,6 +247,7 @@ class ManagedNode(LifecycleNode):
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.release()
+        self.finished = True  # a finalized node does nothing more: run_node ends the process
         return TransitionCallbackReturn.SUCCESS
 
     def release(self) -> None:
@@ -242,7 +333,7 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
         print(usage + table.help_text())
         return 0
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     def fatal(message: str) -> int:
         print(f"[{prog}] FATAL: cannot start: {message}", file=sys.stderr, flush=True)
@@ -267,12 +358,21 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
             if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
                 return (status := fatal(node.failure or "activate failed"))
             node.quiet_failures = False
-        rclpy.spin(node)
+        node.warn_if_open()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            executor.spin_once(timeout_sec=0.5)
+        if node.finished:  # a shutdown transition: reply to whoever asked, then end the process
+            node.get_logger().info("shut down by a lifecycle transition: exiting")
+            deadline = time.monotonic() + _REPLY_LINGER_S
+            while rclpy.ok() and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         try:
-            if rclpy.ok():
+            if rclpy.ok() and not node.finished:
                 node.trigger_shutdown()
             else:  # Ctrl-C / SIGTERM shut the context down: release without the state machine
                 node.release()

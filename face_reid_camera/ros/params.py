@@ -54,7 +54,9 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "(unsecured network: no network_key_path)."),
     ParamSpec("network_key_path", "",
               "The camera network's key file (face-reid-keys new): frames are then sealed (encrypted and "
-              "authenticated) and published on sealed_output_topic only ('' = unsecured, in clear).",
+              "authenticated) and published on sealed_output_topic only, and lifecycle transitions are taken only "
+              "through ~/change_state_sealed (face-reid-state; no lifecycle or parameter services) ('' = "
+              "unsecured, in clear).",
               read_only=True),
     ParamSpec("sealed_output_topic", "face_reid/frames_sealed",
               "Where sealed frames (face_reid_msgs/Sealed) are published when network_key_path is set."),

@@ -64,6 +64,10 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               low=0.5, high=86400.0),
     ParamSpec("no_tracks_warning_s", 5.0, "/diagnostics warns when no /tracks_named arrived for this long (s).",
               low=0.1, high=3600.0),
+    ParamSpec("network_key_path", "",
+              "The network's key file (face-reid-keys new): this node then offers no lifecycle or parameter "
+              "services; transitions only through ~/change_state_sealed, sealed with the key (face-reid-state) "
+              "('' = unsecured: the standard services, open to the DDS domain).", read_only=True),
 )
 
 TABLE = ParamTable(NODE_NAME, (*_NODE_PARAMS, *config_specs(StandoffGoalConfig)),

@@ -54,6 +54,10 @@ TABLE = ParamTable(NODE_NAME, (
               "or stopped ('' = do not)."),
     ParamSpec("no_summary_warning_s", 30.0, "/diagnostics warns when no floor summary arrived for this long (s).",
               low=0.1, high=86400.0),
+    ParamSpec("network_key_path", "",
+              "The network's key file (face-reid-keys new): this node then offers no lifecycle or parameter "
+              "services; transitions only through ~/change_state_sealed, sealed with the key (face-reid-state) "
+              "('' = unsecured: the standard services, open to the DDS domain).", read_only=True),
     *config_specs(CameraMapConfig),
 ), "the face-reid camera map node (face-reid-map)", "face-reid-map --ros-args -p save_path:=maps/cameras.yaml")
 

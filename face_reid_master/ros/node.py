@@ -235,6 +235,12 @@ class MasterNode(ManagedNode):
             self.get_logger().error(
                 f"face database {path} was corrupt: moved to {store.recovered_from}, started a fresh one"
             )
+        if retention is not None:  # a shorter retention than before deletes faces on the first cycle: say so now
+            doomed = len(store.prunable_unnamed(time.time()))
+            if doomed:
+                self.get_logger().warning(
+                    f"retention_unnamed_s={retention:g} s: {doomed} of the {len(store.list_faces())} stored faces "
+                    f"(unnamed, not seen for longer) will be deleted from {path} once frames arrive")
         return store
 
     def _load_gallery(self, path: str) -> dict[str, np.ndarray]:

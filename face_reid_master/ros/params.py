@@ -32,7 +32,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "Also subscribe to every discovered topic matching this regex ('' = off)."),
     ParamSpec("network_key_path", "",
               "The camera network's key file (face-reid-keys new): only sealed frames (sealed_topic_regex) and "
-              "sealed admin requests are then accepted ('' = unsecured: frames and requests in clear).",
+              "sealed admin requests are then accepted, and lifecycle transitions only through ~/change_state_sealed "
+              "(face-reid-state; no lifecycle or parameter services) ('' = unsecured: frames and requests in clear).",
               read_only=True),
     ParamSpec("sealed_topic_regex", "^(/.*)?/face_reid/frames_sealed$",
               "With a network key: subscribe to every discovered face_reid_msgs/Sealed topic matching this regex."),

@@ -810,6 +810,15 @@ class FaceStore:
         ``last_seen_s`` may be stale).  Returns the deleted ids ([] when retention is None).  The node
         must also :meth:`~face_reid_master.identity.algorithm1.IdentityManagerBase.forget_face` them.
         """
+        ids = self.prunable_unnamed(now_s, keep)
+        self._delete_ids(ids)
+        if ids:
+            _LOG.info("face store %s: retention pruned unnamed faces %s", self.path, ids)
+        return ids
+
+    def prunable_unnamed(self, now_s: float, keep: Iterable[int] = ()) -> list[int]:
+        """The ids :meth:`prune_unnamed` would delete at ``now_s`` (nothing is deleted): the node warns with their
+        number when a (new) retention is about to delete stored faces."""
         if isinstance(now_s, bool) or not isinstance(now_s, (int, float, np.floating, np.integer)):
             raise ValueError(f"now_s must be a number of seconds, got {now_s!r}")
         if not math.isfinite(float(now_s)):
@@ -818,17 +827,13 @@ class FaceStore:
             return []
         keep_ids = {_check_face_id(k) for k in keep}
         cutoff = float(now_s) - self.retention_unnamed_s
-        ids = [
+        return [
             int(r[0])
             for r in self._db.execute(
                 "SELECT face_id FROM faces WHERE name IS NULL AND last_seen_s < ? ORDER BY face_id", (cutoff,)
             )
             if int(r[0]) not in keep_ids
         ]
-        self._delete_ids(ids)
-        if ids:
-            _LOG.info("face store %s: retention pruned unnamed faces %s", self.path, ids)
-        return ids
 
     def integrity_ok(self) -> bool:
         """Run ``PRAGMA integrity_check`` now (diagnostics)."""

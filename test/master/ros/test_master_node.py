@@ -580,3 +580,50 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
         executor.shutdown()
         client.destroy_node()
         node.destroy_node()
+
+
+class _Warnings:
+    """A logger that keeps the warnings it passes on."""
+
+    def __init__(self, logger: object) -> None:
+        self.logger, self.warnings = logger, []
+
+    def warning(self, message: str, **kwargs: object) -> object:
+        self.warnings.append(message)
+        return self.logger.warning(message, **kwargs)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self.logger, name)
+
+
+def test_a_retention_that_will_delete_stored_faces_is_a_warning_with_their_number(
+        ros_context, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shorter retention_unnamed_s (set while the master is unconfigured, read at configure) deletes stored
+    faces without anyone asking for them by name: the master says how many, when it opens the store."""
+    from rclpy.parameter import Parameter
+
+    from face_reid_master.identity.records import LearnedFace
+    from face_reid_master.storage.face_store import FaceStore
+
+    now = time.time()
+    rng = np.random.default_rng(1)
+    with FaceStore(tmp_path / "faces.db", embedding_dim=128, embedding_space="dlib_resnet_v1") as store:
+        store.save_faces([LearnedFace(1, rng.normal(size=(1, 128)).astype(np.float32), None, now - 7200, now - 7200),
+                          LearnedFace(2, rng.normal(size=(1, 128)).astype(np.float32), None, now - 7200, now - 7200),
+                          LearnedFace(3, rng.normal(size=(1, 128)).astype(np.float32), "Ann", now - 7200, now - 7200),
+                          LearnedFace(4, rng.normal(size=(1, 128)).astype(np.float32), None, now - 60, now - 60)])
+    node = _master(ros_context, tmp_path)  # retention_unnamed_s 0: keep forever
+    recorder = _Warnings(node.get_logger())
+    monkeypatch.setattr(node, "get_logger", lambda: recorder)
+    try:
+        assert node.trigger_configure() == OK
+        assert not [w for w in recorder.warnings if "retention" in w]
+        assert node.trigger_cleanup() == OK
+        assert node.set_parameters([Parameter("retention_unnamed_s", value=3600.0)])[0].successful
+        assert node.trigger_configure() == OK
+        said = [w for w in recorder.warnings if "retention_unnamed_s" in w]
+        # faces 1 and 2: unnamed, unseen for 2 h; not the named one, not the one seen a minute ago
+        assert said == [f"retention_unnamed_s=3600 s: 2 of the 4 stored faces (unnamed, not seen for longer) will be "
+                        f"deleted from {tmp_path / 'faces.db'} once frames arrive"], recorder.warnings
+    finally:
+        node.destroy_node()

@@ -1,0 +1,117 @@
+"""``face-reid-state NODE TRANSITION --key PATH``: ask a face-reid node for a lifecycle transition.
+
+A node with a network key offers only ``NODE/change_state_sealed``: the request is sealed with the key (a
+participant without it cannot stop or reconfigure the node). Without ``--key`` the node's standard
+``NODE/change_state`` / ``NODE/get_state`` services are used (an unsecured node). TRANSITION is configure,
+activate, deactivate, cleanup, shutdown (the node's process ends) or get (print the state).
+
+Exit codes: 0 done, 1 refused (not allowed from the node's state, not sealed with its key, failed), 2 usage
+error (or an unusable key file), 5 no such node answered within ``--timeout-s``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from face_reid_camera.common.transitions import QUERY, TRANSITIONS, TransitionError, plan
+
+__all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main"]
+
+PROG = "face-reid-state"
+EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[1].replace("``", ""))
+    parser.add_argument("node", help="the node's full name, e.g. /face_reid_master or /cam_a/face_reid_camera")
+    parser.add_argument("transition", choices=[*TRANSITIONS, QUERY])
+    parser.add_argument("--key", default="", help="the network key file (a secured node takes nothing else)")
+    parser.add_argument("--timeout-s", type=float, default=20.0, help="how long to wait for the node (s)")
+    return parser
+
+
+def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
+    """The reply of service ``name``; TimeoutError when it is not there or does not answer in time."""
+    import rclpy
+
+    client = node.create_client(srv_type, name)
+    deadline = time.monotonic() + timeout_s
+    while not client.service_is_ready():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no service {name} within {timeout_s:g} s (is the node running on this "
+                               "ROS_DOMAIN_ID, and secured exactly when --key is given?)")
+        rclpy.spin_once(node, timeout_sec=0.1)
+    future = client.call_async(request)
+    while not future.done():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{name} did not answer within {timeout_s:g} s")
+        rclpy.spin_once(node, timeout_sec=0.1)
+    return future.result()
+
+
+def _sealed(node: Any, target: str, transition: str, key_path: str, timeout_s: float) -> tuple[bool, str, str]:
+    from face_reid_camera.common.sealing import Sealer, load_network_key
+    from face_reid_camera.ros.sealed import seal_request
+    from face_reid_msgs.srv import ChangeState
+
+    sealer = Sealer(load_network_key(key_path), f"{PROG}-{time.time_ns() % 10**9}")
+    request = seal_request(sealer, ChangeState.Request(transition=transition))
+    reply = _call(node, ChangeState, f"{target}/change_state_sealed", request, timeout_s)
+    return bool(reply.success), str(reply.message), str(reply.state)
+
+
+def _standard(node: Any, target: str, transition: str, timeout_s: float) -> tuple[bool, str, str]:
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState, GetState
+
+    state = _call(node, GetState, f"{target}/get_state", GetState.Request(), timeout_s).current_state.label
+    if transition == QUERY:
+        return True, f"state {state}", state
+    try:
+        after = plan(transition, state)
+    except TransitionError as exc:
+        return False, f"refused: {exc}", state
+    request = ChangeState.Request(transition=Transition(label=transition))  # rcl finds it by label from the state
+    ok = _call(node, ChangeState, f"{target}/change_state", request, timeout_s).success
+    return bool(ok), f"{transition}: {'done' if ok else 'failed (see the node log)'}", after if ok else ""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_USAGE
+    target = "/" + args.node.strip("/")
+    import rclpy
+
+    rclpy.init(args=[PROG])
+    node = rclpy.create_node("face_reid_state_client", start_parameter_services=False)
+    try:
+        if args.key:
+            ok, message, state = _sealed(node, target, args.transition, args.key, args.timeout_s)
+        else:
+            ok, message, state = _standard(node, target, args.transition, args.timeout_s)
+    except ValueError as exc:  # an unusable key file
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except TimeoutError as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return EXIT_UNREACHABLE
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    where = f" (state {state})" if state else ""
+    if ok:
+        print(f"{target}: {message}{where}")
+        return EXIT_OK
+    print(f"{PROG}: {target}: {message}{where}", file=sys.stderr)
+    return EXIT_REFUSED
+
+
+if __name__ == "__main__":
+    sys.exit(main())
