@@ -12,8 +12,10 @@ Separate processes on a private ROS domain (discovery on loopback only), the rea
 - ``overload``: a deliberate overload (``--overload-cameras``, 60 by default): the latency must stay bounded,
   the master drops the oldest frames and says what fraction;
 - ``latency_sealed`` / ``throughput_6_sealed``: the latency and 6-camera cases on a secured network (frames
-  sealed with a network key); ``secured_vs_unsecured`` sets them side by side [secured, unsecured] with the
-  in-process cost of sealing and opening one frame;
+  sealed with a network key, and the master's tracks sealed too: the listener takes them through the project's
+  consumer helper, ``face_reid_master.ros.tracks_in``); ``secured_vs_unsecured`` sets them side by side
+  [secured, unsecured] with the in-process cost of sealing and opening one frame, and ``tracks_auth_us`` that of
+  one /tracks_named message of 20 tracks (the master seals it, a consumer opens and checks it);
 - ``frame_read_us``: the in-process cost of reading one received frame's bytes into the core's record, as the
   master does (``cdr``) and through rclpy's message (``rclpy_message``, what it did before);
 - ``core_reference``: the master core alone in this process on the 20-camera case's frames, measured just before
@@ -226,8 +228,13 @@ def role_subscriber(args: argparse.Namespace) -> int:
         else:
             unmarked[0] += 1
 
-    for topic in topics:
-        node.create_subscription(Msg, topic, on_msg, qos)
+    if args.kind == "tracks":  # a secured master's tracks are sealed: opened and checked as any consumer does
+        from face_reid_master.ros.tracks_in import subscribe_tracks
+
+        subscribe_tracks(node, on_msg, topics[0], args.key, qos=qos)
+    else:
+        for topic in topics:
+            node.create_subscription(Msg, topic, on_msg, qos)
     stop = threading.Event()
 
     def wait_stop() -> None:
@@ -337,7 +344,8 @@ def run_case(name: str, cameras: int, rate_hz: float, seconds: float, with_maste
             _pin(children[-1].proc.pid, MASTER_CPUS)
         listener = start_child("listener", [*me, "--role", "subscriber", "--kind",
                                             "tracks" if with_master else "frames", "--cameras", str(cameras),
-                                            "--prefix", prefix], env, logs, talk=True)
+                                            "--prefix", prefix, *(("--key", str(key)) if key and with_master else ())],
+                                env, logs, talk=True)
         children.append(listener)
         _pin(listener.proc.pid, OTHER_CPUS)
         _events(listener, 60.0, "ready")
@@ -507,6 +515,55 @@ def _sealing_cost(key: Path, frames: int = 300) -> dict[str, float]:
     return {"seal": round(float(np.median(seal_t)) * 1e6, 1), "open": round(float(np.median(open_t)) * 1e6, 1)}
 
 
+def _tracks_auth_cost(key: Path, messages: int = 300, tracks: int = 20) -> dict[str, float]:
+    """Microseconds per /tracks_named message of ``tracks`` tracks on a secured network, medians over ``messages``
+    in this process: ``cdr`` the master's serialization (paid secured or not), ``seal`` what sealing adds (AES-GCM
+    and the Sealed message), ``open`` what a consumer's check adds (the Sealed bytes read, AES-GCM, counters),
+    ``deserialize`` rclpy's NamedTrackArray from the opened bytes (paid secured or not), and the bytes on the
+    wire plain and sealed."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from face_reid_camera.common.sealing import Sealed, Sealer, load_network_key
+    from face_reid_master.records import NamedTrackRecord
+    from face_reid_master.ros.track_cdr import tracks_to_cdr
+    from face_reid_master.ros.tracks_in import seal_tracks
+    from face_reid_master.tracks_auth import TRACKS_PURPOSE, TracksVerifier
+    from face_reid_msgs.msg import NamedTrackArray
+    from face_reid_msgs.msg import Sealed as SealedMsg
+
+    secret = load_network_key(key)
+    sealer, verifier = Sealer(secret, "/face_reid_master", TRACKS_PURPOSE), TracksVerifier(secret, not_before_s=0.0)
+    records = [NamedTrackRecord(track_id=k + 1, face_id=k + 1, name=f"person {k}", identity_confidence=0.9,
+                                identity_evidence="face", face_observations=40, position_xy=np.array([k * 0.5, 1.0]),
+                                velocity_xy=np.array([0.1, 0.0]), covariance=np.eye(4) * 0.01, height_m=1.75, state=1,
+                                first_seen_s=time.time() - 10, last_seen_s=time.time(), cameras=("cam00", "cam01"))
+               for k in range(tracks)]
+    cdr = tracks_to_cdr(records, time.time(), "world")
+    raw = serialize_message(seal_tracks(sealer, cdr))
+    cdr_t, seal_t, open_t, read_t = [], [], [], []
+    for _ in range(messages):
+        t0 = time.perf_counter()
+        cdr = tracks_to_cdr(records, time.time(), "world")
+        t1 = time.perf_counter()
+        raw = serialize_message(seal_tracks(sealer, cdr))
+        t2 = time.perf_counter()
+        msg = deserialize_message(raw, SealedMsg)
+        payload = verifier.open(Sealed(msg.sender_id, msg.counter, bytes(msg.nonce), bytes(msg.ciphertext)))
+        t3 = time.perf_counter()
+        deserialize_message(payload, NamedTrackArray)
+        t4 = time.perf_counter()
+        cdr_t.append(t1 - t0)
+        seal_t.append(t2 - t1)
+        open_t.append(t3 - t2)
+        read_t.append(t4 - t3)
+
+    def us(values: list[float]) -> float:
+        return round(float(np.median(values)) * 1e6, 1)
+
+    return {"tracks": tracks, "cdr": us(cdr_t), "seal": us(seal_t), "open": us(open_t), "deserialize": us(read_t),
+            "seal_plus_open": round(us(seal_t) + us(open_t), 1), "bytes_plain": len(cdr), "bytes_sealed": len(raw)}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--role", choices=("bench", "publisher", "subscriber"), default="bench")
@@ -519,7 +576,8 @@ def main() -> int:
     parser.add_argument("--duration-s", type=float, default=10.0)
     parser.add_argument("--prefix", default="/bench")
     parser.add_argument("--kind", choices=("tracks", "frames"), default="tracks")
-    parser.add_argument("--key", default="", help="publisher: seal the frames with this network key file")
+    parser.add_argument("--key", default="", help="publisher: seal the frames with this network key file; "
+                        "subscriber: take the master's tracks sealed with it")
     args = parser.parse_args()
     if args.role == "publisher":
         return role_publisher(args)
@@ -543,6 +601,7 @@ def main() -> int:
         latency_sealed = run_case("latency_sealed", 1, 30.0, 5.0, True, domain_id, work, key=key)
         six_sealed = run_case("throughput_6_sealed", 6, 30.0, args.seconds, True, domain_id, work, key=key)
         sealing = _sealing_cost(key)
+        tracks_auth = _tracks_auth_cost(key)
         frame_read = _frame_read_cost()
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -574,6 +633,7 @@ def main() -> int:
             "6cams_frames_applied_per_s": [six_sealed.get("master_frames_applied_per_s"),
                                            six.get("master_frames_applied_per_s")],
             "6cams_p99_ms": [six_sealed["latency_ms"]["p99"], six["latency_ms"]["p99"]],
+            "tracks_auth_us": tracks_auth,
         },
         "cases": {"baseline_raw_dds": baseline, "latency_1cam": latency, "throughput_6cams": six,
                   "throughput_20cams": twenty, f"overload_{args.overload_cameras}cams": overload,

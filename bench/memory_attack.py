@@ -124,7 +124,8 @@ def run_case(secured: bool, topics: int, messages: int, settle_s: float) -> dict
         node = rclpy.create_node("memory_attacker")
         try:
             _wait(lambda: any(n == "face_reid_master" for n, _ in node.get_node_names_and_namespaces())
-                  and node.count_publishers("/tracks_named") > 0, node, 120.0, "the master")
+                  and node.count_publishers("/tracks_named_sealed" if secured else "/tracks_named") > 0,
+                  node, 120.0, "the master")
             time.sleep(2.0)  # start-up allocations settled
             before = _rss_mb(master.pid)
             sampler = _PeakSampler(master.pid)

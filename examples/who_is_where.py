@@ -3,8 +3,8 @@
 import sys
 
 import rclpy
-from rclpy.qos import QoSProfile
 
+from face_reid_master.ros.tracks_in import subscribe_tracks
 from face_reid_msgs.msg import NamedTrack, NamedTrackArray
 
 
@@ -24,6 +24,7 @@ def main() -> None:
     rclpy.init()
     node = rclpy.create_node("who_is_where")
     count = int(sys.argv[1]) if len(sys.argv) > 1 else 0  # stop after this many messages (0: never)
+    key = sys.argv[2] if len(sys.argv) > 2 else ""  # a secured network's key file: only sealed tracks are taken
     seen = [0]
 
     def on_tracks(msg: NamedTrackArray) -> None:
@@ -31,7 +32,7 @@ def main() -> None:
         print(f"{len(lines)} people in '{msg.header.frame_id}':", *lines, sep="\n  ", flush=True)
         seen[0] += 1
 
-    node.create_subscription(NamedTrackArray, "/tracks_named", on_tracks, QoSProfile(depth=10))
+    subscribe_tracks(node, on_tracks, "/tracks_named", key)  # checks sealed tracks; says when a key is needed
     while rclpy.ok() and (count == 0 or seen[0] < count):
         rclpy.spin_once(node, timeout_sec=0.5)
     rclpy.shutdown()

@@ -526,6 +526,12 @@ class MasterCore:
         times.append(now_s)
         return True
 
+    @property
+    def time_s(self) -> float:
+        """The tracker's time: the newest frame stamp applied (at most the caller's clock) or time advanced to by
+        :meth:`tick`; -inf before either."""
+        return self._last_stamp
+
     def tick(self, now_s: float) -> None:
         """Advance time without a frame (tracks time out, released faces are saved)."""
         self.finish_frames()

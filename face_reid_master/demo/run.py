@@ -134,7 +134,7 @@ class _Run:
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
 
-        from face_reid_msgs.msg import NamedTrackArray
+        from face_reid_master.ros.tracks_in import subscribe_tracks
 
         rclpy.init(args=["face_reid_demo"], signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node("face_reid_demo")
@@ -150,7 +150,7 @@ class _Run:
                 tracks = tuple(track_from_msg(t, lambda s: s - self.t0) for t in msg.tracks)
                 self.messages.append(TrackMessage(stamp, tracks))
 
-            node.create_subscription(NamedTrackArray, "/tracks_named", on_tracks, qos)
+            subscribe_tracks(node, on_tracks, "/tracks_named", qos=qos)  # the demo's master has no network key
             self._wait_ready(node, rclpy, got_any)
             self._play(node, rclpy)
         finally:

@@ -180,7 +180,8 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from face_reid_msgs.msg import CameraFrame, NamedTrackArray
+    from face_reid_master.ros.tracks_in import subscribe_tracks
+    from face_reid_msgs.msg import CameraFrame
 
     def check_master() -> None:
         code = master.proc.poll()
@@ -202,7 +203,7 @@ def _play(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], mast
             got_any[0] = True
             received.append((time.time(), msg))
 
-        node.create_subscription(NamedTrackArray, "/tracks_named", on_tracks, qos)
+        subscribe_tracks(node, on_tracks, "/tracks_named", qos=qos)  # an unsecured master (no network key)
         cameras = sorted({f.camera_id for f in frames})
         pubs = {c: node.create_publisher(CameraFrame, f"/{c}/face_reid/frames", qos) for c in cameras}
 

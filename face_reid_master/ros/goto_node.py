@@ -1,7 +1,9 @@
 """face-reid-goto: send a robot to a named person (thin: messages <-> :class:`StandoffGoal`).
 
-Subscribes /tracks_named; the target comes from the command line (``face-reid-goto NAME``), the ``target_name``
-parameter, the ``~/go_to`` service (face_reid_msgs/GoToPerson) or the ``~/target`` topic (std_msgs/String).
+Subscribes /tracks_named (sealed with the network key when ``network_key_path`` is set:
+:mod:`face_reid_master.ros.tracks_in`); the target comes from the command line (``face-reid-goto NAME``), the
+``target_name`` parameter, the ``~/go_to`` service (face_reid_msgs/GoToPerson) or the ``~/target`` topic
+(std_msgs/String).
 Publishes geometry_msgs/PoseStamped goals on /goal_pose (what nav2's navigator takes) in the robot's map frame,
 and one line per goal or refusal on ``~/status`` (std_msgs/String). Known names also come from the master's
 ``~/list_faces``, so that a learned person who is away is "not tracked" rather than "unknown name". A refusal
@@ -21,6 +23,7 @@ from std_msgs.msg import String
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
 from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.common.sealing import load_network_key
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, STATE_TENTATIVE, NamedTrackRecord
 from face_reid_master.robot.frames import PlanarTransform, load_world_to_map
@@ -31,7 +34,7 @@ from face_reid_master.robot.standoff_goal import (
     StandoffGoalConfig,
 )
 from face_reid_master.ros.convert import track_from_msg
-from face_reid_msgs.msg import NamedTrackArray
+from face_reid_master.ros.tracks_in import TracksSubscription
 from face_reid_msgs.srv import GoToPerson, ListFaces
 
 NODE_NAME = "face_reid_goto"
@@ -48,6 +51,12 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               read_only=True),
     ParamSpec("target_name", "", "Person to go to from the start ('' = nobody; NAME on the command line wins)."),
     ParamSpec("tracks_topic", "/tracks_named", "The master's face_reid_msgs/NamedTrackArray."),
+    ParamSpec("network_key_path", "",
+              "The camera network's key file: only tracks sealed with it (on <tracks_topic>_sealed, what a secured "
+              "master publishes) are taken, and the node offers no lifecycle or parameter services (transitions "
+              "through ~/change_state_sealed: face-reid-state) ('' = unsecured: plain tracks, which any participant "
+              "could forge, and the standard services, open to the DDS domain).",
+              read_only=True),
     ParamSpec("goal_topic", "/goal_pose", "Where the goals (geometry_msgs/PoseStamped, map frame) are published."),
     ParamSpec("world_to_map_path", "",
               "The world -> map transform file of face-reid-align-map ('' = none: the map frame is the world "
@@ -64,10 +73,6 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               low=0.5, high=86400.0),
     ParamSpec("no_tracks_warning_s", 5.0, "/diagnostics warns when no /tracks_named arrived for this long (s).",
               low=0.1, high=3600.0),
-    ParamSpec("network_key_path", "",
-              "The network's key file (face-reid-keys new): this node then offers no lifecycle or parameter "
-              "services; transitions only through ~/change_state_sealed, sealed with the key (face-reid-state) "
-              "('' = unsecured: the standard services, open to the DDS domain).", read_only=True),
 )
 
 TABLE = ParamTable(NODE_NAME, (*_NODE_PARAMS, *config_specs(StandoffGoalConfig)),
@@ -114,6 +119,7 @@ class GotoNode(ManagedNode):
         self.counts = {"tracks_msgs": 0, "goals": 0, "refusals": 0, "requests": 0}
         self.rejected: dict[str, int] = {}
         self._subs: list[Any] = []
+        self._tracks_sub: TracksSubscription | None = None
         self._own_timers: list[Any] = []
         self._service: Any = None
         self.goal_pub: Any = None
@@ -131,6 +137,8 @@ class GotoNode(ManagedNode):
         self.core = StandoffGoal(config_from_values(StandoffGoalConfig, values), transform)
         target = self._cli_target if self._cli_target is not None else str(values["target_name"])
         self.core.set_target(target)  # a bad name fails the start with its reason
+        if values["network_key_path"]:
+            load_network_key(str(values["network_key_path"]))  # a missing or unsafe key file fails the start
         self.values = values
         self.get_logger().info(
             f"goto: target {shown(self.core.target, 64) if self.core.target else '(none)'}, goals in frame "
@@ -144,10 +152,11 @@ class GotoNode(ManagedNode):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.goal_pub = self.create_publisher(PoseStamped, str(values["goal_topic"]), reliable)
         self.status_pub = self.create_publisher(String, "~/status", latched)
-        self._subs = [
-            self.create_subscription(NamedTrackArray, str(values["tracks_topic"]), self._on_tracks, reliable),
-            self.create_subscription(String, "~/target", self._on_target, reliable),
-        ]
+        self._tracks_sub = TracksSubscription(self, self._on_tracks, str(values["tracks_topic"]),
+                                              str(values["network_key_path"]), reliable,
+                                              on_refused=lambda reason, message: self._reject(f"tracks_{reason}",
+                                                                                              message))
+        self._subs = [self.create_subscription(String, "~/target", self._on_target, reliable)]
         self._service = self.create_service(GoToPerson, "~/go_to", self._on_go_to)
         if values["robot_pose_topic"]:
             self._subs.append(self.create_subscription(PoseStamped, str(values["robot_pose_topic"]),
@@ -159,6 +168,9 @@ class GotoNode(ManagedNode):
         self._decide(self.now_s(), announce=True)
 
     def deactivate(self) -> None:
+        if self._tracks_sub is not None:
+            self._tracks_sub.destroy()
+            self._tracks_sub = None
         for sub in self._subs:
             self.destroy_subscription(sub)
         for timer in self._own_timers:
@@ -295,6 +307,9 @@ class GotoNode(ManagedNode):
         since = self._last_tracks_s if self._last_tracks_s is not None else self._started_s
         if now_s - since > float(self.values["no_tracks_warning_s"]):
             warnings.append(f"no /tracks_named for {now_s - since:.1f} s")
+        network = self._tracks_sub.network if self._tracks_sub is not None else None
+        if network is not None and network.problem:
+            warnings.append(network.problem)
         core = self.core
         values: dict[str, str] = {k: str(v) for k, v in self.counts.items()}
         values.update({f"rejected_{k}": str(v) for k, v in sorted(self.rejected.items())})

@@ -39,12 +39,15 @@ from face_reid_camera.ros.sealed import open_payload, open_request
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
+from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.convert import frame_from_msg, markers_for
 from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
+from face_reid_master.ros.tracks_in import seal_tracks
+from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
@@ -86,7 +89,9 @@ class MasterNode(ManagedNode):
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._clocks = ClockOffsets()
         self._own_timers: list[Any] = []
-        self.tracks_pub: Any = None
+        self.tracks_pub: Any = None  # /tracks_named, or <tracks_topic>_sealed on a secured network
+        self._tracks_sealer: Any = None  # seals the tracks (purpose "tracks") when the network has a key
+        self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
         self._regex: re.Pattern[str] | None = None
@@ -121,15 +126,17 @@ class MasterNode(ManagedNode):
             body_metric = load_body_metric(str(values["body_metric_path"]))
         self.core = MasterCore(config, likelihood, self.store, gallery, body_metric)
         self._regex = re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex
-        self._openers = {}
+        self._openers, self._tracks_sealer = {}, None
         if values["network_key_path"]:
-            from face_reid_camera.common.sealing import Opener, load_network_key
+            from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
 
             key = load_network_key(str(values["network_key_path"]))
             age = float(values["max_seal_age_s"])
             started = time.time()  # nothing sealed before this configure is accepted (replays across restarts)
             self._openers = {purpose: Opener(key, purpose, age, started) for purpose in ("frames", "requests")}
-            self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted")
+            self._tracks_sealer = Sealer(key, self.get_fully_qualified_name(), TRACKS_PURPOSE)
+            self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted; "
+                                   "tracks are published sealed with it")
         else:
             self.get_logger().warning(
                 "UNSECURED: no network_key_path: camera frames (face embeddings, biometric data) travel in clear "
@@ -166,7 +173,11 @@ class MasterNode(ManagedNode):
         values = self.values
         qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
         self._frame_qos = qos
-        self.tracks_pub = self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos)
+        # secured: the tracks only sealed (so that no consumer takes a spoof on the plain topic for the master's)
+        self.tracks_pub = (self.create_publisher(Sealed, sealed_topic(str(values["tracks_topic"])), qos)
+                           if self._tracks_sealer is not None else
+                           self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos))
+        self._stamps.reset()
         markers_topic = str(values["markers_topic"])
         self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
         if self.people_topics is not None:
@@ -506,14 +517,18 @@ class MasterNode(ManagedNode):
         if self.values["check_stamps_against_clock"]:
             # Lag by the tracker's delay bound so that frames in flight still arrive in order.
             self.core.tick(now - float(self.values["tracker.max_detection_delay_s"]))
-        self._publish(now, now)
+        self._publish(self.core.time_s, now)  # stamped with the tracker's time (now_s before any frame)
 
     def _publish(self, stamp_s: float, now_s: float) -> None:
+        """The tracks on /tracks_named (sealed on a secured network) stamped ``stamp_s`` (the tracker's time),
+        bounded by ``now_s`` and never behind the previous stamp (:class:`OutputStamps`)."""
         if self.core is None or self.tracks_pub is None:
             return
+        stamp_s = self._stamps.next(stamp_s, now_s)
         tracks = self.core.tracks()
         frame_id = str(self.values["world_frame_id"])
-        self.tracks_pub.publish(tracks_to_cdr(tracks, stamp_s, frame_id))  # serialized here: see track_cdr
+        cdr = tracks_to_cdr(tracks, stamp_s, frame_id)  # serialized here: see track_cdr
+        self.tracks_pub.publish(cdr if self._tracks_sealer is None else seal_tracks(self._tracks_sealer, cdr))
         self._unpublished_stamp = None
         if self.health is not None:
             self.health.published()

@@ -32,8 +32,10 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "Also subscribe to every discovered topic matching this regex ('' = off)."),
     ParamSpec("network_key_path", "",
               "The camera network's key file (face-reid-keys new): only sealed frames (sealed_topic_regex) and "
-              "sealed admin requests are then accepted, and lifecycle transitions only through ~/change_state_sealed "
-              "(face-reid-state; no lifecycle or parameter services) ('' = unsecured: frames and requests in clear).",
+              "sealed admin requests are then accepted, the tracks are published sealed with it on "
+              "<tracks_topic>_sealed (not on tracks_topic), and lifecycle transitions go only through "
+              "~/change_state_sealed (face-reid-state; no lifecycle or parameter services) "
+              "('' = unsecured: frames, requests and tracks in clear, standard services open to the domain).",
               read_only=True),
     ParamSpec("sealed_topic_regex", "^(/.*)?/face_reid/frames_sealed$",
               "With a network key: subscribe to every discovered face_reid_msgs/Sealed topic matching this regex."),
@@ -48,7 +50,9 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "At most this many camera topics are subscribed (each buffers messages before they are checked; "
               "with known_camera_ids, discovered topics must have a known camera id as a namespace) (count).",
               low=1, high=10_000),
-    ParamSpec("tracks_topic", "/tracks_named", "Where face_reid_msgs/NamedTrackArray is published."),
+    ParamSpec("tracks_topic", "/tracks_named",
+              "Where face_reid_msgs/NamedTrackArray is published (with a network key: sealed, as "
+              "face_reid_msgs/Sealed on <tracks_topic>_sealed instead)."),
     ParamSpec("markers_topic", "/tracks_named/markers",
               "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off)."),
     ParamSpec("max_publish_rate_hz", 30.0,

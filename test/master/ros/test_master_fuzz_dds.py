@@ -37,7 +37,8 @@ def test_fuzzed_master_keeps_the_walker_and_stores_nothing_forged(ros_domain_id:
                           "-p", "admin_services:=true", "-p", "topic_discovery_period_s:=0.5",
                           "-p", "body_appearance_tracking:=false", "-p", "stats_log_period_s:=2.0"],
                          ros_domain_id, tmp_path / "master.log")
-    collector = procs.start([str(procs.PROCS / "collect_tracks.py"), "--duration-s", "300"], ros_domain_id)
+    collector = procs.start([str(procs.PROCS / "collect_tracks.py"), "--duration-s", "300", "--key", str(key)],
+                            ros_domain_id)
     running = [master, collector]
     try:
         walker = procs.start([str(procs.PROCS / "sealed_walker.py"), "--key", str(key), "--seconds", "25"],
