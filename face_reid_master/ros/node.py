@@ -137,6 +137,11 @@ class MasterNode(ManagedNode):
             self._tracks_sealer = Sealer(key, self.get_fully_qualified_name(), TRACKS_PURPOSE)
             self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted; "
                                    "tracks are published sealed with it")
+            clear = [name for name in ("publish_people", "publish_hri") if values[name]]
+            if clear:  # standard message types: they cannot carry a seal
+                self.get_logger().warning(
+                    f"secured, but {', '.join(clear)} on: those outputs carry names and positions in clear and "
+                    "any participant could forge them; robots should act on the sealed tracks")
         else:
             self.get_logger().warning(
                 "UNSECURED: no network_key_path: camera frames (face embeddings, biometric data) travel in clear "
