@@ -591,10 +591,11 @@ class MasterNode(ManagedNode):
         store = self.store
         others: list[str] = []
         if self.tracks_pub is not None:  # another master (or anything) publishing our output topic
-            me = (self.get_name(), self.get_namespace())
             others = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                      for info in self.get_publishers_info_by_topic(self.tracks_pub.topic_name)
-                      if (info.node_name, info.node_namespace) != me]
+                      for info in self.get_publishers_info_by_topic(self.tracks_pub.topic_name)]
+            mine = f"{self.get_namespace().rstrip('/')}/{self.get_name()}"
+            if mine in others:  # ours, once: a second master of the same name is another entry
+                others.remove(mine)
         return self._watch.verdict(
             now_s, frames_in=health.frames_in, frames_dropped_overload=self.frames_dropped_overload,
             store_write_failures=getattr(store, "write_failures", core.stats.store_errors),
