@@ -616,7 +616,8 @@ class MasterCore:
         finite = np.isfinite(stacked).all(axis=1)
         plausible = finite & plausible_norms(stacked, cfg.embedding_space)  # NaN / Inf lengths fail the range
         st.embeddings_rejected_norm += int(np.count_nonzero(finite & ~plausible))
-        constant = plausible & degenerate_rows(stacked)
+        with np.errstate(invalid="ignore"):  # NaN rows are not plausible already
+            constant = plausible & (np.ptp(stacked, axis=1) <= 1e-6 * np.abs(stacked).max(axis=1))  # degenerate_rows
         st.embeddings_rejected_degenerate += int(np.count_nonzero(constant))
         plausible &= ~constant
         stacked = self.likelihood.scale(stacked)
