@@ -112,3 +112,26 @@ def test_two_masters_on_one_domain_both_warn(ros_context, tmp_path: Path) -> Non
             ex.shutdown()
         for n in (a, b):
             n.destroy_node()
+
+
+def test_faces_lost_at_open_warn_on_diagnostics(ros_context, tmp_path: Path) -> None:
+    """Faces saved before but missing from the database at open (its last writes lost: rows removed behind the
+    store's back, its id ledger remembers them) make the master's status WARN, naming them."""
+    import sqlite3
+
+    from face_reid_master.identity.records import LearnedFace
+
+    db = tmp_path / "faces.db"
+    with FaceStore(db, embedding_space="dlib_resnet_v1") as store:
+        store.save_faces([LearnedFace(k, np.full((1, 128), 0.1 * k, np.float32) + np.eye(1, 128, k, dtype=np.float32))
+                          for k in (1, 2, 3)])
+    with sqlite3.connect(db) as conn:  # what a lost -wal does: the rows are gone, the ledger says they were saved
+        conn.execute("DELETE FROM features WHERE face_id IN (2, 3)")
+        conn.execute("DELETE FROM faces WHERE face_id IN (2, 3)")
+    node = _master(ros_context, db)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        report = node.diagnostics(node.now_s())
+        assert report.level == 1 and "2 learned face(s) lost at open" in report.message and "ids 2, 3" in report.message
+    finally:
+        node.destroy_node()
