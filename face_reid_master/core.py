@@ -43,7 +43,7 @@ from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
-from face_reid_master.identity.records import IdentityEventKind, LearnedFace
+from face_reid_master.identity.records import IdentityEventKind, LearnedFace, check_face_id
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
 from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
 from face_reid_master.tracking.config import TrackerConfig
@@ -64,6 +64,24 @@ def _derived(name: str, configured: float, derived: float | None) -> float:
 
 
 _PAIRS_SAVE_INTERVAL_S = 30.0  # the online body update's pairs are stored at most this often (s)
+
+
+def degenerate_rows(rows: NDArray[np.floating]) -> NDArray[np.bool_]:
+    """Rows (k, dim) no embedder produces: a NaN / Inf, or all values equal (zero norm, a constant vector): such a
+    vector is as near to every face as to any other, so it would match, or teach, anyone."""
+    rows = np.asarray(rows)
+    finite = np.isfinite(rows).all(axis=1)
+    safe = np.where(finite[:, None], rows, 0.0)
+    if not rows.shape[1]:
+        return np.ones(len(rows), dtype=bool)
+    return ~finite | (np.ptp(safe, axis=1) <= 1e-6 * np.abs(safe).max(axis=1))
+
+
+def _power_of_ten(n: int) -> bool:
+    """1, 10, 100, ...: when a counter is worth a log line (floods stay quiet)."""
+    while n >= 10 and n % 10 == 0:
+        n //= 10
+    return n == 1
 
 
 @dataclass(frozen=True)
@@ -127,6 +145,11 @@ class MasterConfig:
         0.0, "Correlation assumed between the observations of one glance: n of them count as "
         "n / (1 + (n - 1) rho) (0 = independent, the paper; 1 = a glance counts once).", low=0.0, high=1.0)
     max_features_per_face: int = param(50, "Embeddings kept per face, a diverse subset (count).", low=1, high=10000)
+    max_faces: int = param(
+        3000, "Learned faces kept at most: a new face beyond it evicts the least recently seen unnamed face not on a "
+        "track (named faces never; when none can go, the new face is not learned, counted in faces_refused_cap). "
+        "Bounds memory, disk and start-up time (~0.1 MB of memory per face of 50 features; count).",
+        low=1, high=1_000_000)
     learn_only_consistent_features: bool = param(
         True, "An identified track's embedding joins its face only if within the decision distance (guards "
         "faces against tracker swaps; false = the paper).")
@@ -254,6 +277,9 @@ class MasterStats:
     faces_released: int = 0
     faces_released_swapped: int = 0  # of which: the track was swapped onto someone else (it lives on)
     faces_pruned: int = 0
+    faces_evicted: int = 0  # unnamed faces forgotten to keep max_faces (least recently seen first)
+    faces_refused_cap: int = 0  # new faces not learned: max_faces reached and every face named or on a track
+    embeddings_rejected_degenerate: int = 0  # constant rows (all zero, ...): no embedder produces them
     store_errors: int = 0
 
     def as_dict(self) -> dict[str, int]:
@@ -400,7 +426,7 @@ class MasterCore:
         self._last_prune_s = -math.inf
         self._pairs_saved: tuple[int, float] = (0, -math.inf)  # pool version and stamp of the last pair save
         if store is not None:
-            faces = store.load_faces()
+            faces = self._cap_loaded(store.load_faces())
             self.identity.import_faces(faces)
             self.identity.reserve_face_ids(int(store.max_face_id()))
             for face in faces:
@@ -596,6 +622,10 @@ class MasterCore:
         finite = np.isfinite(stacked).all(axis=1)
         plausible = finite & plausible_norms(stacked, cfg.embedding_space)  # NaN / Inf lengths fail the range
         st.embeddings_rejected_norm += int(np.count_nonzero(finite & ~plausible))
+        with np.errstate(invalid="ignore"):  # NaN rows are not plausible already
+            constant = plausible & (np.ptp(stacked, axis=1) <= 1e-6 * np.abs(stacked).max(axis=1))  # degenerate_rows
+        st.embeddings_rejected_degenerate += int(np.count_nonzero(constant))
+        plausible &= ~constant
         stacked = self.likelihood.scale(stacked)
         quality = np.array([people[i].face_quality for _, i, _ in good_len], dtype=np.float64)
         good_quality = quality >= cfg.min_face_quality
@@ -698,7 +728,11 @@ class MasterCore:
         events = self.identity.step(stamp)
         if self.online_metric is not None:
             self._online_metric_step(stamp)
+        kept = []
         for ev in events:
+            if ev.kind == IdentityEventKind.NEW_FACE and not self._room_for(ev.face_id):
+                continue  # not learned (max_faces): the track stays unidentified
+            kept.append(ev)
             if ev.kind == IdentityEventKind.NEW_FACE:
                 self.stats.faces_created += 1
                 self._save_faces([ev.face_id])
@@ -710,7 +744,69 @@ class MasterCore:
                 self.stats.faces_released_swapped += ev.kind == IdentityEventKind.SWAPPED
                 self._save_faces([ev.face_id])
             self._name_checked.pop(ev.face_id, None)
-        return events
+        return kept
+
+    def _room_for(self, new_face: int) -> bool:
+        """Face cap: a new face within max_faces evicts the least recently seen unnamed face not on a track;
+        False (the new face is forgotten at once, counted) when there is none."""
+        excess = len(self.identity.face_ids()) - self.config.max_faces
+        if excess <= 0:
+            return True
+        victims = self.identity.eviction_order(exclude=(new_face,))[:excess]
+        if len(victims) == excess:
+            self._evict(victims)
+            return True
+        self.identity.forget_face(new_face)
+        self.stats.faces_refused_cap += 1
+        if _power_of_ten(self.stats.faces_refused_cap):
+            self._notices.append(f"max_faces ({self.config.max_faces}) reached and every face is named or on a "
+                                 f"track: a new face was not learned ({self.stats.faces_refused_cap} so far, "
+                                 "faces_refused_cap)")
+        return False
+
+    def _evict(self, face_ids: list[int]) -> None:
+        """Forget unnamed faces for the cap (memory, names, store), counted; logged at 1, 10, 100, ... evictions."""
+        for fid in face_ids:
+            self.identity.forget_face(fid)
+            self.people.remove_face(fid)
+            self._names.pop(fid, None)
+            self._dirty_faces.pop(fid, None)
+            self._name_checked.pop(fid, None)
+        self._forget_stored(face_ids)
+        before = self.stats.faces_evicted
+        self.stats.faces_evicted += len(face_ids)
+        if any(_power_of_ten(n) for n in range(before + 1, self.stats.faces_evicted + 1)):
+            self._notices.append(f"max_faces ({self.config.max_faces}) reached: evicted the least recently seen "
+                                 f"unnamed face(s) {face_ids[:10]} ({self.stats.faces_evicted} so far, faces_evicted)")
+
+    def _forget_stored(self, face_ids: list[int]) -> None:
+        """Delete faces from the store: handed to its worker without waiting when it has one (forget_later)."""
+        if self.store is None or not face_ids:
+            return
+        try:
+            later = getattr(self.store, "forget_later", None)
+            if later is not None:
+                later(face_ids)
+            else:
+                for fid in face_ids:
+                    self.store.forget(fid)
+        except Exception:  # the store logs; the faces are gone from memory
+            self.stats.store_errors += 1
+
+    def _cap_loaded(self, faces: list[LearnedFace]) -> list[LearnedFace]:
+        """The stored faces within max_faces: the most recently seen unnamed ones and every named one (the others
+        are evicted from the store, counted, said)."""
+        excess = len(faces) - self.config.max_faces
+        if excess <= 0:
+            return faces
+        unnamed = sorted((f for f in faces if not f.name), key=lambda f: (f.last_seen_s, f.face_id))
+        gone = {f.face_id for f in unnamed[:excess]}
+        if gone:
+            self._forget_stored(sorted(gone))
+            self.stats.faces_evicted += len(gone)
+            self._notices.append(f"the face store held {len(faces)} faces, more than max_faces "
+                                 f"({self.config.max_faces}): evicted the {len(gone)} least recently seen unnamed")
+        return [f for f in faces if f.face_id not in gone]
 
     def _online_metric_step(self, stamp: float) -> None:
         """Start a body-metric re-fit when one is due; install a finished one: the tracker's and the body
@@ -826,7 +922,13 @@ class MasterCore:
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
         """Add or replace a predefined person (gallery embeddings (k, dim) of the master's space) at run time."""
         _derived("name_threshold", self.config.name_threshold, self.likelihood.name_threshold)
-        self.people.set_person(name, self.likelihood.scale(np.asarray(embeddings, dtype=np.float32)))
+        rows = np.asarray(embeddings, dtype=np.float32)
+        if rows.ndim == 2 and rows.shape[0]:
+            bad = np.flatnonzero(degenerate_rows(rows))
+            if bad.size:
+                raise ValueError(f"embedding(s) {bad[:10].tolist()} are degenerate (NaN / Inf, zero norm or all "
+                                 "values equal): no face gives one; refused")
+        self.people.set_person(name, self.likelihood.scale(rows))
         for fid in self.identity.face_ids():
             self._refresh_name(fid, self.identity.face_features(fid))
 
@@ -841,7 +943,9 @@ class MasterCore:
         return True
 
     def forget_face(self, face_id: int) -> bool:
-        """Delete a learned face everywhere (memory, names, store). True if it existed."""
+        """Delete a learned face everywhere (memory, names, store). True if it existed; ValueError for an id out
+        of range."""
+        face_id = check_face_id(face_id)
         found = bool(self.identity.forget_face(face_id))
         self.people.remove_face(face_id)
         self._names.pop(face_id, None)

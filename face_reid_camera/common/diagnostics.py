@@ -107,8 +107,9 @@ class NodeHealth:
         self.messages_published += 1
 
     def report(self, now_s: float, extra: Mapping[str, object] | None = None,
-               warnings: list[str] | None = None) -> DiagnosticReport:
-        """The status now: WARN when nothing arrived for ``no_input_warning_s`` or a warning is given."""
+               warnings: list[str] | None = None, errors: list[str] | None = None) -> DiagnosticReport:
+        """The status now: ERROR when an error is given (said first), else WARN when nothing arrived for
+        ``no_input_warning_s`` or a warning is given."""
         warnings = list(warnings or [])
         since = self.last_input_s if self.last_input_s is not None else self.started_s
         if since is not None and now_s - since > self.no_input_warning_s:
@@ -131,8 +132,9 @@ class NodeHealth:
         }
         values.update({f"rejected_{k}": v for k, v in sorted(self.rejected.items())})
         values.update(extra or {})
-        level = DiagnosticLevel.WARN if warnings else DiagnosticLevel.OK
-        return DiagnosticReport(self.name, self.hardware_id, level, "; ".join(warnings) if warnings else "ok",
+        said = [*(errors or []), *warnings]
+        level = DiagnosticLevel.ERROR if errors else DiagnosticLevel.WARN if warnings else DiagnosticLevel.OK
+        return DiagnosticReport(self.name, self.hardware_id, level, "; ".join(said) if said else "ok",
                                 {k: _fmt(v) for k, v in values.items()})
 
 

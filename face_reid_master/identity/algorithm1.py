@@ -564,6 +564,13 @@ class IdentityManagerBase:
         self.stats.faces_forgotten += 1
         return True
 
+    def eviction_order(self, exclude: Iterable[int] = ()) -> list[int]:
+        """The unnamed faces of face_list (no live or lost track holds them) not in ``exclude``, least recently
+        seen first: what the face cap may evict (named faces never)."""
+        skip = set(exclude) | set(self._lent)
+        faces = [self._faces[fid] for fid in self._available if fid not in skip and not self._faces[fid].name]
+        return [f.face_id for f in sorted(faces, key=lambda f: (f.last_seen_s, f.face_id))]
+
     def export_face(self, face_id: int) -> LearnedFace:
         """Snapshot (copy) of one learned face, e.g. to save it when its track is released; KeyError if unknown."""
         f = self._face(face_id)

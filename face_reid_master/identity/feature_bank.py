@@ -73,10 +73,13 @@ def min_distances_to_faces(observations: npt.ArrayLike, faces: Iterable[npt.Arra
 
 _GEMV_MAX_ROWS = 2
 _PAD_SQN = np.float32(1e30)  # squared norm of padding rows: finite (BLAS-safe) but never the minimum
+_FIRST_WIDTH = 8  # feature rows per slot allocated at first (doubled when a slot needs more, up to kmax)
 
 
 class FeatureBank:
-    """Bounded feature sets of all faces (and unidentified tracks) in one padded float32 block (slot, k, dim + 1).
+    """Bounded feature sets of all faces (and unidentified tracks) in one padded float32 block (slot, width,
+    dim + 1), ``width`` the largest set stored rounded up to a power of two (at most ``kmax``): 2000 faces of 8
+    features take 8 rows each, not the bound's 50.
 
     Column ``dim`` holds ||f||^2 (1e30 for padding rows), so one GEMM of the augmented observations
     [-2 q, 1] gives ||f||^2 - 2 q.f for every stored feature: eq. 4 minima without ragged loops.  Each
@@ -88,23 +91,41 @@ class FeatureBank:
         """``dim``: embedding length; ``max_per_face``: the bound k of every slot's feature set."""
         self.dim = dim
         self.kmax = max_per_face
+        self.width = min(_FIRST_WIDTH, max_per_face)  # feature rows allocated per slot: grows to kmax on demand
         self.n = 0
         self._free: list[int] = []
         self._alloc(8)
 
-    def _alloc(self, cap: int) -> None:
-        old = self.n
-        feats = np.zeros((cap, self.kmax, self.dim + 1), dtype=np.float32)
+    def _alloc(self, cap: int, width: int | None = None) -> None:
+        """(Re)allocate the block for ``cap`` slots of ``width`` rows each, keeping what is stored."""
+        old, old_width = self.n, self.width
+        width = old_width if width is None else width
+        feats = np.zeros((cap, width, self.dim + 1), dtype=np.float32)
         feats[:, :, self.dim] = _PAD_SQN
-        pd2 = np.full((cap, self.kmax, self.kmax), np.inf, dtype=np.float32)
+        pd2 = np.full((cap, width, width), np.inf, dtype=np.float32)
         count = np.zeros(cap, dtype=np.int64)
         cen = np.zeros((cap, self.dim + 1), dtype=np.float32)
         if old:
-            feats[:old] = self.feats[:old]
-            pd2[:old] = self.pd2[:old]
+            feats[:old, :old_width] = self.feats[:old]
+            pd2[:old, :old_width, :old_width] = self.pd2[:old]
             count[:old] = self.count[:old]
             cen[:old] = self.centroid[:old]
         self.feats, self.pd2, self.count, self.centroid = feats, pd2, count, cen
+        self.width = width
+
+    def _fit(self, rows: int) -> None:
+        """Widen every slot (doubling, at most kmax) so that one can hold ``rows`` features: memory follows the
+        largest feature set stored, not the bound."""
+        if rows > self.width:
+            width = self.width
+            while width < rows:
+                width *= 2
+            self._alloc(self.feats.shape[0], min(width, self.kmax))
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the bank's arrays (memory measurements)."""
+        return int(self.feats.nbytes + self.pd2.nbytes + self.count.nbytes + self.centroid.nbytes)
 
     def new_slot(self, features: F32Array) -> int:
         """A slot (reused or new, the block grows by half) holding ``features``; returns its index."""
@@ -137,6 +158,7 @@ class FeatureBank:
         if m == 0:
             return
         k = int(self.count[slot])
+        self._fit(min(k + m, self.kmax))
         dim = self.dim
         stored = self.feats[slot, :k, :dim]
         new_sq = np.einsum("ij,ij->i", new, new)
@@ -161,7 +183,7 @@ class FeatureBank:
             d2[k:, :k] = cross
             d2[:k, k:] = cross.T
             d2[k:, k:] = nn
-            keep = _greedy_keep(d2.copy(), self.kmax)
+            keep = _greedy_keep(d2.copy(), self.kmax)  # (the block is kmax wide: _fit above)
             allf = np.concatenate([self.feats[slot, :k], np.column_stack([new, new_sq])])
             n_keep = len(keep)
             self.feats[slot, :n_keep] = allf[keep]
@@ -261,14 +283,14 @@ class FeatureBank:
         aug = self.augment(obs)
         if len(slots) * 2 >= self.n:  # most faces: scan the whole bank, then select columns
             n_faces, sel = self.n, slots
-            flat = self.feats[: self.n].reshape(self.n * self.kmax, self.dim + 1)
+            flat = self.feats[: self.n].reshape(self.n * self.width, self.dim + 1)
         else:
             n_faces, sel = len(slots), None
-            flat = self.feats[slots].reshape(len(slots) * self.kmax, self.dim + 1)
+            flat = self.feats[slots].reshape(len(slots) * self.width, self.dim + 1)
         if q <= _GEMV_MAX_ROWS:  # OpenBLAS: 1-2 matrix-vector products beat a skinny GEMM (measured)
-            d2 = np.stack([(flat @ aug[r]).reshape(n_faces, self.kmax).min(axis=1) for r in range(q)])
+            d2 = np.stack([(flat @ aug[r]).reshape(n_faces, self.width).min(axis=1) for r in range(q)])
         else:
-            d2 = (flat @ aug.T).reshape(n_faces, self.kmax, q).min(axis=1).T  # streams the bank once
+            d2 = (flat @ aug.T).reshape(n_faces, self.width, q).min(axis=1).T  # streams the bank once
         if sel is not None:
             d2 = d2[:, sel]
         d2 = d2.astype(np.float64) + np.einsum("ij,ij->i", obs, obs).astype(np.float64)[:, None]

@@ -11,9 +11,20 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int
 
-__all__ = ["IdentityEvent", "IdentityEventKind", "IdentityStats", "LearnedFace"]
+__all__ = ["MAX_FACE_ID", "IdentityEvent", "IdentityEventKind", "IdentityStats", "LearnedFace", "check_face_id"]
 
 F32Array = npt.NDArray[np.float32]
+
+MAX_FACE_ID = 2**63 - 1  # the face store keeps ids as SQLite INTEGER (signed 64-bit)
+
+
+def check_face_id(value: object) -> int:
+    """A face id as an int in [1, MAX_FACE_ID]; ValueError with a clear reason (a request's uint64 can be larger)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
+        raise ValueError(f"face id must be an integer, got {type(value).__name__}")
+    if not 1 <= int(value) <= MAX_FACE_ID:
+        raise ValueError(f"face id must be between 1 and {MAX_FACE_ID}, got {int(value)}")
+    return int(value)
 
 
 class IdentityEventKind(str, enum.Enum):

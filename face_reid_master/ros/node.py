@@ -38,6 +38,7 @@ from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.ros.sealed import open_payload, open_request
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
+from face_reid_master.health import MasterHealthWatch
 from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
@@ -78,6 +79,7 @@ class MasterNode(ManagedNode):
         self._admin_worker: Any = None  # the thread that decodes add-person photos (off the frame path)
         self.store: Any = None
         self.health: NodeHealth | None = None
+        self._watch = MasterHealthWatch()  # store failures, faces lost at open, overload, another master
         self._own_services: list[Any] = []
         self._service_calls: dict[str, int] = {}
         self._service_refusals: dict[str, int] = {}
@@ -257,6 +259,7 @@ class MasterNode(ManagedNode):
                 self.get_logger().warning(
                     f"retention_unnamed_s={retention:g} s: {doomed} of the {len(store.list_faces())} stored faces "
                     f"(unnamed, not seen for longer) will be deleted from {path} once frames arrive")
+        self._watch.store_opened(store.lost_face_ids, store.recovered_from, store.salvaged_face_ids)
         return store
 
     def _load_gallery(self, path: str) -> dict[str, np.ndarray]:
@@ -580,7 +583,7 @@ class MasterNode(ManagedNode):
             "cycle_fixed_cost_ms": self._budget.mean_cycle_ms,
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
-                                                                       "embeddings_rejected",
+                                                                       "embeddings_rejected", "faces_", "store_",
                                                                        "detections_rejected", "bodies_", "body_"))})
         extra.update({f"{k}_calls": v for k, v in self._service_calls.items()})
         extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
@@ -605,7 +608,26 @@ class MasterNode(ManagedNode):
                             f"arrive {offset:+.2f} s after their capture stamp (+ behind, - ahead of this host's "
                             "clock; transport included): synchronise the hosts' clocks (chrony / NTP)")
             self.log_throttled("clock_offset", warnings[-1], len(off), warn=True)
-        return health.report(now_s, extra, warnings)
+        verdict = self._health_verdict(now_s, core, health)
+        extra.update(verdict.values)
+        return health.report(now_s, extra, warnings + verdict.warnings, verdict.errors)
+
+    def _health_verdict(self, now_s: float, core: MasterCore, health: NodeHealth) -> Any:
+        """The store's, the overload's and the domain's part of the status (face_reid_master.health)."""
+        store = self.store
+        others: list[str] = []
+        if self.tracks_pub is not None:  # another master (or anything) publishing our output topic
+            others = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                      for info in self.get_publishers_info_by_topic(self.tracks_pub.topic_name)]
+            mine = f"{self.get_namespace().rstrip('/')}/{self.get_name()}"
+            if mine in others:  # ours, once: a second master of the same name is another entry
+                others.remove(mine)
+        return self._watch.verdict(
+            now_s, frames_in=health.frames_in, frames_dropped_overload=self.frames_dropped_overload,
+            store_write_failures=getattr(store, "write_failures", core.stats.store_errors),
+            store_last_write_ok=getattr(store, "last_write_ok", None),
+            store_last_error=getattr(store, "last_error", ""), other_publishers=others,
+            output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
 
     # ------------------------------------------------------------------ services
     async def _add_person(self, request: Any, response: Any) -> Any:

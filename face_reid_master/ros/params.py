@@ -92,8 +92,10 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               low=0, high=100000),
     ParamSpec("persist_faces", True, "Keep learned faces in the database across restarts (bool)."),
     ParamSpec("db_path", "", "Face database file ('' = $FACE_REID_DB or ~/.local/share/face_reid/faces.db)."),
-    ParamSpec("retention_unnamed_s", 0.0, "Forget unnamed faces not seen for this long (s; 0 = keep forever).",
-              low=0.0, high=1e9),
+    ParamSpec("retention_unnamed_s", 2_592_000.0,
+              "Forget unnamed faces not seen for this long (s; 0 = keep forever). 30 days: a visitor who returns "
+              "within a month is still recognised, a one-off passer-by's biometric data is gone a month later "
+              "(data minimisation); named faces are kept.", low=0.0, high=1e9),
     ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
     ParamSpec("body_metric_path", "", "Body metric JSON from face-reid-fit-body ('' = the installed "
               "models/body_metric.json); used when body_appearance_tracking is on."),

@@ -44,7 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_master.identity.predefined_people import check_person_name
-from face_reid_master.identity.records import LearnedFace
+from face_reid_master.identity.records import LearnedFace, check_face_id
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -145,9 +145,7 @@ def _utc_stamp() -> str:
 
 
 def _check_face_id(face_id: Any) -> int:
-    if isinstance(face_id, bool) or not isinstance(face_id, (int, np.integer)):
-        raise ValueError(f"face_id must be an int, got {face_id!r}")
-    return int(face_id)
+    return check_face_id(face_id)
 
 
 def _check_name(name: Any) -> str | None:
@@ -791,6 +789,15 @@ class FaceStore:
         self._delete_ids([fid])
         _LOG.info("face store %s: forgot face %d", self.path, fid)
         return True
+
+    def forget_faces(self, face_ids: Iterable[int]) -> list[int]:
+        """Delete several faces in one transaction (as :meth:`forget`); returns the ids that were stored."""
+        wanted = sorted({_check_face_id(f) for f in face_ids})
+        ids = [f for f in wanted if self._db.execute("SELECT 1 FROM faces WHERE face_id = ?", (f,)).fetchone()]
+        self._delete_ids(ids)
+        if ids:
+            _LOG.info("face store %s: forgot faces %s", self.path, ids[:50])
+        return ids
 
     def forget_name(self, name: str) -> list[int]:
         """Delete every face with exactly this name (case-sensitive); returns their ids."""

@@ -10,8 +10,10 @@ requires) and runs every call there, in the order made:
 - every other method (load, forget, prune, list, ...) waits for its result, after the saves handed over
   before it: a face forgotten after a save stays forgotten.
 
-A failed save is logged and counted (:attr:`write_failures`); what is lost is what a synchronous save that
-raised would have lost. Attributes (``recovered_from``, ``path``, ...) are read from the store as they are.
+A failed save is logged and counted (:attr:`write_failures`, the reason of the last in :attr:`last_error`,
+:attr:`last_write_ok` whether the most recent write succeeded: the node's health reads them); what is lost is
+what a synchronous save that raised would have lost. Attributes (``recovered_from``, ``path``, ...) are read
+from the store as they are.
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ class WriteBehindStore:
         self._pending: dict[int, LearnedFace] = {}
         self._scheduled = False
         self.write_failures = 0  # save batches that raised (logged)
+        self.last_error = ""  # the reason of the last failed write ("" = none yet)
+        self.last_write_ok: bool | None = None  # whether the most recent write succeeded (None: none yet)
 
     def save_faces(self, faces: Iterable[LearnedFace]) -> int:
         """Hand ``faces`` to the worker (a newer snapshot of a face replaces one not yet written); how many."""
@@ -66,9 +70,30 @@ class WriteBehindStore:
         try:
             self._store.save_faces(batch)
         except Exception as exc:  # the frame loop carries on; the next save of these faces may succeed
-            self.write_failures += 1
+            self._failed(exc)
             _LOG.error("face store: saving faces %s failed: %s", [f.face_id for f in batch][:20],
                        str(exc)[:_MAX_ERROR_CHARS])
+        else:
+            self.last_write_ok = True
+
+    def _failed(self, exc: Exception) -> None:
+        self.write_failures += 1
+        self.last_error = f"{type(exc).__name__}: {str(exc)[:_MAX_ERROR_CHARS]}"
+        self.last_write_ok = False
+
+    def forget_later(self, face_ids: Iterable[int]) -> None:
+        """Hand faces to delete to the worker and return at once (the face cap's evictions: nobody waits for
+        the answer); deleted after the saves handed over before, a failure counted like a failed save."""
+        self._pool.submit(self._forget, list(face_ids))
+
+    def _forget(self, face_ids: list[int]) -> None:
+        try:
+            self._store.forget_faces(face_ids)
+        except Exception as exc:
+            self._failed(exc)
+            _LOG.error("face store: forgetting faces %s failed: %s", face_ids[:20], str(exc)[:_MAX_ERROR_CHARS])
+        else:
+            self.last_write_ok = True
 
     def save_body_pairs(self, rows: Iterable[Any], subspace: str) -> None:
         """Hand the online body-metric update's pairs (copies) to the worker and return at once; they are
@@ -80,7 +105,7 @@ class WriteBehindStore:
         try:
             self._store.save_body_pairs(rows, subspace)
         except Exception as exc:  # the pairs stay in memory; the next save may succeed
-            self.write_failures += 1
+            self._failed(exc)
             _LOG.error("face store: saving %d body pairs failed: %s", len(rows), str(exc)[:_MAX_ERROR_CHARS])
 
     def flush(self) -> None:

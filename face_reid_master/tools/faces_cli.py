@@ -178,6 +178,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FaceStoreLockedError as exc:
         print(f"{PROG}: error: {exc}; stop the master node first", file=sys.stderr)
         return EXIT_BUSY
+    except ValueError as exc:  # e.g. a face id out of range
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except (FaceStoreError, OSError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_STORE_ERROR

@@ -670,3 +670,11 @@ def test_faces_still_readable_in_a_damaged_file_are_recovered_and_said(db: Path,
             [(1, None, (3, DIM)), (2, "Ann", (3, DIM)), (3, None, (3, DIM))]
         assert store.integrity_ok() and store.lost_face_ids == []
     assert "recovered 3 of 3 faces" in caplog.text  # before: moved aside, every face gone
+
+
+@pytest.mark.parametrize("face_id", ["0", "-5", str(2**64 - 1)])
+def test_cli_refuses_face_ids_out_of_range(db: Path, face_id: str, capsys: pytest.CaptureFixture[str]) -> None:
+    _cli_store(db)
+    for command in (["forget", face_id], ["rename", face_id, "Bea"]):
+        assert cli_main(["--db", str(db), *command]) == 2
+        assert "face id must be between 1 and 9223372036854775807" in capsys.readouterr().err
