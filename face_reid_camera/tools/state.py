@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from face_reid_camera.common.transitions import QUERY, TRANSITIONS, TransitionError, plan
+from face_reid_camera.ros.service_call import call_service
 
 __all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main"]
 
@@ -34,23 +35,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
-    """The reply of service ``name``; TimeoutError when it is not there or does not answer in time."""
-    import rclpy
+_HINT = "is the node running on this ROS_DOMAIN_ID, and secured exactly when --key is given?"
 
-    client = node.create_client(srv_type, name)
-    deadline = time.monotonic() + timeout_s
-    while not client.service_is_ready():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"no service {name} within {timeout_s:g} s (is the node running on this "
-                               "ROS_DOMAIN_ID, and secured exactly when --key is given?)")
-        rclpy.spin_once(node, timeout_sec=0.1)
-    future = client.call_async(request)
-    while not future.done():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"{name} did not answer within {timeout_s:g} s")
-        rclpy.spin_once(node, timeout_sec=0.1)
-    return future.result()
+
+def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
+    return call_service(node, srv_type, name, request, timeout_s, _HINT)
 
 
 def _sealed(node: Any, target: str, transition: str, key_path: str, timeout_s: float) -> tuple[bool, str, str]:

@@ -12,26 +12,16 @@ import time
 from typing import Any
 
 from face_reid_camera.common.checks import shown
+from face_reid_camera.ros.service_call import call_service
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 
 
-def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
-    import rclpy
+_HINT = "is the master running, with admin_services: true for add / forget, on this ROS_DOMAIN_ID?"
 
-    client = node.create_client(srv_type, name)
-    deadline = time.monotonic() + timeout_s
-    while not client.service_is_ready():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"no service {name} within {timeout_s:g} s (is the master running, with "
-                               "admin_services: true for add / forget, on this ROS_DOMAIN_ID?)")
-        rclpy.spin_once(node, timeout_sec=0.1)
-    future = client.call_async(request)
-    while not future.done():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"{name} did not answer within {timeout_s:g} s")
-        rclpy.spin_once(node, timeout_sec=0.1)
-    return future.result()
+
+def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
+    return call_service(node, srv_type, name, request, timeout_s, _HINT)
 
 
 def _embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
