@@ -59,7 +59,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--tick-period", type=float, default=DEFAULT_TICK_PERIOD_S, metavar="S",
                    help=f"core.tick period between frames, scenario seconds (default {DEFAULT_TICK_PERIOD_S})")
     p.add_argument("--plot", type=str, default=None, metavar="PREFIX",
-                   help="save PREFIX_timeline.png and PREFIX_map.png")
+                   help="save PREFIX_timeline.png, PREFIX_map.png and PREFIX_reliability.png")
     p.add_argument("--out", type=Path, default=None, metavar="JSON", help="also write the JSON to this file")
     p.add_argument("--likelihood", type=Path, default=None, metavar="JSON",
                    help="the fitted likelihoods to use (default: models/face_likelihood_<space>.json); "

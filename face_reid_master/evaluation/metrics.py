@@ -21,9 +21,11 @@ from face_reid_master.evaluation.runner import RunLog, TrackLog
 __all__ = [
     "PURE_TRACK_MIN_PURITY",
     "TrackOutcome",
+    "decision_verdict",
     "evaluate_run",
     "evaluated_tracks",
     "face_persons",
+    "learned_at",
     "mot_metrics",
     "paired_reid_times",
     "track_outcomes",
@@ -82,14 +84,30 @@ def holding_intervals(log: RunLog) -> dict[int, list[tuple[float, float, int]]]:
     return held
 
 
-def track_outcomes(log: RunLog) -> list[TrackOutcome]:
-    """Per evaluated track: is it a re-identification case, and did it get its person's face (docs)."""
-    face_person = face_persons(log)
-    learned_at: dict[int, float] = {}  # person -> first creation stamp of one of their faces
+def learned_at(log: RunLog, face_person: Mapping[int, int]) -> dict[int, float]:
+    """Person -> creation stamp of their first learned face (``face_person``: :func:`face_persons`)."""
+    out: dict[int, float] = {}
     for fid, (stamp, _) in log.faces.items():
         p = face_person[fid]
         if p >= 0:
-            learned_at[p] = min(stamp, learned_at.get(p, math.inf))
+            out[p] = min(stamp, out.get(p, math.inf))
+    return out
+
+
+def decision_verdict(face_person: int, kind: str, person: int, reid_case: bool) -> tuple[str, str]:
+    """("success" | "failure", "" | "wrong_person" | "new_id") of giving ``person`` a face learned from
+    ``face_person``, ``kind`` "new" or "known"; a re-identification case must get a known face (docs)."""
+    if face_person != person:
+        return "failure", "wrong_person"
+    if kind == "new" and reid_case:
+        return "failure", "new_id"
+    return "success", ""
+
+
+def track_outcomes(log: RunLog) -> list[TrackOutcome]:
+    """Per evaluated track: is it a re-identification case, and did it get its person's face (docs)."""
+    face_person = face_persons(log)
+    learned = learned_at(log, face_person)
     held = holding_intervals(log)
 
     def all_faces_busy(person: int, at: float, track_id: int) -> bool:
@@ -100,7 +118,7 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
     last_day_of_person: dict[int, int] = {}
     for t in evaluated_tracks(log):
         p = t.true_person
-        reid = learned_at.get(p, math.inf) < t.birth_s
+        reid = learned.get(p, math.inf) < t.birth_s
         first = t.first_assignment
         day = _day_of(t.birth_s, log.days)
         cross_day = reid and p in last_day_of_person and last_day_of_person[p] < day
@@ -109,12 +127,7 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
             out.append(TrackOutcome(t.track_id, p, t.birth_s, reid, "none", "", 0, None, cross_day))
             continue
         stamp, fid, kind = first
-        if face_person.get(fid, -1) != p:
-            verdict, why = "failure", "wrong_person"
-        elif kind == "new" and reid:
-            verdict, why = "failure", "new_id"
-        else:
-            verdict, why = "success", ""
+        verdict, why = decision_verdict(face_person.get(fid, -1), kind, p, reid)
         busy = why == "new_id" and all_faces_busy(p, stamp, t.track_id)
         evidence = t.evidence[0] if t.evidence else "face"
         out.append(TrackOutcome(t.track_id, p, t.birth_s, reid, verdict, why, fid, stamp, cross_day, busy,
@@ -359,6 +372,10 @@ def evaluate_run(
         "master_stats": dict(log.master_stats),
         "run_time_s": round(log.runtime_s, 2),
     }
+    from face_reid_master.evaluation.calibration import calibration_report, run_decisions  # imports this module
+
+    result["calibration"] = calibration_report(run_decisions(log), thresholds=log.decision_thresholds,
+                                               reid_tracks=len(reid))
     if with_mot:
         t0 = time.perf_counter()
         result["mot"] = {"tracker": mot_metrics(log, "track"), "identity": mot_metrics(log, "face")}

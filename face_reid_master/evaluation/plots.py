@@ -1,4 +1,5 @@
-"""Figures of one evaluated run: tracks per person over time, and a top-down map of true paths and tracks."""
+"""Figures of one evaluated run: tracks per person over time, a top-down map of true paths and tracks, and the
+reliability diagram of its identity decisions."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from face_reid_master.evaluation.calibration import run_decisions, save_reliability_plot
 from face_reid_master.evaluation.metrics import track_outcomes
 from face_reid_master.evaluation.runner import RunLog
 
@@ -18,7 +20,8 @@ _DAY_GAP_PLOT_S = 10.0  # gap drawn between consecutive days on the timeline
 
 
 def save_plots(run: RunLog, scenario: Any, prefix: str, title: str = "") -> list[Path]:
-    """PREFIX_timeline.png (tracks per person over time) and PREFIX_map.png (top-down view)."""
+    """PREFIX_timeline.png (tracks per person over time), PREFIX_map.png (top-down view) and
+    PREFIX_reliability.png (are the identity posteriors right as often as they say)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -120,4 +123,7 @@ def save_plots(run: RunLog, scenario: Any, prefix: str, title: str = "") -> list
     map_path = base.parent / f"{base.name}_map.png"
     fig.savefig(map_path, dpi=120)
     plt.close(fig)
-    return [timeline, map_path]
+
+    reliability = base.parent / f"{base.name}_reliability.png"
+    save_reliability_plot(run_decisions(run), str(reliability), thresholds=run.decision_thresholds, title=title)
+    return [timeline, map_path, reliability]

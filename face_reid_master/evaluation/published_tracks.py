@@ -75,6 +75,7 @@ def run_log_from_messages(messages: Sequence[TrackMessage], truth: TruthLookup, 
                 faces.setdefault(fid, (msg.stamp_s, tid))
                 log.assignments.append((msg.stamp_s, fid, kind))
                 log.evidence.append("body" if tr.identity_evidence == "body" else "face")  # what decided it
+                log.confidence.append(float(tr.identity_confidence))  # published with the new face id
             elif not fid and current_face.get(tid):
                 log.released_s = msg.stamp_s
             current_face[tid] = fid

@@ -26,7 +26,8 @@ from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.records import IdentityEventKind
 from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord
 
-__all__ = ["DEFAULT_TICK_PERIOD_S", "ProgressCallback", "RunLog", "TrackLog", "progress_to", "run_master"]
+__all__ = ["DEFAULT_TICK_PERIOD_S", "ProgressCallback", "RunLog", "TrackLog", "decision_thresholds", "progress_to",
+           "run_master"]
 
 DEFAULT_TICK_PERIOD_S = 0.2  # the node ticks at tick_rate_hz = 5 Hz
 
@@ -40,6 +41,7 @@ class TrackLog:
     ``gt_counts``: true person (-1 = false positive) -> detections associated with the track.
     ``assignments``: (stamp, face id, "new" | "known") in order (Algorithm 1 assigns once per track; after
     a swap releases its face, the next assignment is listed too; ``releases``: when each swap began).
+    ``evidence`` / ``confidence``: per assignment, what decided it and the posterior it was taken at.
     ``names``: name -> first stamp it was shown on one of the track's detections. ``path``: (stamp, x, y)
     samples of the published estimate while CONFIRMED. ``face_gt``: (stamp, true person) of each detection
     with a face embedding.
@@ -59,6 +61,7 @@ class TrackLog:
     face_gt: list[tuple[float, int]] = field(default_factory=list)  # (stamp, true person) of face detections
     releases: list[float] = field(default_factory=list)  # swaps: stamp of the first face not its face's
     evidence: list[str] = field(default_factory=list)  # per assignment: "face" or "body" (what decided it)
+    confidence: list[float] = field(default_factory=list)  # per assignment: identity_confidence at the decision
 
     @property
     def detections(self) -> int:
@@ -129,6 +132,8 @@ class RunLog:
     det_name: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     names: tuple[str, ...] = ()
     body_metric: BodyFeatureMetric | None = None  # the fused body metric at the end (online update: updated)
+    # evidence kind -> the posterior a decision of that kind had to exceed (the run's MasterConfig; empty: unknown)
+    decision_thresholds: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         arrays = {k: getattr(self, k) for k in ("det_frame", "det_stamp_s", "det_gt", "det_track", "det_face")}
@@ -211,6 +216,7 @@ def run_master(
                 log = tracks[tid] = TrackLog(tid, stamp, stamp)
             log.assignments.append((stamp, fid, kind))
             log.evidence.append(core.identity.evidence_of(tid) or "face")
+            log.confidence.append(float(core.identity.confidence_of(tid)))  # the decision's posterior
             log.released_s = None  # holding a face again (after a swap released the previous one)
         for tid in prev_assigned.keys() - assigned.keys():
             if tid in tracks:
@@ -299,7 +305,17 @@ def run_master(
         det_name=np.array(rows_name, dtype=np.int64),
         names=tuple(name_index),
         body_metric=core.body_fused,
+        decision_thresholds=decision_thresholds(cfg),
     )
+
+
+def decision_thresholds(cfg: MasterConfig) -> dict[str, float]:
+    """Evidence kind -> the posterior a decision must exceed under ``cfg`` (the threshold method votes: no face
+    posterior threshold)."""
+    out = {"body": float(cfg.body_posterior_threshold)}
+    if cfg.method == "bayes":
+        out["face"] = float(cfg.posterior_threshold)
+    return out
 
 
 def progress_to(stream: Any = sys.stderr, label: str = "frames") -> ProgressCallback:
