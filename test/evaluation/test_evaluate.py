@@ -241,6 +241,29 @@ def test_real_core_confusable_pair_and_swapped_faces_are_failures(embeddings) ->
     assert r["reidentification"]["failure_wrong_person"] == 1 and r["reidentification"]["success"] == 0
 
 
+def test_real_core_run_reports_the_calibration_of_every_decision(embeddings) -> None:
+    a, b = embeddings[IDS[0]], embeddings[IDS[1]]
+    # both learned; person 0 returns with his own face (right), person 1 returns showing person 0's (wrong)
+    frames, gts = _frames([(0, 0.0, 4.0, 0.0, a[:5]), (1, 0.0, 4.0, 3.0, b[:5]), (0, 7.0, 11.0, 0.0, a[5:]),
+                           (1, 14.0, 18.0, 3.0, a[5:])])
+    cfg = _config("bayes")
+    log = run_master(frames, gts, cfg)
+    r = evaluate_run(log, with_mot=False)
+    cal = r["calibration"]
+    outcomes = track_outcomes(log)
+    decided = [o for o in outcomes if o.outcome != "none"]
+    assert cal["first_decisions"] == len(decided) == 4 and cal["decisions_without_confidence"] == 0
+    assert cal["decisions"] == sum(len(log.tracks[o.track_id].assignments) for o in outcomes)
+    assert cal["wrong"] == sum(o.outcome == "failure" for o in decided) == r["table_ii"]["failure"] == 1
+    # every face decision exceeded the master's threshold, at the posterior the track then published
+    face = cal["at_thresholds"]["face"]
+    assert face["threshold"] == cfg.posterior_threshold and face["decisions_below_threshold"] == 0
+    assert face["decisions"] == cal["by_evidence"]["face"]["decisions"] == 4 and face["wrong"] == 1
+    assert 0.95 < cal["mean_confidence"] <= 0.999  # the face table is clamped at 1 - 1e-3
+    assert sum(b["count"] for b in cal["bins"]) == 4 and 0.0 <= cal["ece"] <= 1.0
+    assert cal["frontier"][0]["recover_rate"] == r["reidentification"]["recover_rate"] == 0.5
+
+
 def test_real_core_return_without_a_face_is_none_and_names_come_from_the_gallery(embeddings) -> None:
     a, c = embeddings[IDS[0]], embeddings[IDS[2]]
     frames, gts = _frames([(0, 0.0, 4.0, 0.0, a[:5]), (2, 0.0, 4.0, 3.0, c[:5]), (0, 7.0, 11.0, 0.0, None)])
@@ -329,7 +352,11 @@ def test_cli_prints_json_and_saves_plots(scenario_dir: Path, tmp_path: Path, cap
     assert printed["predefined_people"]["gallery_people"] == 1
     assert printed["detections"] == printed["scenario"]["detections"] > 0
     assert 0.0 <= printed["mot"]["identity"]["idf1"] <= 1.0
-    for suffix in ("_timeline.png", "_map.png"):
+    assert printed["calibration"]["first_decisions"] == sum(
+        printed[k][f] for k, f in (("reidentification", "success"), ("reidentification", "failure"),
+                                   ("first_appearance", "success"), ("first_appearance", "failure_wrong_person")))
+    assert "face" not in printed["calibration"]["at_thresholds"]  # the threshold method votes: no face posterior
+    for suffix in ("_timeline.png", "_map.png", "_reliability.png"):
         path = prefix.parent / f"run{suffix}"
         assert path.stat().st_size > 10_000 and path.read_bytes()[:4] == b"\x89PNG"
 
