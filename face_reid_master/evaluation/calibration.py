@@ -248,7 +248,7 @@ def save_reliability_plot(decisions: Sequence[Decision], path: str, *, threshold
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlim(lo, 1.0)
-    ax.set_ylim(lo, 1.0)
+    ax.set_ylim(lo, 1.5)  # an all-wrong bin (error 1) stays inside the frame
     ax.set_xlabel("promised error: 1 - mean posterior of the bin")
     ax.set_ylabel("observed error rate (triangle: no error, drawn at 0.5 / count)")
     ax.set_title(f"{title}  reliability of identity decisions", fontsize=9)
