@@ -2,7 +2,8 @@
 
 K folds partition the identities; per fold the metrics are fitted on the other folds' crops and scored on
 this fold's: every crop is a probe against the fold's other crops seen by another camera (every other crop
-when a camera is unknown); rank-1, then mAP, averaged over the folds, ranks the candidates. Candidates:
+when a camera is unknown); rank-1, then mAP, averaged over the folds, ranks the candidates. A crop whose person
+no other camera saw is no probe, and a fold without any probe is left out (both counted). Candidates:
 the principal components kept per block (the leading columns of PCA scores: nested, so one PCA serves
 all), the regularisation, and XQDA's subspace cap r. The pair covariances are computed once per fold; a
 candidate set of columns takes their sub-matrix.
@@ -28,8 +29,8 @@ from face_reid_master.body.linear_metric import LinearMetric
 from face_reid_master.body.pair_covariance import pair_covariances
 from face_reid_master.body.xqda import xqda_for_dims
 
-__all__ = ["DEFAULT_MAX_LENGTH", "Choice", "SearchGrid", "Selection", "dims_candidates", "identity_folds",
-           "select_parameters"]
+__all__ = ["DEFAULT_MAX_LENGTH", "Choice", "NoCrossCameraMatch", "SearchGrid", "Selection", "dims_candidates",
+           "identity_folds", "select_parameters"]
 
 DEFAULT_DIM_STEPS = (16, 32, 48, 64, 80, 96, 112)  # components per block tried
 DEFAULT_MAX_LENGTH = 128  # most values per person on the wire (all blocks): 512 bytes of float32
@@ -84,6 +85,10 @@ class SearchGrid:
                 "regularisations": list(self.regularisations), "subspace_dims": list(self.subspace_dims)}
 
 
+class NoCrossCameraMatch(ValueError):
+    """No fold holds a person seen by two cameras: the candidates cannot be scored."""
+
+
 @dataclass(frozen=True)
 class Choice:
     """A metric's chosen regularisation and XQDA cap (None for KISSME / no cap) with its cross-validated scores."""
@@ -101,18 +106,25 @@ class Choice:
 @dataclass(frozen=True)
 class Selection:
     """Chosen components per block (by the fused XQDA), and per feature of ``METRIC_FEATURES`` the XQDA and
-    KISSME parameters at those components; ``fused_by_dims`` = the best fused XQDA rank-1 of each candidate."""
+    KISSME parameters at those components; ``fused_by_dims`` = the best fused XQDA rank-1 of each candidate;
+    ``folds_skipped`` = why each left-out fold was; ``probes`` / ``probes_without_match`` = crops scored / not
+    (no crop of their person by another camera)."""
 
     pca_dims: dict[str, int]
     xqda: dict[str, Choice]
     kissme: dict[str, Choice]
     folds: int
     fused_by_dims: dict[str, float]
+    folds_skipped: tuple[str, ...] = ()
+    probes: int = 0
+    probes_without_match: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return {"pca_dims": dict(self.pca_dims), "xqda": {k: v.to_dict() for k, v in self.xqda.items()},
                 "kissme": {k: v.to_dict() for k, v in self.kissme.items()}, "folds": self.folds,
-                "fused_xqda_cv_rank1_by_pca_dims": {k: round(v, 4) for k, v in self.fused_by_dims.items()}}
+                "fused_xqda_cv_rank1_by_pca_dims": {k: round(v, 4) for k, v in self.fused_by_dims.items()},
+                "folds_skipped": list(self.folds_skipped), "cv_probes": self.probes,
+                "cv_probes_without_match": self.probes_without_match}
 
 
 def identity_folds(labels: npt.ArrayLike, folds: int, rng: np.random.Generator) -> list[npt.NDArray[np.bool_]]:
@@ -138,7 +150,8 @@ def select_parameters(scores: Mapping[str, npt.ArrayLike], labels: npt.ArrayLike
                       progress: Callable[[int, int], None] | None = None) -> Selection:
     """Choose the metric parameters on ``scores`` (per block of ``FEATURES``: (n, k) PCA scores, leading
     component first, k >= the grid's most), ``labels`` and ``cameras`` (one per row) by ``folds``-fold
-    cross-validation over the identities (see the module doc); ``progress(done, total)`` after each fold."""
+    cross-validation over the identities (see the module doc); ``progress(done, total)`` after each fold.
+    :class:`NoCrossCameraMatch` if no fold has a person seen by two cameras."""
     y = np.asarray(labels)
     cams = list(cameras)
     need = grid.max_dims()
@@ -165,11 +178,21 @@ def select_parameters(scores: Mapping[str, npt.ArrayLike], labels: npt.ArrayLike
                 candidates[f].append(key)
     results: dict[tuple[str, str, tuple[int, ...], float, int | None], list[tuple[float, float]]] = {}
     masks = identity_folds(y, folds, rng)
+    skipped: list[str] = []
+    probes = without_match = 0
     for k, held in enumerate(masks):
         train, test = ~held, held
-        cov = pair_covariances(full[train], y[train])
         valid = ~camera_mask([cams[i] for i in np.flatnonzero(test)], [cams[i] for i in np.flatnonzero(test)])
         np.fill_diagonal(valid, False)
+        matched = ((y[test][:, None] == y[test][None, :]) & valid).any(axis=1)
+        probes, without_match = probes + int(matched.sum()), without_match + int((~matched).sum())
+        if not matched.any():
+            skipped.append(f"fold {k + 1} of {folds}: none of its {np.unique(y[test]).size} people is seen by two "
+                           f"cameras")
+            if progress:
+                progress(k + 1, folds)
+            continue
+        cov = pair_covariances(full[train], y[train])
         for f in METRIC_FEATURES:
             for dims in candidates[f]:
                 cols = columns(f, dims)
@@ -188,6 +211,8 @@ def select_parameters(scores: Mapping[str, npt.ArrayLike], labels: npt.ArrayLike
                         raise ValueError(f"fold {k + 1} of {folds}: {exc}") from None
         if progress:
             progress(k + 1, folds)
+    if len(skipped) == len(masks):
+        raise NoCrossCameraMatch(f"no cross-validation fold has a person seen by two cameras ({'; '.join(skipped)})")
 
     def mean(key: tuple[str, str, tuple[int, ...], float, int | None]) -> tuple[float, float]:
         runs = np.array(results[key])
@@ -210,4 +235,5 @@ def select_parameters(scores: Mapping[str, npt.ArrayLike], labels: npt.ArrayLike
         dims = chosen_dims if f == FUSED else (pca_dims[f],)
         key, (r1, ap) = best([key for key in results if key[:3] == (method, f, dims)])
         chosen[method][f] = Choice(key[3], key[4], r1, ap)
-    return Selection(pca_dims, chosen["xqda"], chosen["kissme"], folds, by_dims)
+    return Selection(pca_dims, chosen["xqda"], chosen["kissme"], folds, by_dims, tuple(skipped), probes,
+                     without_match)

@@ -6,8 +6,9 @@ projection (what a camera sends) is fitted on their crops, then KISSME and XQDA 
 the other half are probes (one camera) against a gallery (the other cameras), as in the second seed.
 Euclidean distances are reported on the raw descriptors and on the projected vectors. The components kept,
 the regularisation and XQDA's subspace cap are chosen per split by cross-validation over the training
-identities only (:mod:`face_reid_master.body.model_selection`). Prints one JSON object; ``--plot`` saves
-the CMC curves.
+identities only (:mod:`face_reid_master.body.model_selection`). Splits and folds without a person seen by
+two cameras are left out and counted (``left_out``); only a folder where nothing is left fails. Prints one
+JSON object; ``--plot`` saves the CMC curves.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from face_reid_master.body.kissme import fit_kissme
 from face_reid_master.body.linear_metric import euclidean_metric
 from face_reid_master.body.model_selection import (
     DEFAULT_MAX_LENGTH,
+    NoCrossCameraMatch,
     SearchGrid,
     Selection,
     dims_candidates,
@@ -99,28 +101,57 @@ def _summary(runs: list[RankScores]) -> dict[str, Any]:
 def evaluate(features: Mapping[str, npt.NDArray[np.floating]], labels: npt.NDArray[Any], cameras: list[str],
              n_splits: int, seed: int, grid: SearchGrid, folds: int = 3,
              progress: Callable[[int], None] | None = None
-             ) -> tuple[dict[str, dict[str, dict[str, Any]]], list[dict[str, Any]]]:
-    """Rank-k and mAP per feature and method, mean (and std of rank-1) over ``n_splits`` random splits of the
-    identities (``seed``), and each split's chosen parameters (:meth:`Selection.to_dict` and the XQDA
-    subspace dimensions). ``features``: per block of ``FEATURES`` the raw descriptors (n, d)."""
+             ) -> tuple[dict[str, dict[str, dict[str, Any]]], list[dict[str, Any]], dict[str, Any]]:
+    """Rank-k and mAP per feature and method, mean (and std of rank-1) over the evaluated ones of ``n_splits``
+    random splits of the identities (``seed``), each evaluated split's chosen parameters
+    (:meth:`Selection.to_dict` and the XQDA subspace dimensions), and what was left out and why (a split
+    without a test person seen by two cameras, or whose cross-validation has none). ``features``: per block
+    of ``FEATURES`` the raw descriptors (n, d). ValueError if nothing is left to evaluate."""
     rng = np.random.default_rng(seed)
     inner_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
     pseudo = [Crop(str(lab), Path(""), cam) for lab, cam in zip(labels.tolist(), cameras, strict=True)]
+    cams_of: dict[str, list[str]] = {}
+    for c in pseudo:
+        cams_of.setdefault(c.identity, []).append(c.camera)
+    # as reid_splits: a person is a probe when seen twice and not by one known camera only
+    matchable = sum(len(v) >= 2 and len(set(v) - {""}) != 1 for v in cams_of.values())
+    if not matchable:
+        raise ValueError(f"no person is seen by two cameras ({len(cams_of)} identities, each seen by one camera "
+                         f"or in one crop): nothing to evaluate")
     splits = reid_splits(pseudo, n_splits, rng)
     scores: dict[str, dict[str, list[RankScores]]] = {f: {m: [] for m in METHODS} for f in METRIC_FEATURES}
     selections = []
+    skipped: list[dict[str, Any]] = []
     for k, split in enumerate(splits):
-        valid = ~same_camera(pseudo, split.probe, split.gallery)
-        distances, selection, subspace = _split_scores(features, labels, cameras, split.train, grid, folds,
-                                                       inner_rng)
-        selections.append({**selection.to_dict(), "xqda_subspace_dims": subspace})
-        for f, by_method in distances.items():
-            for method, distance in by_method.items():
-                scores[f][method].append(rank_scores(distance(split.probe, split.gallery), labels[split.probe],
-                                                     labels[split.gallery], valid))
+        try:
+            if not split.probe.size:
+                raise NoCrossCameraMatch("no test person is seen by two cameras")
+            distances, selection, subspace = _split_scores(features, labels, cameras, split.train, grid, folds,
+                                                           inner_rng)
+        except NoCrossCameraMatch as exc:
+            skipped.append({"split": k + 1, "reason": str(exc)})
+        else:
+            selections.append({**selection.to_dict(), "xqda_subspace_dims": subspace})
+            valid = ~same_camera(pseudo, split.probe, split.gallery)
+            for f, by_method in distances.items():
+                for method, distance in by_method.items():
+                    scores[f][method].append(rank_scores(distance(split.probe, split.gallery), labels[split.probe],
+                                                         labels[split.gallery], valid))
         if progress:
             progress(k + 1)
-    return {f: {m: _summary(runs) for m, runs in by_method.items()} for f, by_method in scores.items()}, selections
+    if not selections:
+        reasons = "; ".join(f"split {s['split']}: {s['reason']}" for s in skipped)
+        raise ValueError(f"every split was left out: {reasons}")
+    left_out = {
+        "identities_not_seen_by_two_cameras": len(cams_of) - matchable,
+        "splits_evaluated": len(selections),
+        "splits_skipped": skipped,
+        "cv_folds_skipped": sum(len(s["folds_skipped"]) for s in selections),
+        "cv_probes_without_match": sum(s["cv_probes_without_match"] for s in selections),
+        "test_probes_without_match": sum(r.probes_without_match for r in scores[METRIC_FEATURES[0]][METHODS[0]]),
+    }
+    return ({f: {m: _summary(runs) for m, runs in by_method.items()} for f, by_method in scores.items()},
+            selections, left_out)
 
 
 def _chosen_summary(selections: list[dict[str, Any]]) -> dict[str, Any]:
@@ -214,8 +245,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             from face_reid_camera.faces.photos import progress_bar
 
             bar = progress_bar(args.splits, "splits", log)
-        results, selections = evaluate(described.features, labels, cameras, args.splits, args.seed, grid,
-                                       args.folds, bar)
+        results, selections, left_out = evaluate(described.features, labels, cameras, args.splits, args.seed,
+                                                 grid, args.folds, bar)
     except ValueError as exc:
         return _fail(str(exc))
     out: dict[str, Any] = {
@@ -245,12 +276,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         "silhouette": args.silhouette,
         "descriptor_ms_per_crop": round(described.ms_per_crop, 3),
         "feature_dims": {f: int(raw_feature(described.features, f).shape[1]) for f in METRIC_FEATURES},
+        "left_out": {**left_out, "why": "a split without a test person seen by two cameras, a cross-validation fold "
+                                        "without a training person seen by two cameras and a crop whose person no "
+                                        "other camera saw cannot be scored: left out, counted; results average the "
+                                        "rest"},
         "results": results,
         "run_time_s": round(time.perf_counter() - t0, 1),
     }
     if args.plot:
         _plot(results, args.plot, f"{args.crops.name}: {out['identities']} identities, {args.splits} splits")
         out["plot"] = str(args.plot)
+    if log and (left_out["splits_skipped"] or left_out["cv_folds_skipped"]):
+        print(f"face-reid-eval-body: left out {len(left_out['splits_skipped'])} of {args.splits} splits and "
+              f"{left_out['cv_folds_skipped']} cross-validation folds (no person seen by two cameras in them); see "
+              f"'left_out'", file=log)
     text = json.dumps(out, indent=1)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from face_reid_master.body.model_selection import SearchGrid, dims_candidates, identity_folds, select_parameters
+from face_reid_master.body.model_selection import (
+    NoCrossCameraMatch,
+    SearchGrid,
+    dims_candidates,
+    identity_folds,
+    select_parameters,
+)
 
 
 def test_dims_candidates_fit_the_wire_budget() -> None:
@@ -63,3 +69,18 @@ def test_search_grid_checks_its_values() -> None:
     with pytest.raises(ValueError, match="subspace_dims"):
         SearchGrid(((4, 4),), subspace_dims=(0,))
     assert SearchGrid(((4, 8), (16, 2))).max_dims() == {"hsv": 16, "siltp": 8}
+
+
+def test_selection_leaves_out_folds_without_a_cross_camera_match() -> None:
+    scores, labels = _scores(np.random.default_rng(1))
+    grid = SearchGrid(((2, 1),), regularisations=(1e-3,), subspace_dims=(None,))
+    one_camera = ["1"] * labels.size
+    with pytest.raises(NoCrossCameraMatch, match="no cross-validation fold has a person seen by two cameras"):
+        select_parameters(scores, labels, one_camera, grid, 3, np.random.default_rng(0))
+    # people 0-2 seen by cameras 1 and 2, 3-17 by camera 1 only: at least 3 of 6 folds hold none of 0-2
+    cameras = [("1", "2")[k % 2] if p < 3 else "1" for k, p in enumerate(labels.tolist())]
+    sel = select_parameters(scores, labels, cameras, grid, 6, np.random.default_rng(0))
+    assert (sel.probes, sel.probes_without_match) == (3 * 4, 15 * 4)
+    assert 3 <= len(sel.folds_skipped) < 6
+    assert all(s.endswith(": none of its 3 people is seen by two cameras") for s in sel.folds_skipped)
+    assert sel.to_dict()["folds_skipped"] == list(sel.folds_skipped)

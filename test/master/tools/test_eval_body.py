@@ -82,7 +82,7 @@ def test_pca_then_metric_evaluation_fits_on_training_people_and_beats_euclidean(
 
     monkeypatch.setattr(eval_body, "fit_projection", spy)
     grid = SearchGrid(((4, 4), (10, 10)), regularisations=(1e-3,), subspace_dims=(None,))
-    results, selections = evaluate(features, labels, cameras, n_splits=2, seed=0, grid=grid, folds=3)
+    results, selections, _ = evaluate(features, labels, cameras, n_splits=2, seed=0, grid=grid, folds=3)
     assert set(fitted_rows) == {12 * 6}  # half of the 24 people: the projection never sees a test person
     # 4 components hold the nuisance (the largest variance) only: cross-validation must take 10
     assert all(s["pca_dims"] == {"hsv": 10, "siltp": 10} for s in selections)
@@ -92,3 +92,70 @@ def test_pca_then_metric_evaluation_fits_on_training_people_and_beats_euclidean(
         assert r["xqda"]["rank1"] >= 0.9 and r["kissme"]["rank1"] >= 0.9, (name, r)
         assert r["euclidean_raw"]["rank1"] < 0.6 and r["euclidean_pca"]["rank1"] < 0.6, (name, r)
         assert r["xqda"]["map"] > r["euclidean_raw"]["map"] + 0.3
+
+
+def _mars_crops(root: Path, cameras_per_person: list[int], shots: int = 3) -> None:
+    """One identity folder per entry, seen by that many cameras (a light change each), ``shots`` crops per
+    camera, MARS names (``0003C4T0003F010.jpg``)."""
+    rng = np.random.default_rng(0)
+    for pid, n_cams in enumerate(cameras_per_person, start=1):
+        shirt, trousers = rng.integers(0, 256, 3), rng.integers(0, 256, 3)
+        folder = root / f"mars_{pid:04d}"
+        folder.mkdir(parents=True)
+        for cam in range(1, n_cams + 1):
+            for k in range(shots):
+                img = np.zeros((128, 64, 3))
+                img[:60], img[60:] = shirt, trousers
+                img = np.clip(img * (1.0 - 0.1 * cam) + rng.normal(0, 6, img.shape), 0, 255).astype(np.uint8)
+                cv2.imwrite(str(folder / f"{pid:04d}C{cam}T{cam:04d}F{k:03d}.jpg"), img)
+
+
+# 4 people seen by 2-3 cameras, 8 by one camera only: some folds / splits hold no person another camera saw
+MIXED_CAMERAS = [2, 3, 2, 3, 1, 1, 1, 1, 1, 1, 1, 1]
+
+
+def _run(crops: Path, seed: int, capsys: pytest.CaptureFixture[str]) -> dict:
+    assert main([str(crops), "--splits", "3", "--seed", str(seed), "--pca-dims", "hsv=6,siltp=4", "--quiet"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_eval_body_leaves_out_and_counts_folds_without_a_cross_camera_match(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Seed 2: one cross-validation fold of every split holds two one-camera people only (the old code stopped
+    with 'fold 3 of 3: no probe's person is in the gallery')."""
+    _mars_crops(tmp_path / "crops", MIXED_CAMERAS)
+    r = _run(tmp_path / "crops", 2, capsys)
+    left = r["left_out"]
+    assert (left["identities_not_seen_by_two_cameras"], left["splits_evaluated"], left["splits_skipped"]) == (8, 3, [])
+    per_split = r["hyperparameters"]["per_split"]
+    assert [s["folds_skipped"] for s in per_split] == [
+        ["fold 3 of 3: none of its 2 people is seen by two cameras"],
+        ["fold 1 of 3: none of its 2 people is seen by two cameras"],
+        ["fold 3 of 3: none of its 2 people is seen by two cameras"]]
+    assert left["cv_folds_skipped"] == 3
+    # every one-camera training person's 3 crops are no probe: 4 such people per split
+    assert [s["cv_probes_without_match"] for s in per_split] == [12, 12, 12] and left["cv_probes_without_match"] == 36
+    assert [s["cv_probes"] for s in per_split] == [12, 15, 18]  # the 2-3 camera people's crops are scored
+    assert left["test_probes_without_match"] == 0
+    fused = r["results"]["fused"]
+    assert all(m["probes_per_split"] == 2.0 for m in fused.values())  # the 2 test people seen by two cameras
+    assert r["results"]["hsv"]["euclidean_raw"]["rank1"] == 1.0  # distinct colours
+
+
+def test_eval_body_leaves_out_a_split_without_probes_and_fails_only_when_nothing_is_left(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Seed 4: split 2's test people are all seen by one camera (the old code: 'no probe's person is in the
+    gallery'); rank-1 averages the 2 other splits. A folder of one-camera people only: a clear error."""
+    _mars_crops(tmp_path / "crops", MIXED_CAMERAS)
+    r = _run(tmp_path / "crops", 4, capsys)
+    left = r["left_out"]
+    assert left["splits_skipped"] == [{"split": 2, "reason": "no test person is seen by two cameras"}]
+    assert left["splits_evaluated"] == 2 and len(r["hyperparameters"]["per_split"]) == 2
+    assert left["cv_folds_skipped"] == 1
+    # a left-out split counted as a miss would give 2/3
+    assert r["results"]["hsv"]["euclidean_raw"]["rank1"] == 1.0
+    assert r["results"]["hsv"]["euclidean_raw"]["probes_per_split"] == 1.0
+    _mars_crops(tmp_path / "single", [1] * 8)
+    assert main([str(tmp_path / "single"), "--splits", "2", "--pca-dims", "hsv=6,siltp=4", "--quiet"]) == 2
+    assert ("error: no person is seen by two cameras (8 identities, each seen by one camera or in one crop): "
+            "nothing to evaluate") in capsys.readouterr().err
