@@ -524,9 +524,9 @@ def _tracks_auth_cost(key: Path, messages: int = 300, tracks: int = 20) -> dict[
     from rclpy.serialization import deserialize_message, serialize_message
 
     from face_reid_camera.common.sealing import Sealed, Sealer, load_network_key
+    from face_reid_camera.ros.sealed import seal_payload
     from face_reid_master.records import NamedTrackRecord
     from face_reid_master.ros.track_cdr import tracks_to_cdr
-    from face_reid_master.ros.tracks_in import seal_tracks
     from face_reid_master.tracks_auth import TRACKS_PURPOSE, TracksVerifier
     from face_reid_msgs.msg import NamedTrackArray
     from face_reid_msgs.msg import Sealed as SealedMsg
@@ -539,13 +539,13 @@ def _tracks_auth_cost(key: Path, messages: int = 300, tracks: int = 20) -> dict[
                                 first_seen_s=time.time() - 10, last_seen_s=time.time(), cameras=("cam00", "cam01"))
                for k in range(tracks)]
     cdr = tracks_to_cdr(records, time.time(), "world")
-    raw = serialize_message(seal_tracks(sealer, cdr))
+    raw = serialize_message(seal_payload(sealer, cdr))
     cdr_t, seal_t, open_t, read_t = [], [], [], []
     for _ in range(messages):
         t0 = time.perf_counter()
         cdr = tracks_to_cdr(records, time.time(), "world")
         t1 = time.perf_counter()
-        raw = serialize_message(seal_tracks(sealer, cdr))
+        raw = serialize_message(seal_payload(sealer, cdr))
         t2 = time.perf_counter()
         msg = deserialize_message(raw, SealedMsg)
         payload = verifier.open(Sealed(msg.sender_id, msg.counter, bytes(msg.nonce), bytes(msg.ciphertext)))

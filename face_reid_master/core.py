@@ -66,15 +66,19 @@ def _derived(name: str, configured: float, derived: float | None) -> float:
 _PAIRS_SAVE_INTERVAL_S = 30.0  # the online body update's pairs are stored at most this often (s)
 
 
+def _constant_rows(rows: NDArray[np.floating]) -> NDArray[np.bool_]:
+    """Finite rows (k, dim) whose values are all equal (all zero included): no embedder produces them."""
+    return np.ptp(rows, axis=1) <= 1e-6 * np.abs(rows).max(axis=1)
+
+
 def degenerate_rows(rows: NDArray[np.floating]) -> NDArray[np.bool_]:
     """Rows (k, dim) no embedder produces: a NaN / Inf, or all values equal (zero norm, a constant vector): such a
     vector is as near to every face as to any other, so it would match, or teach, anyone."""
     rows = np.asarray(rows)
-    finite = np.isfinite(rows).all(axis=1)
-    safe = np.where(finite[:, None], rows, 0.0)
     if not rows.shape[1]:
         return np.ones(len(rows), dtype=bool)
-    return ~finite | (np.ptp(safe, axis=1) <= 1e-6 * np.abs(safe).max(axis=1))
+    finite = np.isfinite(rows).all(axis=1)
+    return ~finite | _constant_rows(np.where(finite[:, None], rows, 0.0))
 
 
 def _power_of_ten(n: int) -> bool:
@@ -623,7 +627,7 @@ class MasterCore:
         plausible = finite & plausible_norms(stacked, cfg.embedding_space)  # NaN / Inf lengths fail the range
         st.embeddings_rejected_norm += int(np.count_nonzero(finite & ~plausible))
         with np.errstate(invalid="ignore"):  # NaN rows are not plausible already
-            constant = plausible & (np.ptp(stacked, axis=1) <= 1e-6 * np.abs(stacked).max(axis=1))  # degenerate_rows
+            constant = plausible & _constant_rows(stacked)
         st.embeddings_rejected_degenerate += int(np.count_nonzero(constant))
         plausible &= ~constant
         stacked = self.likelihood.scale(stacked)
@@ -767,17 +771,22 @@ class MasterCore:
     def _evict(self, face_ids: list[int]) -> None:
         """Forget unnamed faces for the cap (memory, names, store), counted; logged at 1, 10, 100, ... evictions."""
         for fid in face_ids:
-            self.identity.forget_face(fid)
-            self.people.remove_face(fid)
-            self._names.pop(fid, None)
-            self._dirty_faces.pop(fid, None)
-            self._name_checked.pop(fid, None)
+            self._drop_from_memory(fid)
         self._forget_stored(face_ids)
         before = self.stats.faces_evicted
         self.stats.faces_evicted += len(face_ids)
         if any(_power_of_ten(n) for n in range(before + 1, self.stats.faces_evicted + 1)):
             self._notices.append(f"max_faces ({self.config.max_faces}) reached: evicted the least recently seen "
                                  f"unnamed face(s) {face_ids[:10]} ({self.stats.faces_evicted} so far, faces_evicted)")
+
+    def _drop_from_memory(self, face_id: int) -> bool:
+        """Forget a face in memory (identity, names, pending saves); True if the identity layer had it."""
+        found = bool(self.identity.forget_face(face_id))
+        self.people.remove_face(face_id)
+        self._names.pop(face_id, None)
+        self._dirty_faces.pop(face_id, None)
+        self._name_checked.pop(face_id, None)
+        return found
 
     def _forget_stored(self, face_ids: list[int]) -> None:
         """Delete faces from the store: handed to its worker without waiting when it has one (forget_later)."""
@@ -946,10 +955,7 @@ class MasterCore:
         """Delete a learned face everywhere (memory, names, store). True if it existed; ValueError for an id out
         of range."""
         face_id = check_face_id(face_id)
-        found = bool(self.identity.forget_face(face_id))
-        self.people.remove_face(face_id)
-        self._names.pop(face_id, None)
-        self._dirty_faces.pop(face_id, None)
+        found = self._drop_from_memory(face_id)
         if self.store is not None:
             found = bool(self.store.forget(face_id)) or found
         return found

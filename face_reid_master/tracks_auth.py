@@ -32,7 +32,8 @@ def sealed_topic(tracks_topic: str) -> str:
 
 @dataclass
 class TracksVerifier:
-    """Opens sealed tracks (the serialized NamedTrackArray) and counts what it refuses by reason.
+    """Opens sealed tracks (the serialized NamedTrackArray) and counts what it refuses by reason (the
+    subscription counts what it accepts: a payload that opens may still hold no NamedTrackArray).
 
     ``max_age_s``: tracks sealed further than this from this host's clock are refused (``stale``);
     ``not_before_s``: tracks sealed before this (default: now, the consumer's start) are refused (``replayed``):
@@ -42,7 +43,6 @@ class TracksVerifier:
     key: bytes
     max_age_s: float = 30.0
     not_before_s: float | None = None
-    accepted: int = 0
     refused: dict[str, int] = field(default_factory=dict)
     _opener: Opener | None = field(default=None, repr=False)
 
@@ -56,12 +56,10 @@ class TracksVerifier:
         before the start (``replayed``), too far from this host's clock (``stale``), ``malformed``."""
         assert self._opener is not None
         try:
-            payload = self._opener.open(sealed, now_s)
+            return self._opener.open(sealed, now_s)
         except SealError as exc:
             self.refuse(exc.code)
             raise
-        self.accepted += 1
-        return payload
 
     def refuse(self, reason: str) -> int:
         """Count one refused message; the count of ``reason`` so far."""

@@ -10,22 +10,29 @@ from typing import Any
 
 from face_reid_camera.common.sealing import Opener, Sealed, Sealer, SealError
 
-__all__ = ["open_message", "open_payload", "open_request", "seal_message", "seal_request"]
+__all__ = ["open_message", "open_payload", "open_request", "seal_message", "seal_payload", "seal_request", "unpack"]
 
 
 def seal_message(sealer: Sealer, msg: Any, purpose: str | None = None) -> Any:
     """``msg`` serialized and sealed (for ``purpose``, default the sealer's), as a face_reid_msgs/Sealed."""
     from rclpy.serialization import serialize_message
 
+    return seal_payload(sealer, serialize_message(msg), purpose)
+
+
+def seal_payload(sealer: Sealer, payload: bytes, purpose: str | None = None) -> Any:
+    """Bytes already serialized (e.g. the master's tracks) sealed, as a face_reid_msgs/Sealed."""
     from face_reid_msgs.msg import Sealed as SealedMsg
 
-    sealed = sealer.seal(serialize_message(msg), purpose)
-    out = SealedMsg()
-    out.sender_id = sealed.sender_id
-    out.counter = sealed.counter
-    out.nonce = sealed.nonce
-    out.ciphertext = sealed.ciphertext
-    return out
+    sealed = sealer.seal(payload, purpose)
+    return SealedMsg(sender_id=sealed.sender_id, counter=sealed.counter, nonce=sealed.nonce,
+                     ciphertext=sealed.ciphertext)
+
+
+def unpack(sealed_msg: Any) -> Sealed:
+    """The :class:`Sealed` record of a face_reid_msgs/Sealed message (nothing checked yet)."""
+    return Sealed(str(sealed_msg.sender_id), int(sealed_msg.counter), bytes(sealed_msg.nonce),
+                  bytes(sealed_msg.ciphertext))
 
 
 def open_message(opener: Opener, sealed_msg: Any, msg_type: type, now_s: float | None = None,
@@ -44,9 +51,7 @@ def open_message(opener: Opener, sealed_msg: Any, msg_type: type, now_s: float |
 def open_payload(opener: Opener, sealed_msg: Any, now_s: float | None = None, purpose: str | None = None) -> bytes:
     """The serialized message inside a face_reid_msgs/Sealed (not read: the caller knows its type);
     :class:`SealError` when it must not be used (not sealed with this key, replayed, stale)."""
-    sealed = Sealed(str(sealed_msg.sender_id), int(sealed_msg.counter), bytes(sealed_msg.nonce),
-                    bytes(sealed_msg.ciphertext))
-    return opener.open(sealed, now_s, purpose)
+    return opener.open(unpack(sealed_msg), now_s, purpose)
 
 
 def _request_purpose(request: Any) -> str:

@@ -35,7 +35,7 @@ from face_reid_camera.common.embedding_spaces import embedder_for_space, space_d
 from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import open_payload, open_request
+from face_reid_camera.ros.sealed import open_payload, open_request, seal_payload
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.health import MasterHealthWatch
@@ -47,7 +47,6 @@ from face_reid_master.ros.convert import frame_from_msg, markers_for
 from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
-from face_reid_master.ros.tracks_in import seal_tracks
 from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
@@ -536,7 +535,7 @@ class MasterNode(ManagedNode):
         tracks = self.core.tracks()
         frame_id = str(self.values["world_frame_id"])
         cdr = tracks_to_cdr(tracks, stamp_s, frame_id)  # serialized here: see track_cdr
-        self.tracks_pub.publish(cdr if self._tracks_sealer is None else seal_tracks(self._tracks_sealer, cdr))
+        self.tracks_pub.publish(cdr if self._tracks_sealer is None else seal_payload(self._tracks_sealer, cdr))
         self._unpublished_stamp = None
         if self.health is not None:
             self.health.published()

@@ -19,25 +19,18 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from face_reid_camera.common.checks import shown
-from face_reid_camera.common.sealing import Sealed, SealError, load_network_key
+from face_reid_camera.common.sealing import SealError, load_network_key
+from face_reid_camera.ros.sealed import unpack
 from face_reid_master.tracks_auth import NetworkCheck, TracksVerifier, check_network, sealed_topic
 from face_reid_msgs.msg import NamedTrackArray
 from face_reid_msgs.msg import Sealed as SealedMsg
 
-__all__ = ["MAX_SEALED_TRACKS_BYTES", "TracksSubscription", "seal_tracks", "subscribe_tracks"]
+__all__ = ["MAX_SEALED_TRACKS_BYTES", "TracksSubscription", "subscribe_tracks"]
 
 # A sealed tracks message larger than this is refused unread (a NamedTrack is ~300 bytes: 4 MiB is >10,000 tracks).
 MAX_SEALED_TRACKS_BYTES = 4 << 20
 _REPEAT_PROBLEM_S = 30.0  # a network problem (e.g. no key on a secured network) is logged again this often
 _LOG_REFUSED_S = 5.0  # refused messages are logged at most this often
-
-
-def seal_tracks(sealer: Any, cdr: bytes) -> Any:
-    """The serialized NamedTrackArray ``cdr`` sealed for tracks (``sealer``: the master's, purpose "tracks"), as
-    a face_reid_msgs/Sealed."""
-    sealed = sealer.seal(cdr)
-    return SealedMsg(sender_id=sealed.sender_id, counter=sealed.counter, nonce=sealed.nonce,
-                     ciphertext=sealed.ciphertext)
 
 
 class TracksSubscription:
@@ -112,9 +105,7 @@ class TracksSubscription:
             self._refuse("oversized", f"sealed tracks of {len(raw)} bytes refused unread")
             return
         try:
-            sealed_msg = deserialize_message(raw, SealedMsg)
-            sealed = Sealed(str(sealed_msg.sender_id), int(sealed_msg.counter), bytes(sealed_msg.nonce),
-                            bytes(sealed_msg.ciphertext))
+            sealed = unpack(deserialize_message(raw, SealedMsg))
         except Exception as exc:
             self.verifier.refuse("malformed")
             self._refuse("malformed", f"not a face_reid_msgs/Sealed on {self.listening}: {str(exc)[:200]}")
@@ -127,7 +118,6 @@ class TracksSubscription:
         try:
             msg = deserialize_message(payload, NamedTrackArray)
         except Exception as exc:  # a key holder sealed something else
-            self.verifier.accepted -= 1
             self.verifier.refuse("malformed")
             self._refuse("malformed", f"sealed tracks from {shown(sealed.sender_id, 64)} hold no NamedTrackArray: "
                                       f"{str(exc)[:200]}")

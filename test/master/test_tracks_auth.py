@@ -27,7 +27,7 @@ def test_the_masters_sealed_tracks_open_once(key: bytes) -> None:
         verifier.open(sealed)  # the same message again (a replay)
     assert replay.value.code == "replayed"
     assert verifier.open(master.seal(PAYLOAD)) == PAYLOAD
-    assert verifier.accepted == 2 and verifier.refused == {"replayed": 1}
+    assert verifier.refused == {"replayed": 1}
 
 
 def test_tracks_from_another_key_or_sealed_for_another_purpose_are_forged(key: bytes, tmp_path: Path) -> None:
@@ -46,7 +46,7 @@ def test_tracks_from_another_key_or_sealed_for_another_purpose_are_forged(key: b
     with pytest.raises(SealError) as sender:
         verifier.open(renamed)
     assert {other_key.value.code, frame.value.code, altered.value.code, sender.value.code} == {"forged"}
-    assert verifier.refused == {"forged": 4} and verifier.accepted == 0
+    assert verifier.refused == {"forged": 4}
 
 
 def test_old_and_pre_start_tracks_are_refused(key: bytes) -> None:

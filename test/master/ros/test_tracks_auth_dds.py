@@ -25,12 +25,12 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 
 from face_reid_camera.common.sealing import Sealer, load_network_key, write_network_key
-from face_reid_camera.ros.sealed import seal_message
+from face_reid_camera.ros.sealed import seal_message, seal_payload
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.ros.convert import frame_record_to_msg
 from face_reid_master.ros.goto_node import GotoNode
 from face_reid_master.ros.node import MasterNode
-from face_reid_master.ros.tracks_in import seal_tracks, subscribe_tracks
+from face_reid_master.ros.tracks_in import subscribe_tracks
 from face_reid_master.tracks_auth import TRACKS_PURPOSE
 from face_reid_msgs.msg import NamedTrack, NamedTrackArray, Sealed
 
@@ -105,7 +105,7 @@ def test_the_consumer_helper_takes_the_masters_tracks_and_no_spoof(ros_context, 
         for k in range(20):
             frames.publish(seal_message(cam_sealer, _frame(1.0 + 0.01 * k)))
             plain_spoof.publish(_spoofed())
-            sealed_spoof.publish(seal_tracks(forger, spoof_cdr))
+            sealed_spoof.publish(seal_payload(forger, spoof_cdr))
             spin(lambda: False, 0.05)
         assert spin(lambda: tracks.refused.get("forged", 0) >= 20 and goto.rejected.get("tracks_forged", 0) >= 20
                     and any(m.tracks for m in taken)), \
