@@ -21,15 +21,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from face_reid_master.body.metric_file import default_body_metric
+from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric, load_body_metric
 from face_reid_master.core import MasterConfig
 from face_reid_master.evaluation.body_rank import scenario_bodies, scenario_rank1
 from face_reid_master.evaluation.gallery import GalleryInfo, default_gallery_people, scenario_gallery
 from face_reid_master.evaluation.metrics import evaluate_run, paired_reid_times
 from face_reid_master.evaluation.plots import save_plots
+from face_reid_master.evaluation.protocol import ProtocolCheck, check_protocol
 from face_reid_master.evaluation.runner import DEFAULT_TICK_PERIOD_S, RunLog, progress_to, run_master
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood, load_face_likelihood
-from face_reid_master.tools.fit_likelihood import excluded_from_fit
 
 _IDENTITY_FIELDS = {
     "bayes": ("posterior_threshold", "prior_probability", "min_observations", "new_person_scale_c",
@@ -64,6 +64,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--likelihood", type=Path, default=None, metavar="JSON",
                    help="the fitted likelihoods to use (default: models/face_likelihood_<space>.json); "
                    "see face-reid-fit-likelihood")
+    p.add_argument("--body-metric", type=Path, default=None, metavar="JSON",
+                   help="the body metric to use (default: the shipped models/body_metric.json); see face-reid-fit-body")
+    p.add_argument("--allow-fitted", action="store_true",
+                   help="evaluate although a loaded model was fitted on the scenario's people (or does not say what "
+                        "it saw): the result is marked \"honest\": false (default: refused, exit status 3)")
     p.add_argument("--space", default=None, metavar="SPACE",
                    help="embedder space the master compares (default: the scenario's); a scenario simulated with "
                         "both embedders serves dlib_resnet_v1, sface_2021dec and dlib_resnet_v1+sface_2021dec")
@@ -94,15 +99,15 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _identities_in_likelihood_fit(names: Sequence[str], likelihood: FaceLikelihood) -> list[str] | None:
-    """Scenario identities ``likelihood`` may have been fitted on: those its fit did not exclude (metadata
-    ``excluded``, written by face-reid-fit-likelihood); None if the model does not say."""
-    excluded = likelihood.metadata.get("excluded")
-    if not isinstance(excluded, dict):
-        return None
-    ids = set(excluded.get("scenario_identities", ()))
-    patterns = list(excluded.get("patterns", ()))
-    return sorted(n for n in names if not excluded_from_fit(n, patterns, ids))
+def _protocol(args: argparse.Namespace, document: dict[str, Any], model: FaceLikelihood,
+              body_metric: BodyMetricModel | None) -> ProtocolCheck:
+    """Which loaded model saw the scenario's people (the body metric only when bodies are evaluated)."""
+    face_source = str(args.likelihood) if args.likelihood is not None else f"shipped likelihoods of {model.space}"
+    if args.evidence == "face" or document.get("body_space") is None:
+        return check_protocol(document, model.metadata, face_source)
+    metric = body_metric or default_body_metric()
+    source = str(args.body_metric) if args.body_metric is not None else "shipped models/body_metric.json"
+    return check_protocol(document, model.metadata, face_source, metric.metadata, source)
 
 
 def _scenario_json(scenario: Any, likelihood: FaceLikelihood) -> dict[str, Any]:
@@ -127,7 +132,6 @@ def _scenario_json(scenario: Any, likelihood: FaceLikelihood) -> dict[str, Any]:
         "embedding_space": doc.get("embedding_space", "dlib_resnet_v1"),
         "bodies": doc.get("body_space") is not None,
         "body_space": doc.get("body_space"),
-        "identities_in_likelihood_fit": _identities_in_likelihood_fit(names, likelihood),
     }
 
 
@@ -187,12 +191,28 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"{' / '.join(missing)} (a version-1 file?): refit with face-reid-fit-likelihood", file=sys.stderr)
         return 2
 
+    try:
+        body_metric = None if args.body_metric is None else load_body_metric(args.body_metric)
+    except (OSError, ValueError) as exc:
+        print(f"face-reid-eval: error: --body-metric: {exc}", file=sys.stderr)
+        return 2
+
     t0 = time.perf_counter()
     try:
         scenario = load_scenario(args.scenario)
     except ScenarioFormatError as exc:
         print(f"face-reid-eval: error: {exc}", file=sys.stderr)
         return 2
+    protocol = _protocol(args, scenario.document, model, body_metric)
+    if not protocol.honest:
+        lines = "\n".join(f"  - {p}" for p in protocol.problems())
+        if not args.allow_fitted:
+            print(f"face-reid-eval: error: {args.scenario} is not an honest test of the loaded models:\n{lines}\n"
+                  "evaluate people no fitted model has seen (README, 'Honest evaluation'), or pass --allow-fitted "
+                  "to evaluate anyway (the result is marked \"honest\": false)", file=sys.stderr)
+            return 3
+        print(f"face-reid-eval: WARNING: NOT AN HONEST TEST: the loaded models saw this scenario's people:\n{lines}",
+              file=sys.stderr)
     if log:
         print(f"loaded {args.scenario}: {len(scenario.frames)} frames in {time.perf_counter() - t0:.1f} s", file=log)
     try:
@@ -212,7 +232,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
             for d in scenario.days]
     if args.method == "both":
-        runs = {m: _run_offline(args, m, scenario, gallery, days, log, model) for m in ("bayes", "threshold")}
+        runs = {m: _run_offline(args, m, scenario, gallery, days, log, model, body_metric)
+                for m in ("bayes", "threshold")}
         result = {"scenario": runs["bayes"][0].pop("scenario"), "method": "both"}
         for m, (res, _) in runs.items():
             res.pop("scenario", None)
@@ -222,7 +243,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = _config(args, args.method, space)
         if args.live:
             return _main_live(args, scenario, gallery, config, model, days, t0, log)
-        result = _run_offline(args, args.method, scenario, gallery, days, log, model)[0]
+        result = _run_offline(args, args.method, scenario, gallery, days, log, model, body_metric)[0]
+    result["protocol"] = protocol.as_json()
     result["total_time_s"] = round(time.perf_counter() - t0, 2)
     _emit(result, args.out)
     return 0
@@ -235,13 +257,13 @@ def _config(args: argparse.Namespace, method: str, space: str) -> MasterConfig:
                         body_online_update=args.online_update == "on", body_online_background=False)
 
 
-def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, float, list[int]]]
-                      ) -> dict[str, Any] | None:
+def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, float, list[int]]],
+                      loaded: BodyMetricModel | None) -> dict[str, Any] | None:
     """Rank-1 of the shipped and of the final body metric on the scenario's bodies, and the update's counts."""
     final = run.body_metric
     if final is None:
         return None
-    base = default_body_metric()
+    base = loaded or default_body_metric()
     bodies = scenario_bodies(scenario.frames, scenario.frame_gt_ids, base.space, days)
     if not bodies.labels.size:
         return None
@@ -255,14 +277,15 @@ def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, f
 
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
                  days: list[tuple[int, float, float, list[int]]], log: Any,
-                 model: FaceLikelihood) -> tuple[dict[str, Any], RunLog]:
+                 model: FaceLikelihood, body_metric: BodyMetricModel | None = None
+                 ) -> tuple[dict[str, Any], RunLog]:
     """The master core with ``method`` (and ``model``: likelihoods, weights, thresholds) over the scenario;
     (the JSON-ready metrics, the run's log)."""
     config = _config(args, method, model.space)
     likelihood = model
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
-    run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood,
+    run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood, body_metric=body_metric,
                      gallery=gallery.people or None, tick_period_s=args.tick_period, days=days,
                      progress=progress_to(log) if log else None)
     if log:
@@ -276,9 +299,9 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
         "gallery": gallery.as_json(),
         **{k: v for k, v in metrics.items() if k != "method"},
     }
-    body_metric = _body_metric_json(run, scenario, days)
-    if body_metric is not None:
-        result["body_metric"] = body_metric
+    body_json = _body_metric_json(run, scenario, days, body_metric)
+    if body_json is not None:
+        result["body_metric"] = body_json
     if args.plot:
         t2 = time.perf_counter()
         prefix = args.plot if args.method != "both" else f"{args.plot}_{method}"
@@ -335,7 +358,8 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     try:
         live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
                         log=log, likelihood_path=args.likelihood, embedding_space=model.space,
-                        body_appearance_tracking=config.body_appearance_tracking)
+                        body_appearance_tracking=config.body_appearance_tracking,
+                        body_metric_path=args.body_metric)
     except LiveError as exc:
         print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
         return 1

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from face_reid_master.body.metric_file import BodyFeatureMetric
+from face_reid_master.body.metric_file import BodyFeatureMetric, BodyMetricModel
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.records import IdentityEventKind
@@ -171,6 +171,7 @@ def run_master(
     config: MasterConfig | None = None,
     *,
     likelihood: LikelihoodModel | None = None,
+    body_metric: BodyMetricModel | None = None,
     gallery: Mapping[str, NDArray[np.floating]] | None = None,
     tick_period_s: float = DEFAULT_TICK_PERIOD_S,
     days: Sequence[tuple[int, float, float, Sequence[int]]] = (),
@@ -186,7 +187,7 @@ def run_master(
         raise ValueError(f"tick_period_s must be a finite number > 0, got {tick_period_s!r}")
     _check_frames(frames, frame_gt_ids)
     cfg = config or MasterConfig()
-    core = MasterCore(cfg, likelihood=likelihood, store=None, gallery=gallery)
+    core = MasterCore(cfg, likelihood=likelihood, body_metric=body_metric, store=None, gallery=gallery)
     t_start = time.perf_counter()
     tracks: dict[int, TrackLog] = {}
     faces: dict[int, tuple[float, int]] = {}

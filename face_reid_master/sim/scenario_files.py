@@ -172,6 +172,9 @@ def _add_bodies(document: dict[str, Any], bodies: BodyWorld, table: FrameTable) 
     bank = bodies.bank
     document["bodies_dir"] = str(bank.bodies_dir)
     document["body_space"] = bodies.space
+    # what the projection was fitted on, so that face-reid-eval can tell whether its people were seen
+    fitted = bank.projection.metadata.get("identities")
+    document["body_projection_fit"] = sorted(str(n) for n in fitted) if isinstance(fitted, list | tuple) else None
     document["body_descriptor_length"] = bodies.dim
     document["body_crops"] = bank.crops_document()
     document["body_orientation_view_deg"] = {str(o): v for o, v in PKU_VIEW_DEG.items()}

@@ -693,6 +693,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 if weights else "")),
             "data": _describe_data(faces_dir, emb.views) + view_desc,
             "n_identities": len(emb.views),
+            "identities": sorted(emb.views),
             "n_images": emb.n_photos,
             "n_skipped_unreadable": n_unread,
             "n_skipped_no_face": n_noface,
