@@ -342,8 +342,9 @@ def scenario_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_cli_prints_json_and_saves_plots(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     prefix = tmp_path / "plots" / "run"
+    # the shipped face fit saw two of the fixture people: this test is about the output, not the protocol
     assert main([str(scenario_dir), "--method", "threshold", "--plot", str(prefix), "--out",
-                 str(tmp_path / "r.json"), "--quiet"]) == 0
+                 str(tmp_path / "r.json"), "--quiet", "--allow-fitted"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed == json.loads((tmp_path / "r.json").read_text())
     assert printed["method"] == "threshold" and printed["scenario"]["cameras"] == 2
@@ -366,7 +367,7 @@ def test_cli_errors(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     assert "--domain-id must be in 0..232" in capsys.readouterr().err
     assert main([str(tmp_path), "--quiet"]) == 2
     assert "no scenario.json" in capsys.readouterr().err
-    assert main([str(scenario_dir), "--gallery-people", "9", "--quiet"]) == 2
+    assert main([str(scenario_dir), "--gallery-people", "9", "--quiet", "--allow-fitted"]) == 2
     assert "--gallery-people" in capsys.readouterr().err
     assert main([str(scenario_dir), "--likelihood", str(tmp_path / "missing.json"), "--quiet"]) == 2
     assert "--likelihood" in capsys.readouterr().err
@@ -384,17 +385,20 @@ def test_cli_likelihood_option_uses_that_model(scenario_dir: Path, tmp_path: Pat
     assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet"]) == 2  # naming needs one
     assert "name_threshold" in capsys.readouterr().err
     save_face_likelihood(FaceLikelihood(strict, name_threshold=0.45, metadata={"data": "strict"}), path)
-    assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet"]) == 0
+    assert main([str(scenario_dir), "--likelihood", str(path), "--no-mot", "--quiet", "--allow-fitted"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed["parameters"]["likelihood_data"] == "strict"
-    assert printed["scenario"]["identities_in_likelihood_fit"] is None  # this model does not say what it saw
+    # this model does not say what it saw: not an honest test
+    assert printed["protocol"] == {"honest": False, "models": [
+        {"model": "face likelihoods and naming distance", "source": str(path), "identities_seen": None}]}
     reid = printed["reidentification"]
     assert reid["success"] == 0 and reid["failure_new_id"] > 0
-    assert main([str(scenario_dir), "--no-mot", "--quiet"]) == 0
+    assert main([str(scenario_dir), "--no-mot", "--quiet", "--allow-fitted"]) == 0
     shipped = json.loads(capsys.readouterr().out)
     assert shipped["reidentification"]["success"] > 0
-    # the shipped fit lists its exclusions: the test scenario's identities are checked against them
-    assert isinstance(shipped["scenario"]["identities_in_likelihood_fit"], list)
+    # the shipped fit lists its exclusions (Hugo Chavez is one): the other two fixture people were seen
+    (face,) = shipped["protocol"]["models"]
+    assert shipped["protocol"]["honest"] is False and face["identities_seen"] == sorted(IDS[:2])
 
 
 def test_paired_reid_times_compare_the_same_tracks(embeddings) -> None:
@@ -416,7 +420,7 @@ def test_paired_reid_times_compare_the_same_tracks(embeddings) -> None:
 
 
 def test_cli_both_methods_adds_the_paired_comparison(scenario_dir: Path, capsys) -> None:
-    assert main([str(scenario_dir), "--method", "both", "--no-mot", "--quiet"]) == 0
+    assert main([str(scenario_dir), "--method", "both", "--no-mot", "--quiet", "--allow-fitted"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert printed["method"] == "both" and printed["scenario"]["cameras"] == 2
     assert printed["bayes"]["method"] == "bayes" and printed["threshold"]["method"] == "threshold"
