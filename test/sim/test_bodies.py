@@ -7,6 +7,7 @@ own clothes colours; a body projection is fitted on their descriptors. Faces com
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -272,7 +273,8 @@ def test_same_seed_same_files_and_bodies_leave_everything_else_alone(
         for k in fc.files:
             assert np.array_equal(fa[k], fc[k]), k
     doc_a, doc_c = (json.loads((d / "scenario.json").read_text()) for d in (a, c))
-    for key in ("bodies_dir", "body_space", "body_descriptor_length", "body_crops", "body_orientation_view_deg"):
+    for key in ("bodies_dir", "body_space", "body_projection_fit", "body_descriptor_length", "body_crops",
+                "body_orientation_view_deg"):
         del doc_a[key]
     for ident in doc_a["identities"]:
         del ident["clothes"], ident["body_measures"]
@@ -370,3 +372,77 @@ def test_crop_descriptor_ignores_background_and_hidden_bands(tmp_path: Path, pro
     assert np.allclose(desc(0, upper), desc(2, upper), atol=1e-6)  # ... unless hidden
     assert not np.allclose(desc(0), desc(0, gains=np.array([0.6, 0.9, 1.3]), key=(1, 0)), atol=1e-3)
     assert desc(0) is desc(0)  # cached
+
+
+# ------------------------------------------------------------------------------------- honest evaluation
+def _worn(doc: dict) -> set[str]:
+    return {c for ident in doc["identities"] for c in ident["clothes"].values()}
+
+
+def test_cli_records_the_identities_the_body_projection_was_fitted_on(
+        faces: Path, cache: Path, crops_dir: Path, projection: BodyProjection, projection_file: Path,
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """face-reid-sim writes ``body_projection_fit`` (None when the projection does not say) for face-reid-eval."""
+    from face_reid_master.evaluation.protocol import check_protocol
+
+    fitted = [MARKET_IDS[0], PKU_IDS[0], PKU_IDS[1], "market1501_0002"]
+    recorded = save_body_projection(dataclasses.replace(projection, metadata={"identities": fitted}),
+                                    tmp_path / "recorded.npz")
+    common = ["--faces", str(faces), "--people", "3", "--cameras", "1", "--duration", "3", "--cache", str(cache),
+              "--bodies", str(crops_dir), "--seed", "3"]
+    assert main([*common, "--body-projection", str(recorded), "--out", str(tmp_path / "a")]) == 0, \
+        capsys.readouterr().err
+    doc = json.loads((tmp_path / "a" / "scenario.json").read_text())
+    assert doc["body_projection_fit"] == sorted(fitted)
+    seen = _worn(doc) & set(fitted)
+    check = check_protocol(doc, {"identities": []}, "faces")
+    assert {o.model: o.seen for o in check.overlaps}["body projection"] == tuple(sorted(seen))
+    assert check.honest == (not seen)
+    assert main([*common, "--body-projection", str(projection_file), "--out", str(tmp_path / "b")]) == 0
+    assert json.loads((tmp_path / "b" / "scenario.json").read_text())["body_projection_fit"] is None
+
+
+def test_eval_checks_and_uses_the_body_metric_given(faces: Path, cache: Path, crops_dir: Path, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """With the shipped projection and metric (fitted on other crops) and a face fit recording other people,
+    the generated scenario is an honest test; a --body-metric file fitted on its crops is refused, and with
+    --allow-fitted that file is the run's metric (its rank-1, not the shipped one's, in the JSON)."""
+    from face_reid_master.body.linear_metric import LinearMetric
+    from face_reid_master.body.metric_file import default_body_metric, save_body_metric
+    from face_reid_master.evaluation.cli import main as eval_main
+    from face_reid_master.identity.size_likelihood import default_face_likelihood, save_face_likelihood
+
+    scenario = tmp_path / "s"
+    assert main(["--faces", str(faces), "--people", "3", "--cameras", "2", "--duration", "20", "--cache", str(cache),
+                 "--bodies", str(crops_dir), "--seed", "3", "--embedder", "dlib", "--out", str(scenario),
+                 "--quiet"]) == 0, capsys.readouterr().err
+    capsys.readouterr()  # the simulator's summary
+    worn = sorted(_worn(json.loads((scenario / "scenario.json").read_text())))
+    face_fit = tmp_path / "faces.json"
+    save_face_likelihood(dataclasses.replace(default_face_likelihood(), metadata={"identities": ["orl_s01"]}),
+                         face_fit)
+    common = [str(scenario), "--likelihood", str(face_fit), "--no-mot", "--quiet"]
+    assert eval_main(common) == 0
+    shipped = json.loads(capsys.readouterr().out)
+    assert shipped["protocol"]["honest"] is True
+    assert [m["model"] for m in shipped["protocol"]["models"]] == [
+        "face likelihoods and naming distance", "body projection", "body metric"]
+
+    base = default_body_metric()
+    fused = base.features["fused"]
+    one_dim = LinearMetric(fused.metric.projection[:, :1], fused.metric.metric[:1, :1], fused.metric.name)  # worse
+    fitted = dataclasses.replace(
+        base, features={**base.features, "fused": dataclasses.replace(fused, metric=one_dim)},
+        metadata={**base.metadata, "identities": [*worn, "pku_999"]})
+    path = tmp_path / "metric.json"
+    save_body_metric(fitted, path)
+    assert eval_main([*common, "--body-metric", str(path)]) == 3
+    err = capsys.readouterr().err
+    assert f"body metric ({path}) was fitted on {len(worn)} of the scenario's identities" in err
+    assert eval_main([*common, "--body-metric", str(path), "--allow-fitted"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    metric = printed["protocol"]["models"][2]
+    assert printed["protocol"]["honest"] is False
+    assert metric == {"model": "body metric", "source": str(path), "identities_seen": worn}
+    assert printed["body_metric"]["bodies"] == shipped["body_metric"]["bodies"] > 0
+    assert printed["body_metric"]["rank1_shipped"] != shipped["body_metric"]["rank1_shipped"]
