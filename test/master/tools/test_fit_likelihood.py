@@ -93,6 +93,7 @@ def test_fit_command_writes_a_loadable_discriminative_model(cli_run: tuple[int, 
     assert 0.0 < model.k_exponent_positive <= 1.0 and 0.0 < model.k_exponent_negative <= 1.0
     meta = model.metadata
     assert meta["n_images"] == N_SUBSET_PHOTOS == 54 and meta["n_identities"] == 6
+    assert meta["identities"] == sorted(SUBSET)  # what face-reid-eval checks a scenario against
     assert meta["n_positive_pairs"] == N_SUBSET_POSITIVE
     assert meta["n_negative_pairs"] == comb(N_SUBSET_PHOTOS, 2) - N_SUBSET_POSITIVE  # all, below 20000
     assert meta["n_skipped_unreadable"] == 1 and meta["skipped_unreadable"] == ["lfw_Tony_Blair/zz_corrupt.jpg"]
