@@ -45,6 +45,15 @@ def _machine() -> str:
     return f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
 
 
+def _shown(option: str) -> str:
+    """Paths inside the project are shown relative to it (the command reads the same on every machine)."""
+    root = RESULTS.parent.parent
+    path = Path(option)
+    if path.is_absolute() and path.is_relative_to(root):
+        return str(path.relative_to(root))
+    return option
+
+
 def record(name: str, scenario: Path, options: list[str]) -> dict[str, Any]:
     """Evaluate ``scenario`` with ``options`` and return the result document (raises SystemExit on refusal)."""
     argv = [str(scenario), *options, "--no-mot", "--quiet"]
@@ -58,7 +67,7 @@ def record(name: str, scenario: Path, options: list[str]) -> dict[str, Any]:
     params = doc.get("parameters", {})
     return {
         "name": name,
-        "command": "face-reid-eval " + " ".join([scenario.name, *options, "--no-mot"]),
+        "command": "face-reid-eval " + " ".join([scenario.name, *map(_shown, options), "--no-mot"]),
         "simulation": {"faces_dir": doc.get("faces_dir"), "bodies_dir": doc.get("bodies_dir"),
                        "seed": doc.get("seed"), "level": doc.get("level"), "people": params.get("num_people"),
                        "cameras": params.get("num_cameras"), "duration_s": params.get("duration_s"),

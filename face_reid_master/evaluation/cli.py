@@ -242,7 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         config = _config(args, args.method, space)
         if args.live:
-            return _main_live(args, scenario, gallery, config, model, days, t0, log)
+            return _main_live(args, scenario, gallery, config, model, days, t0, log, protocol)
         result = _run_offline(args, args.method, scenario, gallery, days, log, model, body_metric)[0]
     result["protocol"] = protocol.as_json()
     result["total_time_s"] = round(time.perf_counter() - t0, 2)
@@ -322,7 +322,7 @@ def _emit(result: dict[str, Any], out: Path | None) -> None:
 
 def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, config: MasterConfig,
                model: FaceLikelihood, days: list[tuple[int, float, float, list[int]]], t0: float,
-               log: Any) -> int:
+               log: Any, protocol: ProtocolCheck) -> int:
     """``--live``: the scenario through the master node over DDS; the metrics of what it published."""
     likelihood = model
     import os
@@ -395,6 +395,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     if args.plot:
         paths = save_plots(run, scenario, args.plot, title=f"{args.scenario.name} / {args.method} (live)")
         result["plots"] = [str(p) for p in paths]
+    result["protocol"] = protocol.as_json()
     result["total_time_s"] = round(time.perf_counter() - t0, 2)
     _emit(result, args.out)
     return 0

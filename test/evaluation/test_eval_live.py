@@ -64,6 +64,7 @@ def test_live_evaluation_matches_offline(ros_domain_id: int, tmp_path: Path, cap
     live = json.loads(run.stdout)
     assert live == json.loads((tmp_path / "live.json").read_text())
     assert live["mode"] == "live" and "mode" not in offline
+    assert live["protocol"] == offline["protocol"] and live["protocol"]["honest"] is False  # marked as not a test
     assert f"ROS_DOMAIN_ID={ros_domain_id}" in run.stderr
     work = re.search(r"work folder (\S+)", run.stderr)
     assert work and not Path(work.group(1)).exists(), "the temporary folder (face database) must be deleted"
