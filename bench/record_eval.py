@@ -28,8 +28,8 @@ from face_reid_master.evaluation.cli import main as eval_main
 RESULTS = Path(__file__).resolve().parent / "results"
 _NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 # the JSON blocks kept (the rest: per-track detail, plots, timings of this machine's run)
-_KEPT = ("scenario", "protocol", "method", "table_ii", "reidentification", "first_appearance", "pure_tracks",
-         "predefined_people", "calibration", "body_metric")
+_KEPT = ("scenario", "protocol", "confidence_map", "method", "table_ii", "reidentification", "first_appearance",
+         "pure_tracks", "predefined_people", "calibration", "body_metric")
 
 
 def _commit() -> str:

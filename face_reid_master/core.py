@@ -40,6 +40,7 @@ from face_reid_master.body.metric_file import BodyMetricModel, default_body_metr
 from face_reid_master.body.online_metric import OnlineBodyMetric, subspace_key
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
+from face_reid_master.identity.confidence_map import ConfidenceMap, default_confidence_map
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
@@ -344,8 +345,11 @@ class MasterCore:
         store: Any | None = None,
         gallery: Mapping[str, NDArray[np.floating]] | None = None,
         body_metric: BodyMetricModel | None = None,
+        confidence_map: ConfidenceMap | None = None,
     ) -> None:
         self.config = config or MasterConfig()
+        # what a decision's raw posterior is worth, measured on development scenarios (the published confidence)
+        self.confidence_map = confidence_map if confidence_map is not None else default_confidence_map()
         cfg = self.config
         self.tracker = Tracker(cfg.tracker)
         if body_metric is None and cfg.body_appearance_tracking:
@@ -750,6 +754,13 @@ class MasterCore:
             self._name_checked.pop(ev.face_id, None)
         return kept
 
+    def published_confidence(self, track_id: int) -> float:
+        """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
+        (how often such decisions were right), an undecided track's current posterior as it is."""
+        evidence = self.identity.evidence_of(track_id)
+        raw = float(self.identity.confidence_of(track_id))
+        return float(self.confidence_map(evidence, raw)) if evidence else raw
+
     def _room_for(self, new_face: int) -> bool:
         """Face cap: a new face within max_faces evicts the least recently seen unnamed face not on a track;
         False (the new face is forgotten at once, counted) when there is none."""
@@ -1007,7 +1018,7 @@ class MasterCore:
                     track_id=snap.track_id,
                     face_id=fid,
                     name=self.face_name(fid) if fid else "",
-                    identity_confidence=float(self.identity.confidence_of(snap.track_id)),
+                    identity_confidence=self.published_confidence(snap.track_id),
                     identity_evidence=self.identity.evidence_of(snap.track_id),
                     face_observations=self._face_obs.get(snap.track_id, 0),
                     position_xy=snap.position_xy,

@@ -29,6 +29,7 @@ from face_reid_master.evaluation.metrics import evaluate_run, paired_reid_times
 from face_reid_master.evaluation.plots import save_plots
 from face_reid_master.evaluation.protocol import ProtocolCheck, check_protocol
 from face_reid_master.evaluation.runner import DEFAULT_TICK_PERIOD_S, RunLog, progress_to, run_master
+from face_reid_master.identity.confidence_map import ConfidenceMap, default_confidence_map, load_confidence_map
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood, load_face_likelihood
 
 _IDENTITY_FIELDS = {
@@ -66,6 +67,9 @@ def _parser() -> argparse.ArgumentParser:
                    "see face-reid-fit-likelihood")
     p.add_argument("--body-metric", type=Path, default=None, metavar="JSON",
                    help="the body metric to use (default: the shipped models/body_metric.json); see face-reid-fit-body")
+    p.add_argument("--confidence-map", type=str, default=None, metavar="JSON",
+                   help="the map from decision posteriors to identity_confidence (default: the shipped "
+                        "models/identity_confidence.json; 'raw': the posteriors themselves, what a map is fitted on)")
     p.add_argument("--allow-fitted", action="store_true",
                    help="evaluate although a loaded model was fitted on the scenario's people (or does not say what "
                         "it saw): the result is marked \"honest\": false (default: refused, exit status 3)")
@@ -100,14 +104,16 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _protocol(args: argparse.Namespace, document: dict[str, Any], model: FaceLikelihood,
-              body_metric: BodyMetricModel | None) -> ProtocolCheck:
+              body_metric: BodyMetricModel | None, cmap: ConfidenceMap) -> ProtocolCheck:
     """Which loaded model saw the scenario's people (the body metric only when bodies are evaluated)."""
     face_source = str(args.likelihood) if args.likelihood is not None else f"shipped likelihoods of {model.space}"
-    if args.evidence == "face" or document.get("body_space") is None:
-        return check_protocol(document, model.metadata, face_source)
-    metric = body_metric or default_body_metric()
-    source = str(args.body_metric) if args.body_metric is not None else "shipped models/body_metric.json"
-    return check_protocol(document, model.metadata, face_source, metric.metadata, source)
+    map_source = str(args.confidence_map) if args.confidence_map is not None else "shipped confidence map"
+    metric_meta, metric_source = None, ""
+    if args.evidence != "face" and document.get("body_space") is not None:
+        metric_meta = (body_metric or default_body_metric()).metadata
+        metric_source = str(args.body_metric) if args.body_metric is not None else "shipped models/body_metric.json"
+    return check_protocol(document, model.metadata, face_source, metric_meta, metric_source, cmap.metadata,
+                          map_source)
 
 
 def _scenario_json(scenario: Any, likelihood: FaceLikelihood) -> dict[str, Any]:
@@ -196,6 +202,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OSError, ValueError) as exc:
         print(f"face-reid-eval: error: --body-metric: {exc}", file=sys.stderr)
         return 2
+    try:
+        cmap = (default_confidence_map() if args.confidence_map is None else ConfidenceMap.identity()
+                if args.confidence_map == "raw" else load_confidence_map(args.confidence_map))
+    except (OSError, ValueError) as exc:
+        print(f"face-reid-eval: error: --confidence-map: {exc}", file=sys.stderr)
+        return 2
 
     t0 = time.perf_counter()
     try:
@@ -203,7 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ScenarioFormatError as exc:
         print(f"face-reid-eval: error: {exc}", file=sys.stderr)
         return 2
-    protocol = _protocol(args, scenario.document, model, body_metric)
+    protocol = _protocol(args, scenario.document, model, body_metric, cmap)
     if not protocol.honest:
         lines = "\n".join(f"  - {p}" for p in protocol.problems())
         if not args.allow_fitted:
@@ -232,7 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
             for d in scenario.days]
     if args.method == "both":
-        runs = {m: _run_offline(args, m, scenario, gallery, days, log, model, body_metric)
+        runs = {m: _run_offline(args, m, scenario, gallery, days, log, model, body_metric, cmap)
                 for m in ("bayes", "threshold")}
         result = {"scenario": runs["bayes"][0].pop("scenario"), "method": "both"}
         for m, (res, _) in runs.items():
@@ -243,7 +255,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = _config(args, args.method, space)
         if args.live:
             return _main_live(args, scenario, gallery, config, model, days, t0, log, protocol)
-        result = _run_offline(args, args.method, scenario, gallery, days, log, model, body_metric)[0]
+        result = _run_offline(args, args.method, scenario, gallery, days, log, model, body_metric, cmap)[0]
     result["protocol"] = protocol.as_json()
     result["total_time_s"] = round(time.perf_counter() - t0, 2)
     _emit(result, args.out)
@@ -277,8 +289,8 @@ def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, f
 
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
                  days: list[tuple[int, float, float, list[int]]], log: Any,
-                 model: FaceLikelihood, body_metric: BodyMetricModel | None = None
-                 ) -> tuple[dict[str, Any], RunLog]:
+                 model: FaceLikelihood, body_metric: BodyMetricModel | None = None,
+                 cmap: ConfidenceMap | None = None) -> tuple[dict[str, Any], RunLog]:
     """The master core with ``method`` (and ``model``: likelihoods, weights, thresholds) over the scenario;
     (the JSON-ready metrics, the run's log)."""
     config = _config(args, method, model.space)
@@ -286,6 +298,7 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
     if log:
         print(f"running the master core ({method}) over {len(scenario.frames)} frames", file=log)
     run = run_master(scenario.frames, scenario.frame_gt_ids, config, likelihood=likelihood, body_metric=body_metric,
+                     confidence_map=cmap,
                      gallery=gallery.people or None, tick_period_s=args.tick_period, days=days,
                      progress=progress_to(log) if log else None)
     if log:
@@ -297,6 +310,7 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
         "method": method,
         "parameters": _parameters(config, likelihood, args.tick_period),
         "gallery": gallery.as_json(),
+        "confidence_map": "raw" if cmap is not None and cmap.raw else str(args.confidence_map or "shipped"),
         **{k: v for k, v in metrics.items() if k != "method"},
     }
     body_json = _body_metric_json(run, scenario, days, body_metric)
@@ -359,7 +373,8 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
         live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
                         log=log, likelihood_path=args.likelihood, embedding_space=model.space,
                         body_appearance_tracking=config.body_appearance_tracking,
-                        body_metric_path=args.body_metric)
+                        body_metric_path=args.body_metric,
+                        confidence_map_path=None if args.confidence_map in (None, "raw") else Path(args.confidence_map))
     except LiveError as exc:
         print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
         return 1

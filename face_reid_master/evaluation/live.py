@@ -134,7 +134,8 @@ def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], g
              method: str, domain_id: int, run_id: str, *, startup_timeout_s: float = 60.0,
              log: TextIO | None = None, keep_dir: Path | None = None,
              likelihood_path: Path | None = None, embedding_space: str = "dlib_resnet_v1",
-             body_appearance_tracking: bool = True, body_metric_path: Path | None = None) -> LiveRun:
+             body_appearance_tracking: bool = True, body_metric_path: Path | None = None,
+             confidence_map_path: Path | None = None) -> LiveRun:
     """Start the master node, publish ``frames`` in real time (stamps = now), collect /tracks_named.
 
     ``day_of_frame[i]``: the day of ``frames[i]`` (a pause between days, see the module doc). ``gallery``:
@@ -164,6 +165,8 @@ def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], g
         master_args += ["-p", f"likelihood_path:={Path(likelihood_path).resolve()}"]
     if body_metric_path is not None:
         master_args += ["-p", f"body_metric_path:={Path(body_metric_path).resolve()}"]
+    if confidence_map_path is not None:
+        master_args += ["-p", f"confidence_map_path:={Path(confidence_map_path).resolve()}"]
     children: list[ChildProcess] = []
     try:
         children.append(start_child("master", master_args, child_env(domain_id, run_id), work))

@@ -107,9 +107,11 @@ def _overlap(model: str, source: str, names: list[str], metadata: Mapping[str, A
 
 def check_protocol(document: Mapping[str, Any], face_metadata: Mapping[str, Any], face_source: str,
                    body_metric_metadata: Mapping[str, Any] | None = None,
-                   body_metric_source: str = "") -> ProtocolCheck:
+                   body_metric_source: str = "", confidence_metadata: Mapping[str, Any] | None = None,
+                   confidence_source: str = "") -> ProtocolCheck:
     """The overlap of a scenario (its ``scenario.json`` document) with the face likelihoods, the body projection
-    it was described with (recorded by face-reid-sim) and the body metric (None: bodies not evaluated)."""
+    it was described with (recorded by face-reid-sim), the body metric (None: bodies not evaluated) and the
+    confidence map (None: not checked; fitted on scenarios, it records their faces and crops alike)."""
     faces = sorted(str(i["name"]) for i in document.get("identities", ()))
     overlaps = [_overlap("face likelihoods and naming distance", face_source, faces, face_metadata,
                          use_exclusions=True)]
@@ -120,4 +122,6 @@ def check_protocol(document: Mapping[str, Any], face_metadata: Mapping[str, Any]
         overlaps.append(_overlap("body projection", str(document.get("body_space", "")), crops, meta))
         if body_metric_metadata is not None:
             overlaps.append(_overlap("body metric", body_metric_source, crops, body_metric_metadata))
+    if confidence_metadata is not None:
+        overlaps.append(_overlap("confidence map", confidence_source, sorted([*faces, *crops]), confidence_metadata))
     return ProtocolCheck(tuple(overlaps))

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from face_reid_master.body.metric_file import BodyFeatureMetric, BodyMetricModel
 from face_reid_master.core import MasterConfig, MasterCore
+from face_reid_master.identity.confidence_map import ConfidenceMap
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.records import IdentityEventKind
 from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord
@@ -172,6 +173,7 @@ def run_master(
     *,
     likelihood: LikelihoodModel | None = None,
     body_metric: BodyMetricModel | None = None,
+    confidence_map: ConfidenceMap | None = None,
     gallery: Mapping[str, NDArray[np.floating]] | None = None,
     tick_period_s: float = DEFAULT_TICK_PERIOD_S,
     days: Sequence[tuple[int, float, float, Sequence[int]]] = (),
@@ -187,7 +189,8 @@ def run_master(
         raise ValueError(f"tick_period_s must be a finite number > 0, got {tick_period_s!r}")
     _check_frames(frames, frame_gt_ids)
     cfg = config or MasterConfig()
-    core = MasterCore(cfg, likelihood=likelihood, body_metric=body_metric, store=None, gallery=gallery)
+    core = MasterCore(cfg, likelihood=likelihood, body_metric=body_metric, store=None, gallery=gallery,
+                      confidence_map=confidence_map)
     t_start = time.perf_counter()
     tracks: dict[int, TrackLog] = {}
     faces: dict[int, tuple[float, int]] = {}
@@ -217,7 +220,7 @@ def run_master(
                 log = tracks[tid] = TrackLog(tid, stamp, stamp)
             log.assignments.append((stamp, fid, kind))
             log.evidence.append(core.identity.evidence_of(tid) or "face")
-            log.confidence.append(float(core.identity.confidence_of(tid)))  # the decision's posterior
+            log.confidence.append(core.published_confidence(tid))  # identity_confidence of the decision
             log.released_s = None  # holding a face again (after a swap released the previous one)
         for tid in prev_assigned.keys() - assigned.keys():
             if tid in tracks:

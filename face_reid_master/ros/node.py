@@ -125,7 +125,12 @@ class MasterNode(ManagedNode):
             from face_reid_master.body.metric_file import load_body_metric
 
             body_metric = load_body_metric(str(values["body_metric_path"]))
-        self.core = MasterCore(config, likelihood, self.store, gallery, body_metric)
+        confidence_map = None
+        if values["confidence_map_path"]:
+            from face_reid_master.identity.confidence_map import load_confidence_map
+
+            confidence_map = load_confidence_map(str(values["confidence_map_path"]))
+        self.core = MasterCore(config, likelihood, self.store, gallery, body_metric, confidence_map)
         self._regex = re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex
         self._openers, self._tracks_sealer = {}, None
         if values["network_key_path"]:

@@ -99,6 +99,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
     ParamSpec("body_metric_path", "", "Body metric JSON from face-reid-fit-body ('' = the installed "
               "models/body_metric.json); used when body_appearance_tracking is on."),
+    ParamSpec("confidence_map_path", "", "Map from a decision's posterior to the published identity_confidence "
+              "(how often such decisions were right; '' = the installed models/identity_confidence.json)."),
     ParamSpec("clock_offset_warning_s", 0.2,
               "/diagnostics and the log warn when a camera's frames arrive more than this after (or before) their "
               "capture stamp, its own processing time deducted (s; median of its last 50 frames): clocks not "

@@ -303,3 +303,19 @@ def test_frames_deferred_to_one_identity_update_per_cycle_give_the_same_identiti
     per_frame = run(1)
     assert per_frame[0] and per_frame[0][0][1] != 0 and per_frame[1] == 2 and per_frame[2] > 0
     assert run(3) == per_frame
+
+
+def test_a_decided_track_publishes_its_decision_through_the_confidence_map(embeddings) -> None:
+    """identity_confidence is what the map says decisions like this one are worth, not the raw posterior."""
+    from face_reid_master.identity.confidence_map import ConfidenceMap
+
+    published = {}
+    for name, cmap in (("mapped", ConfidenceMap((0.0, 1.0), {"face": (0.42,), "body": (0.17,)})),
+                       ("raw", ConfidenceMap.identity())):
+        core = MasterCore(_config(), confidence_map=cmap)
+        _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:5])}, 0.0, 3.0)
+        (track,) = core.tracks()
+        assert track.face_id and track.identity_evidence == "face"
+        published[name] = track.identity_confidence
+    assert published["mapped"] == 0.42
+    assert published["raw"] > 0.9  # the decision's posterior
