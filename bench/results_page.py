@@ -26,10 +26,13 @@ machine). Do not edit by hand. What is counted: README, "What is counted, exactl
 follow: README, "Honest evaluation".
 
 A row counts as a test only when **honest** is yes: no loaded model (face likelihoods and naming distance, body
-projection, body metric) was fitted on the scenario's people or the crops they wore.
+projection, body metric, confidence map) was fitted on the scenario's people or the crops they wore.
+**confidence**: what `identity_confidence` was, `raw` (the decision posteriors, what the confidence map is fitted
+on: development scenarios) or `shipped` (through `models/identity_confidence.json`, as the master publishes it).
+ECE: the count-weighted gap between `identity_confidence` and the share of right decisions over posterior bins.
 
 """
-_COLUMNS = ("result", "faces / bodies", "people x cameras x s", "colour", "evidence", "honest",
+_COLUMNS = ("result", "faces / bodies", "people x cameras x s", "colour", "evidence", "honest", "confidence",
             "Table II right / wrong", "wrong of decided", "recover rate", "face decisions right / wrong",
             "body decisions right / wrong", "ECE", "wrong names (detections)", "strangers named (detections)",
             "commit, date")
@@ -54,7 +57,8 @@ def _row(doc: dict[str, Any]) -> str:
     honest = "yes" if res.get("protocol", {}).get("honest") else "**no**"
     return (f"| {doc['name']} | {Path(str(sim['faces_dir'])).name} / {bodies} | {sim['people']} x {sim['cameras']} x "
             f"{sim['duration_s']:g} (seed {sim['seed']}{', 2 days' if sim.get('second_day') else ''}) | "
-            f"{colour_text} | {doc.get('evidence') or '-'} | {honest} | {t2['success']} / {t2['failure']} | "
+            f"{colour_text} | {doc.get('evidence') or '-'} | {honest} | {res.get('confidence_map', 'raw')} | "
+            f"{t2['success']} / {t2['failure']} | "
             f"{_pct(t2['failure'] / decided if decided else None)} | {t2['recover_rate']:.2f} | {ev['face']} | "
             f"{ev['body']} | {cal.get('ece', float('nan')):.3f} | {_pct(dets.get('wrong_name_rate'))} | "
             f"{_pct(dets.get('other_named_rate'))} | {doc['commit']}, {doc['date']} |")

@@ -420,14 +420,24 @@ class IdentityManagerBase:
         limit = self.body_evidence.negative_face_distance or self.feature_gate_distance
         return limit is not None and self._face_distance(face_a, face_b) > limit  # NaN: False
 
-    def _faces_alike(self, face_a: int, face_b: int) -> bool:
-        """Whether two learned faces are one person: features of theirs closer than the body evidence's
-        ``alike_face_distance`` (default: half the decision distance)."""
+    def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
+        """Which of ``others`` are the same person as learned ``face``: features closer than the body evidence's
+        ``alike_face_distance`` (default: half the decision distance); one batched distance computation."""
         assert self.body_evidence is not None
         limit = self.body_evidence.alike_face_distance
         if limit is None and self.feature_gate_distance is not None:
             limit = 0.5 * self.feature_gate_distance
-        return limit is not None and self._face_distance(face_a, face_b) < limit  # NaN: False
+        top = self._faces.get(face)
+        known = [k for k, f in enumerate(others) if f in self._faces]
+        out = [False] * len(others)
+        if limit is None or top is None or not known:
+            return out
+        slots = np.array([self._faces[others[k]].slot for k in known], dtype=np.intp)
+        d = self._bank.exact_min_distances(self._bank.features(top.slot), slots)
+        if d.size:
+            for k, dist in zip(known, d.min(axis=0).tolist(), strict=True):
+                out[k] = dist < limit
+        return out
 
     def _near_own_face(self, rows: dict[int, F32Array]) -> dict[int, npt.NDArray[np.bool_]]:
         """For each identified track's new observations: which lie within ``feature_gate_distance`` of a stored

@@ -285,11 +285,11 @@ class BodyEvidence:
         return dict(zip([0, *faces], p.tolist(), strict=True))
 
     def decide(self, available: list[int], now_s: float,
-               alike: Callable[[int, int], bool] | None = None) -> list[tuple[int, int, float]]:
+               alike: Callable[[int, list[int]], list[bool]] | None = None) -> list[tuple[int, int, float]]:
         """(track id, face id, posterior) of the faceless tracks decided now: one face per track and one track
         per face (the most confident first). The posterior is over every face with recent bodies (those held
         by live tracks too: a track that looks most like someone already tracked is not decided), and only an
-        ``available`` face (in face_list) can be given. ``alike(a, b)``: whether faces a and b are one person
+        ``available`` face (in face_list) can be given. ``alike(a, others)``: which of ``others`` are face a's person
         (their posteriors are added up; the most likely available one of them is given)."""
         compared = [(tid, t) for tid, t in self._tracks.items() if t.log_ratio]  # faceless tracks with evidence
         if not compared:
@@ -314,13 +314,14 @@ class BodyEvidence:
         return out
 
     def _alike_group(self, post: dict[int, float], top: int, free: set[int],
-                     alike: Callable[[int, int], bool] | None) -> tuple[int, float]:
+                     alike: Callable[[int, list[int]], list[bool]] | None) -> tuple[int, float]:
         """The most likely available face of the top face's person and that person's summed posterior (the
         top face alone when ``alike`` is None or "someone else" already holds too much)."""
         if alike is None or post[0] >= 1.0 - self.posterior_threshold:
             return top, post[top]
         floor = (1.0 - self.posterior_threshold) / len(post)  # faces below this cannot change the verdict
-        group = [top] + [g for g, q in post.items() if g not in (0, top) and q > floor and alike(top, g)]
+        candidates = [g for g, q in post.items() if g not in (0, top) and q > floor]
+        group = [top] + [g for g, same in zip(candidates, alike(top, candidates), strict=True) if same]
         given = max((g for g in group if g in free), key=post.__getitem__, default=top)
         return given, float(sum(post[g] for g in group))
 

@@ -187,8 +187,9 @@ def test_cli_refuses_a_scenario_of_people_the_face_fit_saw_unless_allowed(
     printed = json.loads(captured.out)
     assert "NOT AN HONEST TEST" in captured.err
     assert printed["protocol"]["honest"] is False
-    (face,) = printed["protocol"]["models"]
+    face, cmap = printed["protocol"]["models"]
     assert face["model"] == FACE_MODEL and face["identities_seen"] == list(SEEN_BY_SHIPPED_FIT)
+    assert cmap["model"] == "confidence map" and cmap["identities_seen"] == []  # fitted on other people
     assert printed["detections"] == printed["scenario"]["detections"] > 0  # the run happened
 
 
@@ -202,7 +203,8 @@ def test_cli_is_honest_with_a_face_fit_that_records_other_people(
     captured = capsys.readouterr()
     printed = json.loads(captured.out)
     assert printed["protocol"] == {"honest": True, "models": [
-        {"model": FACE_MODEL, "source": str(path), "identities_seen": []}]}
+        {"model": FACE_MODEL, "source": str(path), "identities_seen": []},
+        {"model": "confidence map", "source": "shipped confidence map", "identities_seen": []}]}
     assert "HONEST" not in captured.err
     # the same file naming one of the scenario's people is refused
     path = tmp_path / "fit2.json"
@@ -210,3 +212,13 @@ def test_cli_is_honest_with_a_face_fit_that_records_other_people(
     assert main([str(seen_scenario), "--likelihood", str(path), "--evidence", "face", "--no-mot", "--quiet"]) == 3
     err = capsys.readouterr().err
     assert f"({path}) was fitted on 1 of the scenario's identities: lfw_Tony_Blair" in err
+
+
+def test_the_confidence_map_is_checked_against_faces_and_crops_alike() -> None:
+    doc = _document(projection_fit=CLEAN_BODIES)
+    seen = _seen(check_protocol(doc, CLEAN_FACES, "faces", {"identities": CLEAN_BODIES}, "metric",
+                                {"identities": ["orl_s07", "pku_002", "someone_else"]}, "map"))
+    assert seen["confidence map"] == ("orl_s07", "pku_002")
+    clean = check_protocol(doc, CLEAN_FACES, "faces", {"identities": CLEAN_BODIES}, "metric",
+                           {"identities": []}, "raw")
+    assert clean.honest and _seen(clean)["confidence map"] == ()

@@ -65,8 +65,9 @@ def test_two_faces_of_one_person_add_up_and_only_such_faces() -> None:
     post = body.posterior(7, [1, 2, 3], 5.0)
     assert 0.4 < post[1] < 0.6 and post[1] + post[2] > 0.99  # split between the two faces: neither passes
     assert body.decide([1, 2, 3], 5.0) == []
-    assert body.decide([1, 2, 3], 5.0, lambda a, b: False) == []  # different people: still undecided
-    one_person = lambda a, b: {a, b} == {1, 2}  # noqa: E731
+    different = lambda a, others: [False] * len(others)  # noqa: E731
+    assert body.decide([1, 2, 3], 5.0, different) == []  # different people: still undecided
+    one_person = lambda a, others: [{a, b} == {1, 2} for b in others]  # noqa: E731
     ((track, face, p),) = body.decide([1, 2, 3], 5.0, one_person)
     assert track == 7 and face in (1, 2) and p > 0.99
     ((_, face, _),) = body.decide([2, 3], 5.0, one_person)  # face 1 is held: its twin is given
@@ -131,11 +132,12 @@ def test_the_identity_layer_takes_two_close_faces_for_one_person_only() -> None:
     ids.add_body_observations(2, RED, 0.5)  # but her face is held by track 1, so a second face is learned
     ids.step(0.5)
     assert len(ids.face_ids()) == 2
-    assert ids._faces_alike(*ids.face_ids())  # much closer than half the decision distance
+    first, second = ids.face_ids()
+    assert ids._faces_alike(first, [second]) == [True]  # much closer than half the decision distance
     ids.add_observations(3, np.repeat(_face(1) * 5, 3, axis=0), 0.6)  # Bob: another person, 0.51 away
     ids.step(0.6)
     (bob,) = set(ids.face_ids()) - {ids.face_id_of(1), ids.face_id_of(2)}
-    assert not ids._faces_alike(ids.face_id_of(1), bob)
+    assert ids._faces_alike(ids.face_id_of(1), [bob, 999]) == [False, False]  # 999: no such face
     for tid in (1, 2, 3):
         ids.track_deleted(tid, 1.0)
     ids.step(1.0)
