@@ -31,6 +31,8 @@ from face_reid_master.identity.likelihood import LikelihoodModel
 
 __all__ = ["BodyEvidence"]
 
+_ALIKE_BATCH = 8  # candidate faces compared with the top face per batched distance computation
+
 F32 = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
 
@@ -316,14 +318,26 @@ class BodyEvidence:
     def _alike_group(self, post: dict[int, float], top: int, free: set[int],
                      alike: Callable[[int, list[int]], list[bool]] | None) -> tuple[int, float]:
         """The most likely available face of the top face's person and that person's summed posterior (the
-        top face alone when ``alike`` is None or "someone else" already holds too much)."""
+        top face alone when ``alike`` is None or "someone else" already holds too much). Candidates are checked
+        most likely first, in small batches, and no further once even all the rest could not lift the sum above
+        the threshold (the verdict is then "undecided" whatever they are)."""
         if alike is None or post[0] >= 1.0 - self.posterior_threshold:
             return top, post[top]
         floor = (1.0 - self.posterior_threshold) / len(post)  # faces below this cannot change the verdict
-        candidates = [g for g, q in post.items() if g not in (0, top) and q > floor]
-        group = [top] + [g for g, same in zip(candidates, alike(top, candidates), strict=True) if same]
+        candidates = sorted(((q, g) for g, q in post.items() if g not in (0, top) and q > floor), reverse=True)
+        group, total = [top], post[top]
+        remaining = sum(q for q, _ in candidates)
+        for k in range(0, len(candidates), _ALIKE_BATCH):
+            if total + remaining <= self.posterior_threshold:
+                break
+            batch = candidates[k:k + _ALIKE_BATCH]
+            for (q, g), same in zip(batch, alike(top, [g for _, g in batch]), strict=True):
+                remaining -= q
+                if same:
+                    group.append(g)
+                    total += q
         given = max((g for g in group if g in free), key=post.__getitem__, default=top)
-        return given, float(sum(post[g] for g in group))
+        return given, float(total)
 
 
 def _heights(heights: npt.ArrayLike | None, n: int) -> FloatArray:
