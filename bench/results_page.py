@@ -64,11 +64,37 @@ def _row(doc: dict[str, Any]) -> str:
             f"{_pct(dets.get('other_named_rate'))} | {doc['commit']}, {doc['date']} |")
 
 
+def _pooled(docs: list[dict[str, Any]], evidence: str) -> str:
+    """Decisions and ECE pooled over the honest test results (name test*, shipped confidence map) of one
+    evidence setting: every decision of those runs in one reliability table."""
+    chosen = [d for d in docs if d["name"].startswith("test") and d.get("evidence") == evidence
+              and d["result"].get("protocol", {}).get("honest") and d["result"].get("confidence_map") == "shipped"]
+    n = conf = right = 0.0
+    gaps: dict[int, list[float]] = {}
+    for d in chosen:
+        for k, b in enumerate(d["result"]["calibration"].get("bins", ())):
+            if b["count"]:
+                g = gaps.setdefault(k, [0.0, 0.0, 0.0])
+                g[0] += b["count"]
+                g[1] += b["mean_confidence"] * b["count"]
+                g[2] += b["accuracy"] * b["count"]
+    for c, cs, rs in gaps.values():
+        n, conf, right = n + c, conf + cs, right + rs
+    if not n:
+        return f"- {evidence}: no honest test results"
+    ece = sum(abs(rs - cs) for _, cs, rs in gaps.values()) / n
+    return (f"- {evidence} evidence, {len(chosen)} results ({', '.join(d['name'] for d in chosen)}): {int(n)} "
+            f"decisions, {round(n - right)} wrong ({100.0 * (n - right) / n:.1f} %), mean identity_confidence "
+            f"{conf / n:.3f}, ECE {ece:.3f}")
+
+
 def page() -> str:
     docs = [json.loads(p.read_text(encoding="utf-8")) for p in sorted(RESULTS.glob("eval_*.json"))]
     rows = "\n".join(_row(d) for d in docs)
+    pooled = "\n".join(_pooled(docs, e) for e in ("fused", "face"))
     commands = "\n".join(f"- `{d['name']}`: `{d['command']}`" for d in docs)
-    return f"{_HEAD}{_TABLE_HEAD}{rows}\n\nThe evaluation commands:\n\n{commands}\n"
+    return (f"{_HEAD}{_TABLE_HEAD}{rows}\n\nAll decisions of the honest test results pooled (the identity_confidence "
+            f"the master published):\n\n{pooled}\n\nThe evaluation commands:\n\n{commands}\n")
 
 
 def main(argv: list[str]) -> int:

@@ -167,6 +167,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         print(f"face-reid-eval: error: --domain-id must be in 0..232, got {args.domain_id}", file=sys.stderr)
         return 2
+    if args.live and args.confidence_map == "raw":
+        print("face-reid-eval: error: --confidence-map raw is offline only (the live master publishes through a map "
+              "file)", file=sys.stderr)
+        return 2
     if args.live and args.method == "both":
         print("face-reid-eval: error: --live runs one method: use --method bayes or threshold", file=sys.stderr)
         return 2
@@ -374,7 +378,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
                         log=log, likelihood_path=args.likelihood, embedding_space=model.space,
                         body_appearance_tracking=config.body_appearance_tracking,
                         body_metric_path=args.body_metric,
-                        confidence_map_path=None if args.confidence_map in (None, "raw") else Path(args.confidence_map))
+                        confidence_map_path=None if args.confidence_map is None else Path(args.confidence_map))
     except LiveError as exc:
         print(f"face-reid-eval: error: live run failed: {exc}", file=sys.stderr)
         return 1

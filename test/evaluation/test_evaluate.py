@@ -365,6 +365,10 @@ def test_cli_prints_json_and_saves_plots(scenario_dir: Path, tmp_path: Path, cap
 def test_cli_errors(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     assert main([str(scenario_dir), "--live", "--domain-id", "500", "--quiet"]) == 2
     assert "--domain-id must be in 0..232" in capsys.readouterr().err
+    assert main([str(scenario_dir), "--live", "--confidence-map", "raw", "--quiet"]) == 2
+    assert "--confidence-map raw is offline only" in capsys.readouterr().err
+    assert main([str(scenario_dir), "--confidence-map", str(tmp_path / "none.json"), "--quiet"]) == 2
+    assert "--confidence-map" in capsys.readouterr().err
     assert main([str(tmp_path), "--quiet"]) == 2
     assert "no scenario.json" in capsys.readouterr().err
     assert main([str(scenario_dir), "--gallery-people", "9", "--quiet", "--allow-fitted"]) == 2
