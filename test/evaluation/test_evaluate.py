@@ -29,6 +29,7 @@ from face_reid_master.evaluation.metrics import (
     track_outcomes,
 )
 from face_reid_master.evaluation.runner import RunLog, TrackLog, run_master
+from face_reid_master.identity.confidence_map import ConfidenceMap
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal, save_likelihood_model
 from face_reid_master.identity.size_likelihood import FaceLikelihood, save_face_likelihood
 from face_reid_master.records import CameraFrameRecord, PersonRecord
@@ -247,7 +248,7 @@ def test_real_core_run_reports_the_calibration_of_every_decision(embeddings) -> 
     frames, gts = _frames([(0, 0.0, 4.0, 0.0, a[:5]), (1, 0.0, 4.0, 3.0, b[:5]), (0, 7.0, 11.0, 0.0, a[5:]),
                            (1, 14.0, 18.0, 3.0, a[5:])])
     cfg = _config("bayes")
-    log = run_master(frames, gts, cfg)
+    log = run_master(frames, gts, cfg, confidence_map=ConfidenceMap.identity())  # the raw decision posteriors
     r = evaluate_run(log, with_mot=False)
     cal = r["calibration"]
     outcomes = track_outcomes(log)
@@ -394,14 +395,16 @@ def test_cli_likelihood_option_uses_that_model(scenario_dir: Path, tmp_path: Pat
     assert printed["parameters"]["likelihood_data"] == "strict"
     # this model does not say what it saw: not an honest test
     assert printed["protocol"] == {"honest": False, "models": [
-        {"model": "face likelihoods and naming distance", "source": str(path), "identities_seen": None}]}
+        {"model": "face likelihoods and naming distance", "source": str(path), "identities_seen": None},
+        {"model": "confidence map", "source": "shipped confidence map", "identities_seen": []}]}
     reid = printed["reidentification"]
     assert reid["success"] == 0 and reid["failure_new_id"] > 0
     assert main([str(scenario_dir), "--no-mot", "--quiet", "--allow-fitted"]) == 0
     shipped = json.loads(capsys.readouterr().out)
     assert shipped["reidentification"]["success"] > 0
     # the shipped fit lists its exclusions (Hugo Chavez is one): the other two fixture people were seen
-    (face,) = shipped["protocol"]["models"]
+    face, cmap = shipped["protocol"]["models"]
+    assert cmap["model"] == "confidence map" and cmap["identities_seen"] == []
     assert shipped["protocol"]["honest"] is False and face["identities_seen"] == sorted(IDS[:2])
 
 

@@ -426,7 +426,7 @@ def test_eval_checks_and_uses_the_body_metric_given(faces: Path, cache: Path, cr
     shipped = json.loads(capsys.readouterr().out)
     assert shipped["protocol"]["honest"] is True
     assert [m["model"] for m in shipped["protocol"]["models"]] == [
-        "face likelihoods and naming distance", "body projection", "body metric"]
+        "face likelihoods and naming distance", "body projection", "body metric", "confidence map"]
 
     base = default_body_metric()
     fused = base.features["fused"]

@@ -95,7 +95,9 @@ def test_two_masters_on_one_domain_both_warn(ros_context, tmp_path: Path) -> Non
         def both_warn() -> bool:
             for ex in executors:
                 ex.spin_once(timeout_sec=0.05)
-            return all("another publisher of /tracks_named" in n.diagnostics(n.now_s()).message for n in (a, b))
+            # the other's node name arrives with discovery too (until then: _NODE_NAME_UNKNOWN_)
+            return all("another publisher of /tracks_named" in (m := n.diagnostics(n.now_s()).message)
+                       and "/face_reid_master" in m for n in (a, b))
 
         deadline = time.monotonic() + 60.0
         while not both_warn():  # DDS discovery: each master's graph learns the other's publisher
