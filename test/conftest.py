@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import shutil
+from collections.abc import Iterable
 from pathlib import Path
 
 import pytest
@@ -16,6 +18,17 @@ DATA_DIR = Path(__file__).parent / "data"
 FACES_DIR = DATA_DIR / "faces"
 RGBD_DIR = DATA_DIR / "rgbd"
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+
+def copy_fixture_faces(root: Path, identities: Iterable[str], per_identity: int = 4) -> Path:
+    """A faces folder at ``root``: one sub-folder per identity with its first ``per_identity`` fixture photos."""
+    for ident in identities:
+        (root / ident).mkdir(parents=True)
+        for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:per_identity]:
+            shutil.copy(photo, root / ident / photo.name)
+    return root
+
 
 _domain_counter = [0]
 # the domain a developer's own system runs on (any valid id): the tests never use it

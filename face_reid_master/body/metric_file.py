@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from face_reid_camera.common.errors import ModelLoadError
+from face_reid_camera.common.model_files import read_model_json, unusable_model
 from face_reid_master.body.features import METRIC_FEATURES, feature_blocks, feature_columns
 from face_reid_master.body.linear_metric import LinearMetric
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
@@ -207,19 +207,12 @@ def _feature_from(name: str, doc: Mapping[str, Any], slices: dict[str, slice]) -
 def load_body_metric(path: str | Path) -> BodyMetricModel:
     """Read a body metric file: FileNotFoundError when missing, :class:`ModelLoadError` (path and reason) when
     unusable (not JSON, another format or version, missing or inconsistent values)."""
-    src = Path(path)
-    if not src.is_file():
-        raise FileNotFoundError(f"body metric file {src}: No such file (fit one with face-reid-fit-body)")
-    try:
-        doc = json.loads(src.read_text(encoding="utf-8"))
-        if not isinstance(doc, dict) or doc.get("format") != FORMAT_NAME or doc.get("version") != FORMAT_VERSION:
-            raise ValueError(f"not a {FORMAT_NAME} version {FORMAT_VERSION} file")
+    doc = read_model_json(path, FORMAT_NAME, FORMAT_VERSION, "body metric file", "fit one with face-reid-fit-body")
+    with unusable_model("body metric file", path):
         blocks = tuple((str(b["name"]), int(b["start"]), int(b["stop"])) for b in doc["blocks"])
         slices = {n: slice(a, b) for n, a, b in blocks}
         features = {n: _feature_from(n, doc["features"][n], slices) for n in METRIC_FEATURES}
         return BodyMetricModel(str(doc["space"]), int(doc["length"]), blocks, features, doc.get("metadata", {}))
-    except (OSError, ValueError, KeyError, TypeError) as exc:  # JSONDecodeError is a ValueError
-        raise ModelLoadError(f"body metric file {src} is unusable: {exc}") from exc
 
 
 def default_body_metric() -> BodyMetricModel:

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from face_reid_camera.common.errors import ModelLoadError
 from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric, load_body_metric
 from face_reid_master.core import MasterConfig
 from face_reid_master.evaluation.body_rank import scenario_bodies, scenario_rank1
@@ -116,17 +117,16 @@ def _protocol(args: argparse.Namespace, document: dict[str, Any], model: FaceLik
                           map_source)
 
 
-def _scenario_json(scenario: Any, likelihood: FaceLikelihood) -> dict[str, Any]:
+def _scenario_json(scenario: Any) -> dict[str, Any]:
     doc = scenario.document
     summary = scenario.summary
-    names = [str(i["name"]) for i in scenario.identities]
     return {
         "directory": str(scenario.directory),
         "level": scenario.level,
         "seed": scenario.seed,
         "days": len(scenario.days),
         "people_per_day": summary.get("people_per_day"),
-        "identities": len(names),
+        "identities": len(scenario.identities),
         "cameras": len(scenario.cameras),
         "duration_s": summary.get("duration_s"),
         "frames": summary.get("frames"),
@@ -203,13 +203,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         body_metric = None if args.body_metric is None else load_body_metric(args.body_metric)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, ModelLoadError) as exc:
         print(f"face-reid-eval: error: --body-metric: {exc}", file=sys.stderr)
         return 2
     try:
         cmap = (default_confidence_map() if args.confidence_map is None else ConfidenceMap.identity()
                 if args.confidence_map == "raw" else load_confidence_map(args.confidence_map))
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, ModelLoadError) as exc:
         print(f"face-reid-eval: error: --confidence-map: {exc}", file=sys.stderr)
         return 2
 
@@ -275,7 +275,8 @@ def _config(args: argparse.Namespace, method: str, space: str) -> MasterConfig:
 
 def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, float, list[int]]],
                       loaded: BodyMetricModel | None) -> dict[str, Any] | None:
-    """Rank-1 of the shipped and of the final body metric on the scenario's bodies, and the update's counts."""
+    """Rank-1 of the body metric loaded at the start (``loaded``, else the shipped one) and of the final one on
+    the scenario's bodies, and the online update's counts."""
     final = run.body_metric
     if final is None:
         return None
@@ -285,7 +286,7 @@ def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, f
         return None
     stats = run.master_stats
     return {"bodies": int(bodies.labels.size),
-            "rank1_shipped": scenario_rank1(bodies, base.features["fused"]),
+            "rank1_start": scenario_rank1(bodies, base.features["fused"]),
             "rank1_final": scenario_rank1(bodies, final),
             "refits": int(stats.get("body_metric_refits", 0)),
             "pairs_mined": int(stats.get("body_pairs_mined", 0))}
@@ -310,7 +311,7 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
     metrics = evaluate_run(run, gallery_people=gallery.gt_of_name or None, scenario_summary=scenario.summary,
                            with_mot=not args.no_mot)
     result: dict[str, Any] = {
-        "scenario": _scenario_json(scenario, model),
+        "scenario": _scenario_json(scenario),
         "method": method,
         "parameters": _parameters(config, likelihood, args.tick_period),
         "gallery": gallery.as_json(),
@@ -397,7 +398,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     transport = live.transport
     result: dict[str, Any] = {
         "mode": "live",
-        "scenario": _scenario_json(scenario, model),
+        "scenario": _scenario_json(scenario),
         "method": args.method,
         "parameters": {**_parameters(config, likelihood, 1.0 / 5.0), "master": "face_reid_master.ros.node, default "
                        "parameters but method, db_path (temporary) and gallery_path (the gallery below, .npz)"},

@@ -10,10 +10,11 @@ compares those with a scenario's face identities and the crop identities its peo
 from __future__ import annotations
 
 import ast
-import fnmatch
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from face_reid_master.tools.fit_likelihood import excluded_from_fit
 
 __all__ = ["FitOverlap", "ProtocolCheck", "check_protocol", "fitted_identities", "scenario_crop_identities"]
 
@@ -44,7 +45,7 @@ def _seen_by_exclusions(names: Iterable[str], metadata: Mapping[str, Any]) -> li
         return None
     left_out = set(_as_value(excluded.get("scenario_identities", ())) or ())
     patterns = [str(p) for p in _as_value(excluded.get("patterns", ())) or ()]
-    return sorted(n for n in names if n not in left_out and not any(fnmatch.fnmatchcase(n, p) for p in patterns))
+    return sorted(n for n in names if not excluded_from_fit(n, patterns, left_out))
 
 
 @dataclass(frozen=True)

@@ -405,39 +405,37 @@ class IdentityManagerBase:
             body.add_face_bodies(fid, emb, newest, heights=heights)
         body.forget_track(tid)
 
-    def _face_distance(self, face_a: int, face_b: int) -> float:
-        """The smallest distance between the stored features of two learned faces (NaN if either is unknown)."""
-        a, b = self._faces.get(face_a), self._faces.get(face_b)
-        if a is None or b is None:
-            return math.nan
-        d = self._bank.exact_min_distances(self._bank.features(a.slot), np.array([b.slot], dtype=np.intp))
-        return float(d.min()) if d.size else math.nan
+    def _face_distances(self, face: int, others: list[int]) -> FloatArray:
+        """The smallest distance between the stored features of learned ``face`` and of each of ``others``, in one
+        batched computation (NaN where either face is unknown)."""
+        out = np.full(len(others), np.nan)
+        top = self._faces.get(face)
+        known = [k for k, f in enumerate(others) if f in self._faces]
+        if top is None or not known:
+            return out
+        slots = np.array([self._faces[others[k]].slot for k in known], dtype=np.intp)
+        d = self._bank.exact_min_distances(self._bank.features(top.slot), slots)
+        if d.size:
+            out[known] = d.min(axis=0)
+        return out
 
     def _faces_differ(self, face_a: int, face_b: int) -> bool:
         """Whether two learned faces are confidently different people: no features of theirs closer than the
         body evidence's ``negative_face_distance`` (default: the decision distance)."""
         assert self.body_evidence is not None
         limit = self.body_evidence.negative_face_distance or self.feature_gate_distance
-        return limit is not None and self._face_distance(face_a, face_b) > limit  # NaN: False
+        return limit is not None and bool(self._face_distances(face_a, [face_b])[0] > limit)  # NaN: False
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are the same person as learned ``face``: features closer than the body evidence's
-        ``alike_face_distance`` (default: half the decision distance); one batched distance computation."""
+        ``alike_face_distance`` (default: half the decision distance); NaN (unknown face): not alike."""
         assert self.body_evidence is not None
         limit = self.body_evidence.alike_face_distance
         if limit is None and self.feature_gate_distance is not None:
             limit = 0.5 * self.feature_gate_distance
-        top = self._faces.get(face)
-        known = [k for k, f in enumerate(others) if f in self._faces]
-        out = [False] * len(others)
-        if limit is None or top is None or not known:
-            return out
-        slots = np.array([self._faces[others[k]].slot for k in known], dtype=np.intp)
-        d = self._bank.exact_min_distances(self._bank.features(top.slot), slots)
-        if d.size:
-            for k, dist in zip(known, d.min(axis=0).tolist(), strict=True):
-                out[k] = dist < limit
-        return out
+        if limit is None:
+            return [False] * len(others)
+        return (self._face_distances(face, others) < limit).tolist()
 
     def _near_own_face(self, rows: dict[int, F32Array]) -> dict[int, npt.NDArray[np.bool_]]:
         """For each identified track's new observations: which lie within ``feature_gate_distance`` of a stored

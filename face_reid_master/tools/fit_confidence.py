@@ -12,13 +12,75 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from face_reid_master.evaluation.protocol import scenario_crop_identities
-from face_reid_master.identity.confidence_map import fit_confidence_map, save_confidence_map
+from face_reid_master.identity.confidence_map import EVIDENCE, ConfidenceMap, save_confidence_map
+from face_reid_master.sim.scenario_files import load_scenario_document
+
+
+def _pooled(right: Sequence[float], count: Sequence[float]) -> list[float]:
+    """Pool-adjacent-violators on (right + 1) / (count + 2): a non-decreasing accuracy per bin; empty bins take
+    their neighbours' value."""
+    blocks: list[list[float]] = []  # [right, count, first bin, last bin]
+    for k, (r, n) in enumerate(zip(right, count, strict=True)):
+        if n <= 0:
+            continue
+        blocks.append([r, n, k, k])
+        while len(blocks) > 1 and (blocks[-2][0] + 1) / (blocks[-2][1] + 2) > (blocks[-1][0] + 1) / (blocks[-1][1] + 2):
+            r2, n2, _, last = blocks.pop()
+            blocks[-1][0] += r2
+            blocks[-1][1] += n2
+            blocks[-1][3] = last
+    out = [float("nan")] * len(count)
+    if not blocks:
+        return [0.5] * len(count)
+    for r, n, a, b in blocks:
+        for k in range(int(a), int(b) + 1):
+            out[k] = (r + 1) / (n + 2)
+    last = (blocks[0][0] + 1) / (blocks[0][1] + 2)
+    for k in range(len(out)):  # empty bins: the value of the nearest filled bin below (above for the first ones)
+        if math.isnan(out[k]):
+            out[k] = last
+        else:
+            last = out[k]
+    return out
+
+
+def fit_confidence_map(results: Iterable[Mapping[str, Any]], identities: Iterable[str] = (),
+                       sources: Sequence[str] = ()) -> ConfidenceMap:
+    """Fit a map from face-reid-eval results (their ``calibration`` blocks: decisions per evidence and bin)."""
+    edges: tuple[float, ...] | None = None
+    right: dict[str, list[float]] = {}
+    count: dict[str, list[float]] = {}
+    for res in results:
+        cal = res["calibration"]
+        e = tuple(float(x) for x in cal["bin_edges"])
+        if edges is None:
+            edges = e
+            right = {k: [0.0] * (len(e) - 1) for k in EVIDENCE}
+            count = {k: [0.0] * (len(e) - 1) for k in EVIDENCE}
+        elif e != edges:
+            raise ValueError(f"results with other bin edges: {list(e)} vs {list(edges)}")
+        for kind, block in cal["by_evidence"].items():
+            target = "body" if kind == "body" else "face"
+            for k, b in enumerate(block.get("bins", ())):
+                n = int(b["count"])
+                if n:
+                    count[target][k] += n
+                    right[target][k] += n - int(b["wrong"])
+    if edges is None:
+        raise ValueError("no results to fit on")
+    values = {k: tuple(round(v, 6) for v in _pooled(right[k], count[k])) for k in EVIDENCE}
+    decisions = {k: tuple(int(n) for n in count[k]) for k in EVIDENCE}
+    meta = {"tool": "face_reid_master.tools.fit_confidence", "fitted_on": list(sources),
+            "identities": sorted(set(identities)),
+            "right": {k: int(sum(right[k])) for k in EVIDENCE}, "decisions": {k: int(sum(count[k])) for k in EVIDENCE}}
+    return ConfidenceMap(edges, values, decisions, meta)
 
 
 def _result(path: Path) -> dict[str, Any]:
@@ -31,8 +93,7 @@ def _result(path: Path) -> dict[str, Any]:
 
 def _people(res: dict[str, Any]) -> list[str]:
     """The scenario's face identities and the crops its people wore (from its scenario.json)."""
-    scenario = Path(str(res["scenario"]["directory"])) / "scenario.json"
-    doc = json.loads(scenario.read_text(encoding="utf-8"))
+    doc = load_scenario_document(Path(str(res["scenario"]["directory"])))
     return [str(i["name"]) for i in doc.get("identities", ())] + scenario_crop_identities(doc)
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import FACES_DIR
+from conftest import FACES_DIR, copy_fixture_faces
 
 from face_reid_camera.faces.photos import PhotoEmbedder
 from face_reid_master.core import MasterConfig
@@ -330,11 +330,7 @@ def scenario_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from face_reid_master.sim.scenario_files import write_scenario
     from face_reid_master.sim.simulate import SimConfig, simulate
 
-    faces = tmp_path_factory.mktemp("faces")
-    for ident in IDS:
-        (faces / ident).mkdir()
-        for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:4]:
-            shutil.copy(photo, faces / ident / photo.name)
+    faces = copy_fixture_faces(tmp_path_factory.mktemp("faces"), IDS)
     out = tmp_path_factory.mktemp("scenario")
     cfg = SimConfig(num_people=3, num_cameras=2, duration_s=40.0, seed=5, embedder="dlib")
     write_scenario(simulate(faces, cfg), out)
@@ -370,6 +366,9 @@ def test_cli_errors(scenario_dir: Path, tmp_path: Path, capsys) -> None:
     assert "--confidence-map raw is offline only" in capsys.readouterr().err
     assert main([str(scenario_dir), "--confidence-map", str(tmp_path / "none.json"), "--quiet"]) == 2
     assert "--confidence-map" in capsys.readouterr().err
+    (tmp_path / "metric.json").write_text("{not json")  # corrupt: a clear error, not a traceback
+    assert main([str(scenario_dir), "--body-metric", str(tmp_path / "metric.json"), "--quiet"]) == 2
+    assert f"--body-metric: body metric file {tmp_path / 'metric.json'} is unusable" in capsys.readouterr().err
     assert main([str(tmp_path), "--quiet"]) == 2
     assert "no scenario.json" in capsys.readouterr().err
     assert main([str(scenario_dir), "--gallery-people", "9", "--quiet", "--allow-fitted"]) == 2

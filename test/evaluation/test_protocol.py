@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import FACES_DIR
+from conftest import copy_fixture_faces
 
 from face_reid_master.body.metric_file import default_body_metric
 from face_reid_master.evaluation.cli import main
@@ -162,11 +161,7 @@ def seen_scenario(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from face_reid_master.sim.scenario_files import write_scenario
     from face_reid_master.sim.simulate import SimConfig, simulate
 
-    faces = tmp_path_factory.mktemp("faces")
-    for ident in SEEN_BY_SHIPPED_FIT:
-        (faces / ident).mkdir()
-        for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:4]:
-            shutil.copy(photo, faces / ident / photo.name)
+    faces = copy_fixture_faces(tmp_path_factory.mktemp("faces"), SEEN_BY_SHIPPED_FIT)
     out = tmp_path_factory.mktemp("scenario")
     write_scenario(simulate(faces, SimConfig(num_people=2, num_cameras=2, duration_s=30.0, seed=5, embedder="dlib")),
                    out)

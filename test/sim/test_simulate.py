@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import FACES_DIR
+from conftest import copy_fixture_faces
 
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.sim.cli import main
@@ -28,12 +28,7 @@ PHOTOS_PER_IDENTITY = 4
 
 @pytest.fixture(scope="module")
 def faces(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("faces")
-    for ident in IDENTITIES:
-        (root / ident).mkdir()
-        for photo in sorted((FACES_DIR / ident).glob("*.jpg"))[:PHOTOS_PER_IDENTITY]:
-            shutil.copy(photo, root / ident / photo.name)
-    return root
+    return copy_fixture_faces(tmp_path_factory.mktemp("faces"), IDENTITIES, PHOTOS_PER_IDENTITY)
 
 
 @pytest.fixture(scope="module")

@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from face_reid_camera.common.errors import ModelLoadError
 from face_reid_master.identity.confidence_map import (
     ConfidenceMap,
     default_confidence_map,
-    fit_confidence_map,
     load_confidence_map,
     save_confidence_map,
 )
+from face_reid_master.tools.fit_confidence import fit_confidence_map
 
 EDGES = [0.0, 0.5, 0.9, 0.99, 1.0]
 
@@ -66,7 +67,7 @@ def test_invalid_maps_and_files_are_refused_with_their_reason(tmp_path: Path) ->
         load_confidence_map(tmp_path / "missing.json")
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"format": "something else"}))
-    with pytest.raises(ValueError, match=f"{bad}.*not a face-reid-confidence-map"):
+    with pytest.raises(ModelLoadError, match=f"{bad}.*not a face-reid-confidence-map"):
         load_confidence_map(bad)
     with pytest.raises(ValueError, match="other bin edges"):
         fit_confidence_map([_result([(1, 0)] * 4, [(1, 0)] * 4),

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from face_reid_master.identity.confidence_map import load_confidence_map
+from face_reid_master.sim.scenario_files import FORMAT_NAME, FORMAT_VERSION
 from face_reid_master.tools.fit_confidence import main
 
 EDGES = [0.0, 0.9, 0.999, 1.0]
@@ -18,7 +19,8 @@ def _write_result(tmp: Path, name: str, face: list[tuple[int, int]], body: list[
     scenario = tmp / name
     scenario.mkdir()
     (scenario / "scenario.json").write_text(json.dumps(
-        {"identities": [{"gt_id": k, "name": face_id, "clothes": {"1": crop}}
+        {"format": FORMAT_NAME, "version": FORMAT_VERSION,
+         "identities": [{"gt_id": k, "name": face_id, "clothes": {"1": crop}}
                         for k, (face_id, crop) in enumerate(people.items())]}))
     def block(rows: list[tuple[int, int]]) -> dict:
         return {"bins": [{"count": n, "wrong": w} for n, w in rows]}
