@@ -280,7 +280,7 @@ class MasterStats:
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
-    faces_released_swapped: int = 0  # of which: the track was swapped onto someone else (it lives on)
+    faces_released_swapped: int = 0  # of which: the track was swapped onto someone else (published under a new id)
     faces_pruned: int = 0
     faces_evicted: int = 0  # unnamed faces forgotten to keep max_faces (least recently seen first)
     faces_refused_cap: int = 0  # new faces not learned: max_faces reached and every face named or on a track
@@ -299,7 +299,7 @@ class FrameOutcome:
     accepted: bool
     reason: str = ""
     code: str = ""
-    track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> track id
+    track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> tracker id (public_id)
     tracks_created: tuple[int, ...] = ()
     tracks_deleted: tuple[int, ...] = ()
     identity_events: tuple[Any, ...] = ()
@@ -418,7 +418,9 @@ class MasterCore:
         self.stats = MasterStats()
         self._space_noticed: dict[str, str] = {}  # camera id -> the unusable space it was last logged for
         self._notices: list[str] = []
-        self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed
+        self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed (since its last split)
+        self._split: dict[int, tuple[int, float]] = {}  # tracker id -> (published id, since s) after a swap
+        self._gone: list[int] = []  # tracks deleted since the last identity step (their split ids go after it)
         self._birth: dict[int, tuple[float, float, float]] = {}  # track id -> (x, y, created s) until it moves
         self._moved: set[int] = set()  # tracks that moved away from where they appeared
         self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
@@ -727,11 +729,13 @@ class MasterCore:
         for track_id in deleted:
             self.identity.track_deleted(track_id, stamp)
             self._face_obs.pop(track_id, None)
+            self._gone.append(track_id)
             self._birth.pop(track_id, None)
             self._moved.discard(track_id)
 
     def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
                        recovered: Iterable[int] = ()) -> list[Any]:
+        """One identity update after the given track events; returns its events with published track ids."""
         self._track_events(deleted, stamp, lost, recovered)
         events = self.identity.step(stamp)
         if self.online_metric is not None:
@@ -740,7 +744,8 @@ class MasterCore:
         for ev in events:
             if ev.kind == IdentityEventKind.NEW_FACE and not self._room_for(ev.face_id):
                 continue  # not learned (max_faces): the track stays unidentified
-            kept.append(ev)
+            public = self.public_id(ev.track_id)
+            kept.append(ev if public == ev.track_id else dataclasses.replace(ev, track_id=public))
             if ev.kind == IdentityEventKind.NEW_FACE:
                 self.stats.faces_created += 1
                 self._save_faces([ev.face_id])
@@ -749,10 +754,26 @@ class MasterCore:
                 self._save_faces([ev.face_id])
             elif ev.kind in (IdentityEventKind.RELEASED, IdentityEventKind.SWAPPED):
                 self.stats.faces_released += 1
-                self.stats.faces_released_swapped += ev.kind == IdentityEventKind.SWAPPED
                 self._save_faces([ev.face_id])
+            if ev.kind == IdentityEventKind.SWAPPED:
+                self.stats.faces_released_swapped += 1
+                self._split_track(ev.track_id, stamp)
             self._name_checked.pop(ev.face_id, None)
+        for track_id in self._gone:
+            self._split.pop(track_id, None)
+        self._gone.clear()
         return kept
+
+    def _split_track(self, track_id: int, stamp: float) -> None:
+        """A swapped track is someone else from now on: it is published under a new id, so that no consumer
+        carries the person it was over to the one it has become (its old id ends here)."""
+        self._split[track_id] = (self.tracker.reserve_id(), stamp)
+        self._face_obs[track_id] = 0
+
+    def public_id(self, track_id: int) -> int:
+        """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
+        split = self._split.get(track_id)
+        return track_id if split is None else split[0]
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
@@ -1015,7 +1036,7 @@ class MasterCore:
             fid = self.identity.face_id_of(snap.track_id) or 0
             out.append(
                 NamedTrackRecord(
-                    track_id=snap.track_id,
+                    track_id=self.public_id(snap.track_id),
                     face_id=fid,
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=self.published_confidence(snap.track_id),
@@ -1026,7 +1047,8 @@ class MasterCore:
                     covariance=snap.covariance,
                     height_m=float(snap.height_m),
                     state=int(snap.state),
-                    first_seen_s=float(snap.created_s),
+                    first_seen_s=float(self._split[snap.track_id][1] if snap.track_id in self._split
+                                       else snap.created_s),
                     last_seen_s=float(snap.last_seen_s),
                     cameras=tuple(sorted(snap.cameras)),
                 )

@@ -206,7 +206,9 @@ def run_master(
 
     def identity_changes(stamp: float) -> None:
         nonlocal prev_assigned
-        assigned = core.identity.assigned_tracks()
+        raw = core.identity.assigned_tracks()  # tracker id -> face id; logged under the published ids
+        internal = {core.public_id(tid): tid for tid in raw}
+        assigned = {public: raw[tid] for public, tid in internal.items()}
         if assigned == prev_assigned:
             return
         for tid, fid in assigned.items():
@@ -216,11 +218,12 @@ def run_master(
             if kind == "new":
                 faces[fid] = (stamp, tid)
             log = tracks.get(tid)
-            if log is None:  # identity of a track never seen in an association (cannot happen in the core)
+            if log is None:  # a track decided at its split, before an association under its new id
                 log = tracks[tid] = TrackLog(tid, stamp, stamp)
+            inner = internal[tid]
             log.assignments.append((stamp, fid, kind))
-            log.evidence.append(core.identity.evidence_of(tid) or "face")
-            log.confidence.append(core.published_confidence(tid))  # identity_confidence of the decision
+            log.evidence.append(core.identity.evidence_of(inner) or "face")
+            log.confidence.append(core.published_confidence(inner))  # identity_confidence of the decision
             log.released_s = None  # holding a face again (after a swap released the previous one)
         for tid in prev_assigned.keys() - assigned.keys():
             if tid in tracks:
@@ -260,7 +263,8 @@ def run_master(
         identity_changes(stamp)
         track_of = outcome.track_of_person
         for j, person in enumerate(frame.people):
-            tid = track_of.get(j, -1)
+            inner = track_of.get(j, -1)
+            tid = core.public_id(inner) if inner >= 0 else -1
             fid = 0
             shown = -1
             if tid >= 0:
@@ -274,7 +278,7 @@ def run_master(
                     log.face_gt.append((stamp, int(gt[j])))
                     if log.first_face_s is None:
                         log.first_face_s = stamp
-                fid = core.identity.face_id_of(tid) or 0
+                fid = core.identity.face_id_of(inner) or 0
                 if fid:
                     name = core.face_name(fid)
                     if name:

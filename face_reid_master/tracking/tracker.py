@@ -210,6 +210,11 @@ class Tracker:
         self._clock.reset()
         return deleted
 
+    def reserve_id(self) -> int:
+        """A fresh id no track will be given (ids are never reused): the new published id of a split track."""
+        self._next_id += 1
+        return self._next_id - 1
+
     def snapshots(self, at_s: float | None = None, include_tentative: bool = True) -> list[TrackSnapshot]:
         """Snapshots of the live tracks, sorted by id, states predicted forward to ``at_s``.
 

@@ -319,3 +319,30 @@ def test_a_decided_track_publishes_its_decision_through_the_confidence_map(embed
         published[name] = track.identity_confidence
     assert published["mapped"] == 0.42
     assert published["raw"] > 0.9  # the decision's posterior
+
+
+def test_a_track_the_tracker_swapped_onto_another_person_is_published_under_a_new_id(embeddings) -> None:
+    """The person on track T is face A for 3 s; then the track carries B's face (the tracker swapped people):
+    once the faces release A, T ends on the output and the same tracker track goes on under a new id that
+    starts at the split, so a robot following T as A does not follow B."""
+    a, b = embeddings[IDS[0]], embeddings[IDS[1]]
+    core = MasterCore(_config())
+    _walk(core, {"p": (np.array([0.0, 0.0]), a[:5])}, 0.0, 3.0)
+    (before,) = core.tracks()
+    assert before.face_id != 0
+    events = []
+    t, k = 3.0, 0
+    while t < 8.0:  # the same tracker track, now showing B's face
+        pos = np.array([0.5 * t, 0.0, 0.0])
+        out = core.process_frame(CameraFrameRecord("cam_a", t, (PersonRecord(pos, 0.05, 1.75, b[k % 5], 0.9, 0.8),)))
+        events.extend(out.identity_events)
+        k += 1
+        t = 3.0 + k / 10.0
+    (after,) = core.tracks()
+    assert core.tracker.track_ids() == [before.track_id]  # one tracker track throughout
+    swaps = [e for e in events if e.kind.value == "swapped"]
+    assert [(e.track_id, e.face_id) for e in swaps] == [(before.track_id, before.face_id)]
+    assert after.track_id not in (0, before.track_id) and core.public_id(before.track_id) == after.track_id
+    assert after.face_id not in (0, before.face_id)  # B, decided afresh on the new id
+    assert after.first_seen_s >= swaps[0].stamp_s > before.first_seen_s
+    assert core.stats.faces_released_swapped == 1
