@@ -143,12 +143,6 @@ class MasterConfig:
     min_observations: int = param(3, "Face observations needed before a decision (count).", low=1, high=1000)
     new_person_scale_c: float = param(1.0, "The paper's c: larger = readier to call a face new.",
                                       low=0.0, high=1e6, low_open=True)
-    glance_gap_s: float = param(
-        1.0, "A camera's face observations of a track with no gap longer than this form one glance (s).",
-        low=0.0, high=60.0)
-    glance_correlation: float = param(
-        0.0, "Correlation assumed between the observations of one glance: n of them count as "
-        "n / (1 + (n - 1) rho) (0 = independent, the paper; 1 = a glance counts once).", low=0.0, high=1.0)
     max_features_per_face: int = param(50, "Embeddings kept per face, a diverse subset (count).", low=1, high=10000)
     max_faces: int = param(
         3000, "Learned faces kept at most: a new face beyond it evicts the least recently seen unnamed face not on a "
@@ -396,7 +390,6 @@ class MasterCore:
             self.identity: IdentityManagerBase = make_identity_manager(
                 "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
                 prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
-                glance_gap_s=cfg.glance_gap_s, glance_correlation=cfg.glance_correlation,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
                 release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,

@@ -35,7 +35,7 @@ from face_reid_master.identity.size_likelihood import FaceLikelihood, default_fa
 
 _IDENTITY_FIELDS = {
     "bayes": ("posterior_threshold", "prior_probability", "min_observations", "new_person_scale_c",
-              "glance_gap_s", "glance_correlation", "max_features_per_face", "learn_only_consistent_features",
+              "max_features_per_face", "learn_only_consistent_features",
               "release_after_inconsistent"),
     "threshold": ("threshold_distance", "threshold_votes", "max_features_per_face", "learn_only_consistent_features",
                   "release_after_inconsistent"),

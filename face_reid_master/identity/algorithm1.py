@@ -176,8 +176,7 @@ class IdentityManagerBase:
         """Queue face embeddings (K, embedding_dim) observed on a track; used at the next :meth:`step`.
 
         ``eye_px``: the face size (eye distance, px) of each row, for size-conditioned likelihoods (None or
-        0: unknown). ``source``: the camera that saw them (its consecutive observations of a track form a
-        glance, see :mod:`~face_reid_master.identity.glance_evidence`). Returns False (and counts it) when
+        0: unknown). ``source``: the camera that saw them. Returns False (and counts it) when
         the track was already deleted (a late message). Raises ValueError on a wrong shape/dtype, NaN or Inf.
         """
         tid = check_int("track_id", track_id, -(2**63))
@@ -292,7 +291,6 @@ class IdentityManagerBase:
         unassigned_ids: list[int] = []
         unassigned_obs: list[F32Array] = []
         unassigned_eye: list[FloatArray] = []
-        unassigned_chunks: list[list[Chunk]] = []
         bank = self._bank
         single_slots: list[int] = []  # one new feature into a full feature set: batched below
         single_obs: list[F32Array] = []
@@ -329,7 +327,6 @@ class IdentityManagerBase:
                 unassigned_ids.append(tid)
                 unassigned_obs.append(obs)
                 unassigned_eye.append(_eye_rows(chunks))
-                unassigned_chunks.append(chunks)
             if slot is not None:
                 if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
                     single_slots.append(slot)
@@ -339,7 +336,7 @@ class IdentityManagerBase:
         if single_slots:
             bank.add_one_each(np.array(single_slots, dtype=np.intp), np.concatenate(single_obs))
         if unassigned_ids:
-            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye, unassigned_chunks)
+            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         if self.body_evidence is not None:
@@ -720,9 +717,9 @@ class IdentityManagerBase:
 
     # hooks for the classification method
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
-                           eye_px: list[FloatArray], chunks: list[list[Chunk]]) -> None:
+                           eye_px: list[FloatArray]) -> None:
         """Accumulate the evidence of this step's observations of unassigned tracks (one array per track;
-        ``chunks``: per track, the queued chunks its rows came from, in order: camera and stamp)."""
+        ``eye_px``: the eye distance of each row, px, 0 = unknown)."""
         raise NotImplementedError
 
     def _decide(self) -> list[tuple[int, int, float]]:

@@ -30,8 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.identity.algorithm1 import Chunk, IdentityManagerBase, TrackEntry
-from face_reid_master.identity.glance_evidence import GlanceEvidence
+from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
@@ -51,9 +50,7 @@ class BayesIdentityManager(IdentityManagerBase):
     and ``sinkhorn_max_iterations`` [10]; ``sinkhorn_solver`` "newton" (same fixed point in a few
     iterations) or "sinkhorn" (the paper's alternations).  ``max_abs_log_likelihood_ratio`` (None = the
     paper) optionally bounds the evidence of a single observation, against wrong crops / track swaps.
-    ``glance_gap_s`` and ``glance_correlation`` (0 = the paper's independent observations): the
-    observations of one camera's glance at a track count as ``n / (1 + (n - 1) rho)`` observations
-    (:mod:`~face_reid_master.identity.glance_evidence`).  The remaining arguments are those of
+    The remaining arguments are those of
     :class:`IdentityManagerBase`.
     """
 
@@ -69,8 +66,6 @@ class BayesIdentityManager(IdentityManagerBase):
         sinkhorn_max_iterations: int = 100,
         sinkhorn_solver: str = "newton",
         max_abs_log_likelihood_ratio: float | None = None,
-        glance_gap_s: float = 1.0,
-        glance_correlation: float = 0.0,
         **bank_args: Any,
     ) -> None:
         super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
@@ -103,7 +98,6 @@ class BayesIdentityManager(IdentityManagerBase):
                 low_open=True, high_open=True,
             )
         self.max_abs_log_likelihood_ratio = max_abs_log_likelihood_ratio
-        self._glances = GlanceEvidence(glance_gap_s, glance_correlation)
         self._log_c = math.log(self.likelihood.new_person_scale_c)
         self._table = np.zeros((1, 1))  # row 0 / column 0 slack; P[0, 0] unused (0)
         self._counts = np.zeros((1, 1), dtype=np.int64)
@@ -158,8 +152,6 @@ class BayesIdentityManager(IdentityManagerBase):
         self._table = np.delete(self._table, idx, axis=0)
         self._counts = np.delete(self._counts, idx, axis=0)
         drop = set(track_ids)
-        for t in drop:
-            self._glances.forget_track(t)
         self._rows = [t for t in self._rows if t not in drop]
         self._reindex_rows()
         self._dirty = True
@@ -168,14 +160,12 @@ class BayesIdentityManager(IdentityManagerBase):
         n1 = self._table.shape[0]
         self._table = np.hstack([self._table, np.full((n1, 1), self.prior_probability)])
         self._counts = np.hstack([self._counts, np.zeros((n1, 1), dtype=np.int64)])
-        self._glances.add_column()
         self._dirty = True
 
     def _on_faces_unavailable(self, column_indices: list[int]) -> None:
         cols = [c + 1 for c in column_indices]
         self._table = np.delete(self._table, cols, axis=1)
         self._counts = np.delete(self._counts, cols, axis=1)
-        self._glances.remove_columns(cols)
         self._dirty = True
 
     def _on_track_identified(self, track_id: int) -> None:
@@ -186,7 +176,7 @@ class BayesIdentityManager(IdentityManagerBase):
 
     # ------------------------------------------------------------------------------ inference
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
-                           eye_px: list[FloatArray], chunks: list[list[Chunk]]) -> None:
+                           eye_px: list[FloatArray]) -> None:
         for tid in track_ids:
             if tid not in self._row_of:
                 self._add_row(tid)
@@ -207,9 +197,7 @@ class BayesIdentityManager(IdentityManagerBase):
             lr = model.log_ratio_rows(d, n_feats, buckets)
             if self.max_abs_log_likelihood_ratio is not None:
                 np.clip(lr, -self.max_abs_log_likelihood_ratio, self.max_abs_log_likelihood_ratio, out=lr)
-        if not self._glances.independent:
-            self._glance_evidence(track_ids, chunks, lr, log_ev)
-        elif m and len(sizes) == obs.shape[0]:
+        if m and len(sizes) == obs.shape[0]:
             log_ev[:, 1:] = lr
         elif m:
             starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -218,21 +206,6 @@ class BayesIdentityManager(IdentityManagerBase):
         self._table[rows] *= np.exp(log_ev)
         self._counts[rows] += sizes[:, None]
         self._dirty = True
-
-    def _glance_evidence(self, track_ids: list[int], chunks: list[list[Chunk]], lr: FloatArray,
-                         log_ev: FloatArray) -> None:
-        """log_ev rows := each track's change of glance-weighted evidence (lr: per-observation ratios)."""
-        full = np.empty((lr.shape[0], lr.shape[1] + 1))
-        full[:, 0] = self._log_c
-        full[:, 1:] = lr
-        start = 0
-        for r, (tid, runs) in enumerate(zip(track_ids, chunks, strict=True)):
-            total = np.zeros(full.shape[1])
-            for run in runs:
-                rows = run.embeddings.shape[0]
-                total += self._glances.update(tid, run.source, run.stamp_s, full[start:start + rows])
-                start += rows
-            log_ev[r] = total
 
     def _normalise(self) -> None:
         if len(self._rows) == 0:

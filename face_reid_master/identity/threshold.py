@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.identity.algorithm1 import Chunk, IdentityManagerBase, TrackEntry, Vote
+from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry, Vote
 
 __all__ = ["ThresholdIdentityManager"]
 
@@ -38,7 +38,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
         self.n_votes = check_int("n_votes", n_votes, 1)
 
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
-                           eye_px: list[npt.NDArray[np.float64]], chunks: list[list[Chunk]]) -> None:
+                           eye_px: list[npt.NDArray[np.float64]]) -> None:
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
         d = self._available_distances(obs)
         if d.shape[1]:
