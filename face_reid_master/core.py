@@ -191,10 +191,6 @@ class MasterConfig:
         0.0, "Two learned faces whose features are closer than this face-embedding distance count as one person "
         "in a body decision (a second face learned while another track held the first); 0 = half the face "
         "decision distance.", low=0.0, high=4.0)
-    body_fusion: str = param(
-        "funnel", "How a faceless track's body appearance and head height are fused (second seed, Algorithm 2): "
-        "'funnel' (appearance prunes the faces, the rest are also judged by height) or 'score' (both summed for "
-        "every face).", choices=("funnel", "score"))
     body_funnel_alpha: float = param(
         1.5, "Funnel: a face whose recent bodies are farther than this times the nearest face's is abandoned "
         "for that observation (> 1).", low=1.0, high=100.0, low_open=True)
@@ -380,7 +376,7 @@ class MasterCore:
                 max_log_ratio=cfg.body_max_log_ratio,
                 online=self.online_metric, rank_limit=cfg.body_online_rank_limit,
                 verified_confidence=cfg.body_online_verified_confidence,
-                negative_face_distance=cfg.body_online_negative_face_distance or None, fusion=cfg.body_fusion,
+                negative_face_distance=cfg.body_online_negative_face_distance or None,
                 funnel_alpha=cfg.body_funnel_alpha, height_same_std_m=cfg.body_height_same_std_m,
                 height_other_std_m=cfg.body_height_other_std_m,
                 alike_face_distance=cfg.body_alike_face_distance or None)

@@ -83,9 +83,6 @@ def _parser() -> argparse.ArgumentParser:
                    help="fused (default): bodies (where the scenario has them) steer the tracker's association "
                         "(body_appearance_tracking) and name tracks that show no face (body_identity); body: "
                         "bodies for the tracker only; face: positions and faces only, as before bodies")
-    p.add_argument("--fusion", choices=("funnel", "score"), default="funnel",
-                   help="how body appearance and head height are fused for a faceless track (body_fusion): the "
-                        "feature funnel (default) or plain score-level fusion")
     p.add_argument("--online-update", choices=("on", "off"), default="on",
                    help="on: the body metric is updated online from body pairs the faces labelled "
                         "(body_online_update, re-fitted in the frame's thread so that runs repeat); the JSON "
@@ -269,7 +266,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _config(args: argparse.Namespace, method: str, space: str) -> MasterConfig:
     """The master configuration the evaluation's options ask for."""
     return MasterConfig(method=method, embedding_space=space, body_appearance_tracking=args.evidence != "face",
-                        body_identity=args.evidence == "fused", body_fusion=args.fusion,
+                        body_identity=args.evidence == "fused",
                         body_online_update=args.online_update == "on", body_online_background=False)
 
 

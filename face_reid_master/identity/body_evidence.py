@@ -26,7 +26,7 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.online_metric import MinedPair, OnlineBodyMetric
 from face_reid_master.identity.body_gallery import FaceBodyPool, PoolSnapshot
-from face_reid_master.identity.feature_funnel import FUSIONS, funnel_survivors, gaussian_log_ratio
+from face_reid_master.identity.feature_funnel import funnel_survivors, gaussian_log_ratio
 from face_reid_master.identity.likelihood import LikelihoodModel
 
 __all__ = ["BodyEvidence"]
@@ -66,10 +66,10 @@ class BodyEvidence:
     others are mined against) when its face decided it with at least this posterior. ``negative_face_distance``
     (theta_2, face-embedding distance; None = the identity layer's decision distance): two faces are
     confidently different people when none of their features are closer than this.
-    ``fusion``: how a faceless track's body appearance and head height are combined (see
-    :mod:`~face_reid_master.identity.feature_funnel`): "funnel" (appearance first; a face whose recent bodies
-    are farther than ``funnel_alpha`` x the nearest face's is abandoned for that observation, the others are
-    also judged by height) or "score" (both ratios summed for every face). ``height_same_std_m`` /
+    A faceless track's body appearance and head height are combined by the feature funnel (see
+    :mod:`~face_reid_master.identity.feature_funnel`): appearance first; a face whose recent bodies are farther
+    than ``funnel_alpha`` x the nearest face's is abandoned for that observation, the others are also judged
+    by height. ``height_same_std_m`` /
     ``height_other_std_m``: spread of the difference between a person's head height and their face's recent
     median, for the same person / another person (m). ``alike_face_distance`` (face-embedding distance; None =
     half the identity layer's decision distance): two learned faces with features closer than this are taken
@@ -82,7 +82,7 @@ class BodyEvidence:
                  other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5,
                  online: OnlineBodyMetric | None = None, mine_interval_s: float = 2.0, rank_limit: int = 1,
                  verified_confidence: float = 0.99, negative_face_distance: float | None = None,
-                 fusion: str = "funnel", funnel_alpha: float = 1.5, height_same_std_m: float = 0.05,
+                 funnel_alpha: float = 1.5, height_same_std_m: float = 0.05,
                  height_other_std_m: float = 0.12, alike_face_distance: float | None = None) -> None:
         if not isinstance(likelihood, LikelihoodModel):
             raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
@@ -104,9 +104,6 @@ class BodyEvidence:
         self.verified_confidence = check_real("verified_confidence", verified_confidence, 0.0, 1.0)
         self.negative_face_distance = None if negative_face_distance is None else check_real(
             "negative_face_distance", negative_face_distance, 0.0, math.inf, low_open=True)
-        if fusion not in FUSIONS:
-            raise ValueError(f"fusion must be one of {FUSIONS}, got {fusion!r}")
-        self.fusion = fusion
         self.funnel_alpha = check_real("funnel_alpha", funnel_alpha, 1.0, math.inf, low_open=True)
         self.height_same_std_m = check_real("height_same_std_m", height_same_std_m, 0.0, math.inf, low_open=True)
         self.height_other_std_m = check_real("height_other_std_m", height_other_std_m, self.height_same_std_m,
@@ -182,16 +179,14 @@ class BodyEvidence:
 
     def _log_ratios(self, appearance: FloatArray, height_difference: FloatArray) -> FloatArray:
         """Per observation and face, the log-likelihood ratio of "same person" from the appearance distances
-        and head-height differences (NaN: not measured, no evidence), fused as ``fusion`` says."""
+        and head-height differences (NaN: not measured, no evidence), fused by the feature funnel."""
         cap = self.max_log_ratio
         lr = np.clip(self.likelihood.log_likelihood_ratio(appearance), -cap, cap)
         geo = np.clip(gaussian_log_ratio(height_difference, self.height_same_std_m, self.height_other_std_m),
                       -cap, cap)
         lr = lr + np.where(np.isfinite(geo), geo, 0.0)
-        if self.fusion == "funnel":  # appearance prunes; the faces abandoned get the bound against them
-            keep = funnel_survivors([appearance, height_difference], [self.funnel_alpha])
-            lr = np.where(keep, lr, -cap)
-        return lr
+        keep = funnel_survivors([appearance, height_difference], [self.funnel_alpha])  # appearance prunes
+        return np.where(keep, lr, -cap)  # the faces abandoned get the bound against them
 
     def track_bodies(self, track_id: int) -> tuple[F32, float, FloatArray]:
         """The track's kept body embeddings (k, r), the stamp of its newest and their head heights (for its
