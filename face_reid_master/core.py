@@ -183,7 +183,7 @@ class MasterConfig:
         0.999, "A faceless track gets a face when its body posterior exceeds this (0.5..1).", low=0.5, high=1.0,
         low_open=True, high_open=True)
     body_max_log_ratio: float = param(
-        0.5, "Bound of one body observation's evidence, in log odds (frames of one glance are far from "
+        0.25, "Bound of one body observation's evidence, in log odds (frames of one glance are far from "
         "independent).", low=0.0, high=10.0, low_open=True)
     body_min_observations: int = param(
         6, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
