@@ -1,10 +1,10 @@
-"""Write docs/results.md from the recorded evaluation results (bench/results/eval_*.json).
+"""Write docs/results.md from the recorded results (bench/results/eval_*.json and choices_*.json).
 
     python bench/results_page.py            # writes docs/results.md
     python bench/results_page.py --check    # exit 1 when docs/results.md is not what the files give
 
-Every number on the page comes from a result file written by ``bench/record_eval.py``; a test keeps the page
-in sync with the files.
+Every number on the page comes from a result file written by ``bench/record_eval.py`` or ``bench/dev_sweep.py``;
+a test keeps the page in sync with the files.
 """
 
 from __future__ import annotations
@@ -88,13 +88,41 @@ def _pooled(docs: list[dict[str, Any]], evidence: str) -> str:
             f"{conf / n:.3f}, ECE {ece:.3f}")
 
 
+_CHOICE_COLUMNS = ("variant", "settings", "Table II right / wrong", "wrong of decided", "recover rate",
+                   "face decisions right / wrong", "body decisions right / wrong", "wrong names (detections)",
+                   "strangers named (detections)")
+
+
+def _choices(doc: dict[str, Any]) -> str:
+    """One sweep of bench/dev_sweep.py as a table: every variant summed over the development scenarios."""
+    def pct(num: int, den: int) -> str:
+        return _pct(num / den if den else None)
+
+    head = "| " + " | ".join(_CHOICE_COLUMNS) + " |\n" + "|---" * len(_CHOICE_COLUMNS) + "|\n"
+    rows = []
+    for v in doc["variants"]:
+        settings = ", ".join(f"`{k}={json.dumps(x)}`" for k, x in v["overrides"].items()) or "defaults"
+        decided = v["right"] + v["wrong"]
+        recover = v["reid_success"] / v["reid_cases"] if v["reid_cases"] else 0.0
+        rows.append(f"| {v['label']} | {settings} | {v['right']} / {v['wrong']} | {pct(v['wrong'], decided)} | "
+                    f"{recover:.3f} | {v['face_right']} / {v['face_wrong']} | {v['body_right']} / {v['body_wrong']} | "
+                    f"{pct(v['wrong_names'], v['gallery_detections'])} | "
+                    f"{pct(v['others_named'], v['other_detections'])} |")
+    seeds = ", ".join(str(s["seed"]) for s in doc["scenarios"])
+    return (f"### {doc['name']}\n\nSummed over the development scenarios of seeds {seeds} ({doc['commit']}, "
+            f"{doc['date']}): `{doc['command']}`\n\n{head}" + "\n".join(rows) + "\n")
+
+
 def page() -> str:
     docs = [json.loads(p.read_text(encoding="utf-8")) for p in sorted(RESULTS.glob("eval_*.json"))]
     rows = "\n".join(_row(d) for d in docs)
     pooled = "\n".join(_pooled(docs, e) for e in ("fused", "face"))
     commands = "\n".join(f"- `{d['name']}`: `{d['command']}`" for d in docs)
+    sweeps = [json.loads(p.read_text(encoding="utf-8")) for p in sorted(RESULTS.glob("choices_*.json"))]
+    choices = "\n".join(_choices(d) for d in sweeps)
     return (f"{_HEAD}{_TABLE_HEAD}{rows}\n\nAll decisions of the honest test results pooled (the identity_confidence "
-            f"the master published):\n\n{pooled}\n\nThe evaluation commands:\n\n{commands}\n")
+            f"the master published):\n\n{pooled}\n\nThe evaluation commands:\n\n{commands}\n"
+            + (f"\n## Choices made on the development scenarios\n\n{choices}" if sweeps else ""))
 
 
 def main(argv: list[str]) -> int:

@@ -23,3 +23,31 @@ def test_the_results_page_is_generated_from_the_result_files() -> None:
         row = next(line for line in page.splitlines() if line.startswith(f"| {doc['name']} |"))
         assert f"| {t2['success']} / {t2['failure']} |" in row
         assert ("| yes |" in row) == bool(doc["result"]["protocol"]["honest"])
+
+
+def test_every_development_sweep_is_on_the_page_with_its_sums() -> None:
+    page = (REPO / "docs" / "results.md").read_text(encoding="utf-8")
+    for path in sorted((REPO / "bench" / "results").glob("choices_*.json")):
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        assert f"### {doc['name']}" in page and doc["command"] in page
+        for v in doc["variants"]:
+            row = next(line for line in page.splitlines() if line.startswith(f"| {v['label']} |"))
+            assert f"| {v['right']} / {v['wrong']} |" in row and f"| {v['body_right']} / {v['body_wrong']} |" in row
+
+
+def test_a_sweep_variant_is_label_colon_settings() -> None:
+    sys.path.insert(0, str(REPO / "bench"))
+    try:
+        from dev_sweep import parse_variant
+    finally:
+        sys.path.remove(str(REPO / "bench"))
+    assert parse_variant("base:") == ("base", {})
+    assert parse_variant("b:body_max_log_ratio=0.25,body_identity=false,method=bayes") == (
+        "b", {"body_max_log_ratio": 0.25, "body_identity": False, "method": "bayes"})
+    for bad in ("nolabel", ":a=1", "x:a"):
+        try:
+            parse_variant(bad)
+        except ValueError as exc:
+            assert "LABEL" in str(exc) or "param=value" in str(exc)
+        else:
+            raise AssertionError(f"{bad!r} was accepted")
