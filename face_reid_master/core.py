@@ -769,7 +769,9 @@ class MasterCore:
         (how often such decisions were right), an undecided track's current posterior as it is."""
         evidence = self.identity.evidence_of(track_id)
         raw = float(self.identity.confidence_of(track_id))
-        return float(self.confidence_map(evidence, raw)) if evidence else raw
+        if not evidence:
+            return raw
+        return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
 
     def _room_for(self, new_face: int) -> bool:
         """Face cap: a new face within max_faces evicts the least recently seen unnamed face not on a track;

@@ -81,6 +81,7 @@ class TrackEntry:
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
     evidence: str = ""  # identified: "face", "body" (no face seen yet) or "both" (body, then its face agreed)
+    new_face: bool = False  # identified: its decision created the face (a person not known before)
 
 
 def _rows(chunks: list[Chunk]) -> F32Array:
@@ -387,6 +388,7 @@ class IdentityManagerBase:
         track.face_id = fid
         track.confidence = float(confidence)
         track.evidence = "body"
+        track.new_face = False
         self._move_track_bodies(track.track_id, fid)
         self.stats.assigned_by_body += 1
         return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
@@ -485,6 +487,11 @@ class IdentityManagerBase:
         "" (unidentified / unknown track)."""
         track = self._tracks.get(track_id)
         return "" if track is None or track.face_id is None else track.evidence
+
+    def decided_new(self, track_id: int) -> bool:
+        """Whether a live identified track's decision created its face (False otherwise)."""
+        track = self._tracks.get(track_id)
+        return track is not None and track.face_id is not None and track.new_face
 
     def face_id_of(self, track_id: int) -> int | None:
         """Face id assigned to a live track, or None while unidentified / unknown track."""
@@ -675,6 +682,7 @@ class IdentityManagerBase:
         track.slot = None
         track.votes.clear()
         track.evidence = "face"
+        track.new_face = kind == IdentityEventKind.NEW_FACE
         self._move_track_bodies(tid, fid)
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from face_reid_master.evaluation.protocol import scenario_crop_identities
-from face_reid_master.identity.confidence_map import EVIDENCE, ConfidenceMap, save_confidence_map
+from face_reid_master.identity.confidence_map import DECISIONS, ConfidenceMap, save_confidence_map
 from face_reid_master.sim.scenario_files import load_scenario_document
 
 
@@ -53,7 +53,7 @@ def _pooled(right: Sequence[float], count: Sequence[float]) -> list[float]:
 
 def fit_confidence_map(results: Iterable[Mapping[str, Any]], identities: Iterable[str] = (),
                        sources: Sequence[str] = ()) -> ConfidenceMap:
-    """Fit a map from face-reid-eval results (their ``calibration`` blocks: decisions per evidence and bin)."""
+    """Fit a map from face-reid-eval results (their ``calibration`` blocks: decisions per kind and bin)."""
     edges: tuple[float, ...] | None = None
     right: dict[str, list[float]] = {}
     count: dict[str, list[float]] = {}
@@ -62,12 +62,13 @@ def fit_confidence_map(results: Iterable[Mapping[str, Any]], identities: Iterabl
         e = tuple(float(x) for x in cal["bin_edges"])
         if edges is None:
             edges = e
-            right = {k: [0.0] * (len(e) - 1) for k in EVIDENCE}
-            count = {k: [0.0] * (len(e) - 1) for k in EVIDENCE}
+            right = {k: [0.0] * (len(e) - 1) for k in DECISIONS}
+            count = {k: [0.0] * (len(e) - 1) for k in DECISIONS}
         elif e != edges:
             raise ValueError(f"results with other bin edges: {list(e)} vs {list(edges)}")
-        for kind, block in cal["by_evidence"].items():
-            target = "body" if kind == "body" else "face"
+        if "by_decision" not in cal:
+            raise ValueError("a result without decisions per kind (calibration.by_decision): evaluate it again")
+        for target, block in cal["by_decision"].items():
             for k, b in enumerate(block.get("bins", ())):
                 n = int(b["count"])
                 if n:
@@ -75,11 +76,12 @@ def fit_confidence_map(results: Iterable[Mapping[str, Any]], identities: Iterabl
                     right[target][k] += n - int(b["wrong"])
     if edges is None:
         raise ValueError("no results to fit on")
-    values = {k: tuple(round(v, 6) for v in _pooled(right[k], count[k])) for k in EVIDENCE}
-    decisions = {k: tuple(int(n) for n in count[k]) for k in EVIDENCE}
+    values = {k: tuple(round(v, 6) for v in _pooled(right[k], count[k])) for k in DECISIONS}
+    decisions = {k: tuple(int(n) for n in count[k]) for k in DECISIONS}
     meta = {"tool": "face_reid_master.tools.fit_confidence", "fitted_on": list(sources),
             "identities": sorted(set(identities)),
-            "right": {k: int(sum(right[k])) for k in EVIDENCE}, "decisions": {k: int(sum(count[k])) for k in EVIDENCE}}
+            "right": {k: int(sum(right[k])) for k in DECISIONS},
+            "decisions": {k: int(sum(count[k])) for k in DECISIONS}}
     return ConfidenceMap(edges, values, decisions, meta)
 
 

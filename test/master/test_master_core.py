@@ -306,19 +306,25 @@ def test_frames_deferred_to_one_identity_update_per_cycle_give_the_same_identiti
 
 
 def test_a_decided_track_publishes_its_decision_through_the_confidence_map(embeddings) -> None:
-    """identity_confidence is what the map says decisions like this one are worth, not the raw posterior."""
+    """identity_confidence is what the map says decisions like this one are worth, not the raw posterior: a
+    new face is looked up as "face_new", the person's return (re-identified) as "face_known"."""
     from face_reid_master.identity.confidence_map import ConfidenceMap
 
     published = {}
-    for name, cmap in (("mapped", ConfidenceMap((0.0, 1.0), {"face": (0.42,), "body": (0.17,)})),
-                       ("raw", ConfidenceMap.identity())):
+    mapped = ConfidenceMap((0.0, 1.0), {"face_known": (0.42,), "face_new": (0.31,), "body": (0.17,)})
+    for name, cmap in (("mapped", mapped), ("raw", ConfidenceMap.identity())):
         core = MasterCore(_config(), confidence_map=cmap)
         _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:5])}, 0.0, 3.0)
-        (track,) = core.tracks()
-        assert track.face_id and track.identity_evidence == "face"
-        published[name] = track.identity_confidence
-    assert published["mapped"] == 0.42
-    assert published["raw"] > 0.9  # the decision's posterior
+        (first,) = core.tracks()
+        assert first.face_id and first.identity_evidence == "face" and core.identity.decided_new(first.track_id)
+        _walk(core, {}, 3.0, 6.0)  # gone long enough for the track to be deleted
+        _walk(core, {"a": (np.array([3.0, 1.0]), embeddings[IDS[0]][5:])}, 6.0, 9.0)
+        (back,) = core.tracks()
+        assert back.face_id == first.face_id and back.track_id != first.track_id
+        assert not core.identity.decided_new(back.track_id)
+        published[name] = (first.identity_confidence, back.identity_confidence)
+    assert published["mapped"] == (0.31, 0.42)
+    assert min(published["raw"]) > 0.9  # the decisions' posteriors
 
 
 def test_a_track_the_tracker_swapped_onto_another_person_is_published_under_a_new_id(embeddings) -> None:

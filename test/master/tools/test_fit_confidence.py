@@ -25,7 +25,7 @@ def _write_result(tmp: Path, name: str, face: list[tuple[int, int]], body: list[
     def block(rows: list[tuple[int, int]]) -> dict:
         return {"bins": [{"count": n, "wrong": w} for n, w in rows]}
     res = {"scenario": {"directory": str(scenario)},
-           "calibration": {"bin_edges": EDGES, "by_evidence": {"face": block(face), "body": block(body)}}}
+           "calibration": {"bin_edges": EDGES, "by_decision": {"face_known": block(face), "body": block(body)}}}
     if confidence_map is not None:
         res["confidence_map"] = confidence_map
     path = tmp / f"{name}.json"
@@ -41,8 +41,9 @@ def test_the_map_pools_the_results_and_records_their_people(tmp_path: Path, caps
     out = tmp_path / "map.json"
     assert main([str(a), str(b), "--out", str(out)]) == 0
     cmap = load_confidence_map(out)
-    assert cmap.values["face"][2] == pytest.approx((54 + 1) / (60 + 2))  # both results' decisions at >= 0.999
-    assert cmap.values["face"][1] == pytest.approx((2 + 1) / (4 + 2))
+    assert cmap.values["face_known"][2] == pytest.approx((54 + 1) / (60 + 2))  # both results' decisions >= 0.999
+    assert cmap.values["face_known"][1] == pytest.approx((2 + 1) / (4 + 2))
+    assert cmap.values["face_new"] == pytest.approx([0.5] * 3)  # no decision of the kind: no information
     assert cmap.values["body"] == pytest.approx([(7 + 1) / (10 + 2)] * 3)
     assert cmap.metadata["identities"] == ["celeba_1", "celeba_2", "celeba_3", "market_1", "market_2"]
     assert json.loads(capsys.readouterr().out)["people"] == 5
