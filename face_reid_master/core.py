@@ -766,11 +766,12 @@ class MasterCore:
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
-        (how often such decisions were right), an undecided track's current posterior as it is."""
+        (how often such decisions were right); 0 for an undecided track (it claims no face: its candidates' raw
+        posteriors are the overconfident numbers the map exists to correct)."""
         evidence = self.identity.evidence_of(track_id)
-        raw = float(self.identity.confidence_of(track_id))
         if not evidence:
-            return raw
+            return 0.0
+        raw = float(self.identity.confidence_of(track_id))
         return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
 
     def _room_for(self, new_face: int) -> bool:

@@ -314,7 +314,12 @@ def test_a_decided_track_publishes_its_decision_through_the_confidence_map(embed
     mapped = ConfidenceMap((0.0, 1.0), {"face_known": (0.42,), "face_new": (0.31,), "body": (0.17,)})
     for name, cmap in (("mapped", mapped), ("raw", ConfidenceMap.identity())):
         core = MasterCore(_config(), confidence_map=cmap)
-        _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:5])}, 0.0, 3.0)
+        _walk(core, {"a": (np.array([0.0, 0.0]), embeddings[IDS[0]][:2])}, 0.0, 0.2)  # 2 faces: undecided
+        _walk(core, {"a": (np.array([0.1, 0.0]), None)}, 0.2, 1.0)  # confirmed, no face
+        (undecided,) = core.tracks()
+        assert undecided.face_id == 0 and undecided.identity_confidence == 0.0  # no claim, no confidence
+        assert core.identity.confidence_of(undecided.track_id) > 0.0  # though its candidates have posteriors
+        _walk(core, {"a": (np.array([0.5, 0.0]), embeddings[IDS[0]][:5])}, 1.0, 3.0)
         (first,) = core.tracks()
         assert first.face_id and first.identity_evidence == "face" and core.identity.decided_new(first.track_id)
         _walk(core, {}, 3.0, 6.0)  # gone long enough for the track to be deleted
