@@ -154,8 +154,8 @@ class MasterConfig:
         "faces against tracker swaps; false = the paper).")
     release_after_inconsistent: int = param(
         3, "An identified track whose last this many face embeddings were all beyond the decision distance "
-        "was swapped onto someone else: it loses its face and is classified afresh (count; 0 = never, the "
-        "paper; needs learn_only_consistent_features).", low=0, high=1000)
+        "was swapped onto someone else: it loses its face and goes on under a new track id, undecided (count; "
+        "0 = never, the paper; needs learn_only_consistent_features).", low=0, high=1000)
     lend_lost_faces: bool = param(
         True, "The face of a track the tracker lost (tracker.lost_after_s) may be given to another track before "
         "the lost one is deleted: the person came back as a new track (false = the paper: held until deleted).")
