@@ -56,11 +56,9 @@ def run_variant(scenarios: list[Any], metric: Any, overrides: dict[str, Any]) ->
     for sc in scenarios:
         space = sc.document["embedding_space"]
         gal = scenario_gallery(sc.document, sc.directory, default_gallery_people(sc.document, None), space=space)
-        days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
-                for d in sc.days]
         cfg = MasterConfig(**{"embedding_space": space, "body_online_background": False, **overrides})
         log = run_master(sc.frames, sc.frame_gt_ids, cfg, likelihood=default_face_likelihood(space),
-                         body_metric=metric, gallery=gal.people or None, days=days)
+                         body_metric=metric, gallery=gal.people or None, days=sc.day_spans)
         m = evaluate_run(log, gallery_people=gal.gt_of_name or None, scenario_summary=sc.summary, with_mot=False)
         t2, reid, ev = m["table_ii"], m["reidentification"], m["calibration"]["by_evidence"]
         dets = m["predefined_people"]["detections"]

@@ -62,9 +62,9 @@ class Decision:
 def run_decisions(log: RunLog) -> list[Decision]:
     """Every face-id assignment of the evaluated tracks, in time order, judged as the metrics judge them.
 
-    A track's first face id takes its :func:`track_outcomes` verdict. A later one (the face layer released a
-    swapped track, which was then identified afresh) is judged by the same rule with the track's person since
-    the swap (:meth:`TrackLog.face_person_until`) and "re-identification case" counted from the swap.
+    A track's first face id takes its :func:`track_outcomes` verdict. A later one (its lent face was taken while
+    it was lost, and it was identified afresh) is judged by the same rule with the track's person until then
+    (:meth:`TrackLog.face_person_until`).
     """
     face_person = face_persons(log)
     learned = learned_at(log, face_person)
@@ -77,9 +77,8 @@ def run_decisions(log: RunLog) -> list[Decision]:
             if k == 0:
                 right, why, reid = o.outcome == "success", o.failure_kind, o.reid_case
             else:
-                since = max((r for r in t.releases if r <= stamp), default=t.birth_s)
                 person = t.face_person_until(stamp)
-                reid = learned.get(person, math.inf) < since
+                reid = learned.get(person, math.inf) < t.birth_s
                 verdict, why = decision_verdict(face_person.get(fid, -1), kind, person, reid)
                 right = verdict == "success"
             out.append(Decision(t.track_id, float(stamp), int(fid), kind, conf, evidence, right, why, k == 0, reid))

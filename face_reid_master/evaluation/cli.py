@@ -242,8 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if log and gallery.people:
         print(f"gallery of {len(gallery.people)} people built in {time.perf_counter() - t1:.1f} s", file=log)
 
-    days = [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
-            for d in scenario.days]
+    days = scenario.day_spans
     if args.method == "both":
         runs = {m: _run_offline(args, m, scenario, gallery, days, log, model, body_metric, cmap)
                 for m in ("bayes", "threshold")}

@@ -24,7 +24,6 @@ from face_reid_master.body.metric_file import BodyFeatureMetric, BodyMetricModel
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.identity.confidence_map import ConfidenceMap
 from face_reid_master.identity.likelihood import LikelihoodModel
-from face_reid_master.identity.records import IdentityEventKind
 from face_reid_master.records import STATE_CONFIRMED, CameraFrameRecord
 
 __all__ = ["DEFAULT_TICK_PERIOD_S", "ProgressCallback", "RunLog", "TrackLog", "decision_thresholds", "progress_to",
@@ -40,8 +39,9 @@ class TrackLog:
     """What happened to one track (all stamps in scenario seconds).
 
     ``gt_counts``: true person (-1 = false positive) -> detections associated with the track.
-    ``assignments``: (stamp, face id, "new" | "known") in order (Algorithm 1 assigns once per track; after
-    a swap releases its face, the next assignment is listed too; ``releases``: when each swap began).
+    ``assignments``: (stamp, face id, "new" | "known") in order (Algorithm 1 assigns once per track; a track
+    whose lent face was taken while it was lost may be assigned again; a swapped track goes on under a new id,
+    i.e. as another TrackLog).
     ``evidence`` / ``confidence``: per assignment, what decided it and the posterior it was taken at.
     ``names``: name -> first stamp it was shown on one of the track's detections. ``path``: (stamp, x, y)
     samples of the published estimate while CONFIRMED. ``face_gt``: (stamp, true person) of each detection
@@ -60,7 +60,6 @@ class TrackLog:
     names: dict[str, float] = field(default_factory=dict)
     path: list[tuple[float, float, float]] = field(default_factory=list)
     face_gt: list[tuple[float, int]] = field(default_factory=list)  # (stamp, true person) of face detections
-    releases: list[float] = field(default_factory=list)  # swaps: stamp of the first face not its face's
     evidence: list[str] = field(default_factory=list)  # per assignment: "face" or "body" (what decided it)
     confidence: list[float] = field(default_factory=list)  # per assignment: identity_confidence at the decision
 
@@ -94,10 +93,8 @@ class TrackLog:
         return self.face_person_until(math.inf)
 
     def face_person_until(self, stamp_s: float) -> int:
-        """:attr:`face_person` of the face detections up to ``stamp_s`` since the track last lost a face
-        (a swap: what the track gathered before it was another person's); all of them if there were none."""
-        since = max((r for r in self.releases if r <= stamp_s), default=-math.inf)
-        counts = Counter(g for s, g in self.face_gt if g >= 0 and since - 1e-9 <= s <= stamp_s + 1e-9)
+        """:attr:`face_person` of the face detections up to ``stamp_s``; all of them if there were none."""
+        counts = Counter(g for s, g in self.face_gt if g >= 0 and s <= stamp_s + 1e-9)
         if not counts:
             counts = Counter(g for _, g in self.face_gt if g >= 0)
         if not counts:
@@ -254,9 +251,6 @@ def run_master(
         stamp = float(frame.stamp_s)
         tick_until(stamp)
         outcome = core.process_frame(frame)
-        for ev in outcome.identity_events:
-            if ev.kind == IdentityEventKind.SWAPPED and ev.track_id in tracks and ev.since_s is not None:
-                tracks[ev.track_id].releases.append(ev.since_s)
         gt = np.asarray(frame_gt_ids[i]).tolist()
         if not outcome.accepted:
             rejected += 1

@@ -277,6 +277,12 @@ class Scenario:
         return list(self.document["days"])
 
     @property
+    def day_spans(self) -> list[tuple[int, float, float, list[int]]]:
+        """(day, start s, end s, gt ids) of every day: what run_master's ``days`` takes."""
+        return [(int(d["day"]), float(d["start_s"]), float(d["end_s"]), [int(g) for g in d["gt_ids"]])
+                for d in self.document["days"]]
+
+    @property
     def summary(self) -> dict[str, Any]:
         return dict(self.document["summary"])
 

@@ -101,15 +101,14 @@ def _track(tid: int, person: int, birth: float, end: float, assignments: list[tu
     return t
 
 
-def test_run_decisions_take_the_table_ii_verdict_and_judge_a_decision_after_a_swap() -> None:
+def test_run_decisions_take_the_table_ii_verdict_and_judge_a_later_decision() -> None:
     swapped = _track(4, 1, 20.0, 30.0, [(21.0, 1, "known"), (26.0, 2, "known")], [0.97, 0.999])
     swapped.face_gt = [(20.5, 1)] * 3 + [(25.0, 1)] * 3  # person 1 all along: the first face id (0's) is wrong
-    swapped.releases = [24.0]
     tracks = [
         _track(1, 0, 0.0, 8.0, [(2.0, 1, "new")], [0.96]),  # first appearance: right
         _track(2, 1, 1.0, 9.0, [(4.0, 2, "new")], [0.99]),  # first appearance: right
         _track(3, 0, 10.0, 18.0, [(13.5, 1, "known")], [0.9999], ["body"]),  # re-identified by body: right
-        swapped,  # wrong known face, then released and given its own: right
+        swapped,  # wrong known face, then (its face taken while lost) given its own: right
         _track(5, 0, 40.0, 45.0, [(41.0, 3, "new")], [0.98]),  # known person given a new id: wrong
         _track(6, 1, 50.0, 55.0, [], []),  # never decided
     ]

@@ -454,14 +454,3 @@ def test_names_are_also_judged_per_detection_so_a_swapped_track_was_right_before
     assert names["pure_tracks"]["gallery_tracks"] == 1 and names["pure_tracks"]["wrong_name"] == 1  # bob's track
     with pytest.raises(ValueError, match="det_name"):
         RunLog("bayes", {}, {}, [0], [0.0], [0], [1], [0], det_name=[3], names=("alice",))
-
-
-def test_a_face_made_after_a_swap_belongs_to_whom_the_track_showed_since_the_swap() -> None:
-    # track 1: person 0's faces until 4 s (face 1), then person 1's; the swap is noticed from 5 s (releases)
-    # and face 2 made at 6 s from the faces since then: face 2 is person 1's, face 1 stays person 0's
-    t1 = _track(1, 0, 0.0, 9.0, assigned=(1.0, 1, "new"), n_det=30)
-    t1.assignments.append((6.0, 2, "new"))
-    t1.face_gt = [(0.5, 0)] * 3 + [(3.0, 0)] * 10 + [(5.0, 1), (5.5, 1), (6.0, 1)]
-    t1.releases = [5.0]
-    log = _empty_log([t1], {1: (1.0, 1), 2: (6.0, 1)})
-    assert face_persons(log) == {1: 0, 2: 1}
