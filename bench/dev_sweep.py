@@ -11,13 +11,12 @@ made on these sums (the frontier of wrong decisions against recover rate), on de
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import sys
 from pathlib import Path
 from typing import Any
 
-from record_eval import RESULTS, _commit, _machine, _shown
+from record_eval import RESULTS, provenance, shown
 
 from face_reid_master.body.metric_file import load_body_metric
 from face_reid_master.core import MasterConfig
@@ -88,10 +87,9 @@ def main(argv: list[str]) -> int:
     for label, overrides in variants:
         rows.append({"label": label, "overrides": overrides, **run_variant(scenarios, metric, overrides)})
         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
-    doc = {"name": args.name, "command": " ".join(["python bench/dev_sweep.py", *(_shown(a) for a in argv)]),
+    doc = {"name": args.name, "command": " ".join(["python bench/dev_sweep.py", *(shown(a) for a in argv)]),
            "scenarios": [{"directory": Path(sc.directory).name, "seed": sc.document.get("seed")} for sc in scenarios],
-           "commit": _commit(), "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d"),
-           "machine": _machine(), "variants": rows}
+           **provenance(), "variants": rows}
     out = RESULTS / f"choices_{args.name}.json"
     out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out}")

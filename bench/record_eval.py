@@ -45,7 +45,13 @@ def _machine() -> str:
     return f"{platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}"
 
 
-def _shown(option: str) -> str:
+def provenance() -> dict[str, str]:
+    """What produced a result file: the commit, the date (UTC) and the machine."""
+    return {"commit": _commit(), "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d"),
+            "machine": _machine()}
+
+
+def shown(option: str) -> str:
     """Paths inside the project are shown relative to it (the command reads the same on every machine)."""
     root = RESULTS.parent.parent
     path = Path(option)
@@ -67,14 +73,12 @@ def record(name: str, scenario: Path, options: list[str]) -> dict[str, Any]:
     params = doc.get("parameters", {})
     return {
         "name": name,
-        "command": "face-reid-eval " + " ".join([scenario.name, *map(_shown, options), "--no-mot"]),
+        "command": "face-reid-eval " + " ".join([scenario.name, *map(shown, options), "--no-mot"]),
         "simulation": {"faces_dir": doc.get("faces_dir"), "bodies_dir": doc.get("bodies_dir"),
                        "seed": doc.get("seed"), "level": doc.get("level"), "people": params.get("num_people"),
                        "cameras": params.get("num_cameras"), "duration_s": params.get("duration_s"),
                        "second_day": params.get("second_day"), "color_resolution": params.get("color_resolution")},
-        "commit": _commit(),
-        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d"),
-        "machine": _machine(),
+        **provenance(),
         "evidence": result.get("parameters", {}).get("evidence"),
         "result": {k: result[k] for k in _KEPT if k in result},
     }

@@ -190,7 +190,6 @@ def calibration_report(decisions: Sequence[Decision], *, thresholds: Mapping[str
     recorded = [d for d in decisions if math.isfinite(d.confidence)]
     conf, ok = _arrays([d.confidence for d in recorded], [d.right for d in recorded])
     evidence = np.array([d.evidence for d in recorded], dtype=object)
-    kind = np.array([d.kind for d in recorded], dtype=object)
     key = np.array([decision_key(d.evidence, d.kind == "new") for d in recorded], dtype=object)
     at_thresholds = {}
     for ev, thr in sorted((thresholds or {}).items()):
@@ -208,7 +207,6 @@ def calibration_report(decisions: Sequence[Decision], *, thresholds: Mapping[str
         "decisions_after_release": sum(not d.first for d in recorded),
         "decisions_without_confidence": len(decisions) - len(recorded),
         "by_evidence": {ev: _summary(conf[evidence == ev], ok[evidence == ev], edges) for ev in EVIDENCE_KINDS},
-        "by_kind": {k: _summary(conf[kind == k], ok[kind == k], edges) for k in ("new", "known")},
         "by_decision": {k: _summary(conf[key == k], ok[key == k], edges) for k in DECISIONS},  # the map's kinds
         "at_thresholds": at_thresholds,
         "frontier": frontier(conf, ok, frontier_thresholds, recovers=recovers, reid_tracks=reid_tracks),

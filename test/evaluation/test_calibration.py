@@ -88,7 +88,11 @@ def test_report_by_evidence_at_thresholds_and_unrecorded_posteriors() -> None:
                                             "wrong": 1, "error_rate": 0.1, "decisions_below_threshold": 0}
     assert rep["at_thresholds"]["body"]["error_rate"] == 0.5
     assert rep["frontier"][0]["decisions"] == 12 and rep["frontier"][0]["recover_rate"] == pytest.approx(10 / 12)
-    assert rep["by_kind"]["known"]["decisions"] == 12 and rep["by_kind"]["new"]["decisions"] == 0
+    kinds = rep["by_decision"]
+    assert (kinds["face_known"]["decisions"], kinds["face_new"]["decisions"], kinds["body"]["decisions"]) == (10, 0, 2)
+    new = calibration_report([_decision(0.999, False, kind="new"), _decision(0.999, True, kind="new")])
+    assert new["by_decision"]["face_new"]["decisions"] == 2 and new["by_decision"]["face_new"]["error_rate"] == 0.5
+    assert new["by_decision"]["face_known"]["decisions"] == 0
 
 
 def _track(tid: int, person: int, birth: float, end: float, assignments: list[tuple[float, int, str]],
