@@ -3,7 +3,7 @@
     python bench/dev_sweep.py NAME --scenarios DIR,DIR,... --body-metric FILE "LABEL:param=value,..." ...
 
 Each variant (``LABEL:`` alone = the defaults) runs the master core over every scenario, as ``face-reid-eval``
-does offline (fused evidence, the body metric refitted in the frame's thread), and is summed over them: Table II
+does offline (fused evidence), and is summed over them: Table II
 right / wrong, recover rate, face and body decisions, wrong names and strangers named per detection. Choices are
 made on these sums (the frontier of wrong decisions against recover rate), on development scenarios only.
 """
@@ -55,7 +55,7 @@ def run_variant(scenarios: list[Any], metric: Any, overrides: dict[str, Any]) ->
     for sc in scenarios:
         space = sc.document["embedding_space"]
         gal = scenario_gallery(sc.document, sc.directory, default_gallery_people(sc.document, None), space=space)
-        cfg = MasterConfig(**{"embedding_space": space, "body_online_background": False, **overrides})
+        cfg = MasterConfig(**{"embedding_space": space, **overrides})
         log = run_master(sc.frames, sc.frame_gt_ids, cfg, likelihood=default_face_likelihood(space),
                          body_metric=metric, gallery=gal.people or None, days=sc.day_spans)
         m = evaluate_run(log, gallery_people=gal.gt_of_name or None, scenario_summary=sc.summary, with_mot=False)

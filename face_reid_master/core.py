@@ -37,7 +37,6 @@ from face_reid_camera.common.embedding_spaces import (
 )
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric
-from face_reid_master.body.online_metric import OnlineBodyMetric, subspace_key
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.confidence_map import ConfidenceMap, default_confidence_map
@@ -62,9 +61,6 @@ def _derived(name: str, configured: float, derived: float | None) -> float:
         raise ValueError(f"{name} is 0 (= derived for the embedder space) but the likelihood file derives none: "
                          f"set {name} explicitly or refit with face-reid-fit-likelihood")
     return derived
-
-
-_PAIRS_SAVE_INTERVAL_S = 30.0  # the online body update's pairs are stored at most this often (s)
 
 
 def _constant_rows(rows: NDArray[np.floating]) -> NDArray[np.bool_]:
@@ -200,33 +196,6 @@ class MasterConfig:
     body_height_other_std_m: float = param(
         0.12, "Spread of another person's head height around a face's recent median (m; > the same-person "
         "spread).", low=0.0, high=2.0, low_open=True)
-    body_online_update: bool = param(
-        True, "Update the body metric online from body pairs the faces labelled (second seed, Algorithm 1; "
-        "needs body_identity).")
-    body_online_background: bool = param(
-        True, "Re-fit the body metric on a worker thread (false: in the frame's thread, deterministic; for "
-        "evaluation).")
-    body_online_interval_s: float = param(
-        30.0, "Least time between two body-metric re-fits (s).", low=0.0, high=86400.0)
-    body_online_min_new_pairs: int = param(
-        10, "Mined pairs added since the last re-fit before another (count).", low=1, high=100000)
-    body_online_prior_pairs: float = param(
-        1000.0, "Weight of the shipped body metric in the re-fit, in pairs of each kind (count).", low=0.0,
-        high=1e9, low_open=True)
-    body_online_verified_confidence: float = param(
-        0.99, "theta_1: a track's bodies teach the metric only when its face decided it with at least this "
-        "posterior (0..1).", low=0.0, high=1.0)
-    body_online_negative_face_distance: float = param(
-        0.0, "theta_2: two faces count as different people when none of their features are closer than this "
-        "face-embedding distance (0 = the face decision distance).", low=0.0, high=4.0)
-    body_online_rank_limit: int = param(
-        1, "E: a person's own body ranked beyond E faces, or another's within E, is a pair to learn from "
-        "(count).", low=1, high=1000)
-    body_online_max_pairs_per_track: int = param(
-        8, "Pairs one track may take part in: what a wrong face decision can teach the metric at most "
-        "(count).", low=1, high=10000)
-    body_online_max_pairs: int = param(
-        2000, "Mined pairs kept (the oldest go first) (count).", low=1, high=1000000)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
@@ -264,9 +233,6 @@ class MasterStats:
     bodies_received: int = 0  # detections with well-formed body fields
     bodies_rejected_malformed: int = 0  # body fields with NaN / Inf appearance or out-of-range visibility
     bodies_rejected_space: int = 0  # descriptors of another projection than the body metric's
-    body_metric_refits: int = 0  # online body-metric updates installed
-    body_pairs_mined: int = 0  # body pairs the faces labelled, kept for the online update
-    body_metric_refit_failures: int = 0  # re-fits that failed numerically (the metric in use stays)
     faces_created: int = 0
     faces_reidentified: int = 0
     faces_released: int = 0
@@ -345,7 +311,7 @@ class MasterCore:
         if body_metric is None and cfg.body_appearance_tracking:
             body_metric = default_body_metric()
         self.body_metric = body_metric if cfg.body_appearance_tracking else None
-        # the fused metric bodies are embedded with (the online update replaces it; body_metric stays as loaded)
+        # the fused metric bodies are embedded with
         self.body_fused = None if self.body_metric is None else self.body_metric.features["fused"]
         self._body_space_noticed: dict[str, str] = {}  # camera id -> the unusable body space it was logged for
         model = likelihood or default_face_likelihood(cfg.embedding_space)
@@ -362,21 +328,11 @@ class MasterCore:
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
         body_evidence = None
-        self.online_metric: OnlineBodyMetric | None = None
         if self.body_metric is not None and cfg.body_identity and cfg.method == "bayes":
-            if cfg.body_online_update:
-                self.online_metric = OnlineBodyMetric(
-                    self.body_metric.features["fused"], prior_pairs=cfg.body_online_prior_pairs,
-                    min_new_pairs=cfg.body_online_min_new_pairs, interval_s=cfg.body_online_interval_s,
-                    background=cfg.body_online_background, capacity=cfg.body_online_max_pairs,
-                    max_pairs_per_track=cfg.body_online_max_pairs_per_track)
             body_evidence = BodyEvidence(
                 self.body_metric.features["fused"].likelihood, window_s=cfg.body_window_s,
                 posterior_threshold=cfg.body_posterior_threshold, min_observations=cfg.body_min_observations,
                 max_log_ratio=cfg.body_max_log_ratio,
-                online=self.online_metric, rank_limit=cfg.body_online_rank_limit,
-                verified_confidence=cfg.body_online_verified_confidence,
-                negative_face_distance=cfg.body_online_negative_face_distance or None,
                 funnel_alpha=cfg.body_funnel_alpha, height_same_std_m=cfg.body_height_same_std_m,
                 height_other_std_m=cfg.body_height_other_std_m,
                 alike_face_distance=cfg.body_alike_face_distance or None)
@@ -423,14 +379,12 @@ class MasterCore:
         self._last_now_s = -math.inf  # the caller's clock at the last frame (live)
         self._camera_frames: dict[str, deque[float]] = {}  # camera -> its frames' times in the last second
         self._last_prune_s = -math.inf
-        self._pairs_saved: tuple[int, float] = (0, -math.inf)  # pool version and stamp of the last pair save
         if store is not None:
             faces = self._cap_loaded(store.load_faces())
             self.identity.import_faces(faces)
             self.identity.reserve_face_ids(int(store.max_face_id()))
             for face in faces:
                 self._refresh_name(face.face_id, face.features)
-            self._restore_body_pairs()
 
     # ------------------------------------------------------------------------------ input
     def process_frame(self, frame: CameraFrameRecord, now_s: float | None = None, *,
@@ -727,8 +681,6 @@ class MasterCore:
         """One identity update after the given track events; returns its events with published track ids."""
         self._track_events(deleted, stamp, lost, recovered)
         events = self.identity.step(stamp)
-        if self.online_metric is not None:
-            self._online_metric_step(stamp)
         kept = []
         for ev in events:
             if ev.kind == IdentityEventKind.NEW_FACE and not self._room_for(ev.face_id):
@@ -841,53 +793,8 @@ class MasterCore:
                                  f"({self.config.max_faces}): evicted the {len(gone)} least recently seen unnamed")
         return [f for f in faces if f.face_id not in gone]
 
-    def _online_metric_step(self, stamp: float) -> None:
-        """Start a body-metric re-fit when one is due; install a finished one: the tracker's and the body
-        evidence's embeddings are converted to it (face galleries off-thread where possible)."""
-        online, body = self.online_metric, self.identity.body_evidence
-        assert online is not None and body is not None and self.body_metric is not None
-        done = online.poll(stamp, body.conversion_snapshot, BodyEvidence.convert_snapshot)
-        self.stats.body_pairs_mined = online.pairs_mined["positive"] + online.pairs_mined["negative"]
-        self.stats.body_metric_refit_failures = online.refit_failures
-        if done is None:
-            return
-        new, change, converted = done
-        self.body_fused = new
-        self.tracker.change_appearance(change)
-        body.change_metric(change, converted)  # type: ignore[arg-type]
-        self.stats.body_metric_refits += 1
-
-    def _restore_body_pairs(self) -> None:
-        """The online update's pairs saved by an earlier run: the metric they taught is in use at once."""
-        online, load = self.online_metric, getattr(self.store, "load_body_pairs", None)
-        if online is None or load is None or self.body_metric is None:
-            return
-        try:
-            rows = load(subspace_key(online.base))
-        except Exception:  # the store logs; the shipped metric stays
-            self.stats.store_errors += 1
-            return
-        if online.restore(rows):
-            self.body_fused = online.current
-            self._pairs_saved = (online.pool.version, -math.inf)
-
-    def _save_body_pairs(self, stamp: float, force: bool = False) -> None:
-        """Persist the online update's pairs when they changed (at most every _PAIRS_SAVE_INTERVAL_S or
-        save_interval_s, the longer, unless forced: pairs can be mined again, faces cannot)."""
-        online, save = self.online_metric, getattr(self.store, "save_body_pairs", None)
-        if online is None or save is None or online.pool.version == self._pairs_saved[0]:
-            return
-        if not force and stamp - self._pairs_saved[1] < max(self.config.save_interval_s, _PAIRS_SAVE_INTERVAL_S):
-            return
-        self._pairs_saved = (online.pool.version, stamp)
-        try:
-            save(online.pool.rows(), subspace_key(online.base))
-        except Exception:  # the store logs; the pairs stay in memory
-            self.stats.store_errors += 1
-
     def _maintain_faces(self, stamp: float) -> None:
         cfg = self.config
-        self._save_body_pairs(stamp)
         if self.store is not None and stamp - self._last_prune_s >= cfg.prune_interval_s:
             self._last_prune_s = stamp
             self._prune_unnamed(stamp)
@@ -942,14 +849,10 @@ class MasterCore:
             self.stats.faces_pruned += 1
 
     def flush(self) -> None:
-        """Write every face with unsaved features (and the online update's pairs) to the store, and stop the
-        body-metric worker (call at shutdown)."""
+        """Write every face with unsaved features to the store (call at shutdown)."""
         self.finish_frames()
         for fid in list(self._dirty_faces):
             self._save_faces([fid])
-        self._save_body_pairs(self._last_stamp, force=True)
-        if self.online_metric is not None:
-            self.online_metric.close()
 
     # ------------------------------------------------------------------------------ people
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:

@@ -83,10 +83,6 @@ def _parser() -> argparse.ArgumentParser:
                    help="fused (default): bodies (where the scenario has them) steer the tracker's association "
                         "(body_appearance_tracking) and name tracks that show no face (body_identity); body: "
                         "bodies for the tracker only; face: positions and faces only, as before bodies")
-    p.add_argument("--online-update", choices=("on", "off"), default="on",
-                   help="on: the body metric is updated online from body pairs the faces labelled "
-                        "(body_online_update, re-fitted in the frame's thread so that runs repeat); the JSON "
-                        "reports the metric's rank-1 on the scenario's bodies before and after")
     p.add_argument("--no-mot", action="store_true", help="skip the motmetrics IDF1 / MOTA (saves time)")
     p.add_argument("--live", action="store_true",
                    help="run the whole DDS pipeline instead of the core: a master node process (temporary face "
@@ -265,27 +261,19 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _config(args: argparse.Namespace, method: str, space: str) -> MasterConfig:
     """The master configuration the evaluation's options ask for."""
     return MasterConfig(method=method, embedding_space=space, body_appearance_tracking=args.evidence != "face",
-                        body_identity=args.evidence == "fused",
-                        body_online_update=args.online_update == "on", body_online_background=False)
+                        body_identity=args.evidence == "fused")
 
 
 def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, float, list[int]]],
                       loaded: BodyMetricModel | None) -> dict[str, Any] | None:
-    """Rank-1 of the body metric loaded at the start (``loaded``, else the shipped one) and of the final one on
-    the scenario's bodies, and the online update's counts."""
-    final = run.body_metric
-    if final is None:
+    """Rank-1 of the body metric in use (``loaded``, else the shipped one) on the scenario's bodies."""
+    if run.body_metric is None:  # bodies were not used
         return None
     base = loaded or default_body_metric()
     bodies = scenario_bodies(scenario.frames, scenario.frame_gt_ids, base.space, days)
     if not bodies.labels.size:
         return None
-    stats = run.master_stats
-    return {"bodies": int(bodies.labels.size),
-            "rank1_start": scenario_rank1(bodies, base.features["fused"]),
-            "rank1_final": scenario_rank1(bodies, final),
-            "refits": int(stats.get("body_metric_refits", 0)),
-            "pairs_mined": int(stats.get("body_pairs_mined", 0))}
+    return {"bodies": int(bodies.labels.size), "rank1": scenario_rank1(bodies, base.features["fused"])}
 
 
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,

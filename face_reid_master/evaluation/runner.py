@@ -129,7 +129,7 @@ class RunLog:
     runtime_s: float = 0.0
     det_name: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     names: tuple[str, ...] = ()
-    body_metric: BodyFeatureMetric | None = None  # the fused body metric at the end (online update: updated)
+    body_metric: BodyFeatureMetric | None = None  # the fused body metric the run embedded bodies with
     # evidence kind -> the posterior a decision of that kind had to exceed (the run's MasterConfig; empty: unknown)
     decision_thresholds: dict[str, float] = field(default_factory=dict)
 

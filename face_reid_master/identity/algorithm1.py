@@ -364,10 +364,7 @@ class IdentityManagerBase:
                 continue
             for emb, t, source, heights in parts:
                 if track.face_id is not None:
-                    verified = track.evidence in ("face", "both") and track.confidence >= body.verified_confidence
-                    if verified and body.wants_probe(tid, t):
-                        self.stats.body_pairs_mined += body.mine(track.face_id, tid, emb[-1], t, self._faces_differ)
-                    body.add_face_bodies(track.face_id, emb, t, tid if verified else -1, heights)
+                    body.add_face_bodies(track.face_id, emb, t, heights)
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
                     body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source, heights)
         events = []
@@ -417,13 +414,6 @@ class IdentityManagerBase:
         if d.size:
             out[known] = d.min(axis=0)
         return out
-
-    def _faces_differ(self, face_a: int, face_b: int) -> bool:
-        """Whether two learned faces are confidently different people: no features of theirs closer than the
-        body evidence's ``negative_face_distance`` (default: the decision distance)."""
-        assert self.body_evidence is not None
-        limit = self.body_evidence.negative_face_distance or self.feature_gate_distance
-        return limit is not None and bool(self._face_distances(face_a, [face_b])[0] > limit)  # NaN: False
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are the same person as learned ``face``: features closer than the body evidence's
@@ -695,8 +685,6 @@ class IdentityManagerBase:
         track.confidence = 0.0
         track.votes.clear()
         track.n_observations = 0
-        if track.evidence in ("face", "both") and self.body_evidence is not None:
-            self.body_evidence.track_unverified(track.track_id)
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
@@ -707,7 +695,7 @@ class IdentityManagerBase:
         self._pending_obs.pop(tid, None)
         self._pending_bodies.pop(tid, None)
         if self.body_evidence is not None:
-            self.body_evidence.track_ended(tid)
+            self.body_evidence.forget_track(tid)
         track = self._tracks.pop(tid, None)
         if track is None:
             return None

@@ -8,10 +8,6 @@ face in face_list with recent bodies, the log-likelihood ratio of its body obser
 body distance, fitted with the metric); a face is decided when its posterior, against every other such face
 and "someone else" (a person without recent bodies here: new, or in other clothes), passes a strict
 threshold after enough observations. Body evidence never creates a face: only a face does.
-
-With an :class:`~face_reid_master.body.online_metric.OnlineBodyMetric`, bodies of tracks their faces
-identified confidently are also probes of the online metric update: compared with every face's recent
-face-verified bodies, a ranking that disagrees with the faces gives a pair to learn from (:meth:`mine`).
 """
 
 from __future__ import annotations
@@ -24,8 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.body.online_metric import MinedPair, OnlineBodyMetric
-from face_reid_master.identity.body_gallery import FaceBodyPool, PoolSnapshot
+from face_reid_master.identity.body_gallery import FaceBodyPool
 from face_reid_master.identity.feature_funnel import funnel_survivors, gaussian_log_ratio
 from face_reid_master.identity.likelihood import LikelihoodModel
 
@@ -59,13 +54,6 @@ class BodyEvidence:
     (frames of one glance are far from independent). ``other_log_odds``: log prior odds of "someone else".
     ``min_interval_s``: one camera's observations of a track count as evidence at most this often (the
     frames in between show nearly the same view; they are still kept for the face's gallery).
-    ``online``: the online metric update fed by :meth:`mine` (None: the metric stays as shipped).
-    ``mine_interval_s``: a track's bodies are probes at most this often; ``rank_limit``: the seed's E (a
-    person's own body ranked beyond E faces is an error positive, another's within E an error negative).
-    ``verified_confidence`` (the seed's theta_1): a track's bodies are face-verified (probes, and gallery rows
-    others are mined against) when its face decided it with at least this posterior. ``negative_face_distance``
-    (theta_2, face-embedding distance; None = the identity layer's decision distance): two faces are
-    confidently different people when none of their features are closer than this.
     A faceless track's body appearance and head height are combined by the feature funnel (see
     :mod:`~face_reid_master.identity.feature_funnel`): appearance first; a face whose recent bodies are farther
     than ``funnel_alpha`` x the nearest face's is abandoned for that observation, the others are also judged
@@ -80,8 +68,6 @@ class BodyEvidence:
     def __init__(self, likelihood: LikelihoodModel, *, window_s: float = 3600.0, gallery_size: int = 64,
                  posterior_threshold: float = 0.99, min_observations: int = 10, max_log_ratio: float = 0.3,
                  other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5,
-                 online: OnlineBodyMetric | None = None, mine_interval_s: float = 2.0, rank_limit: int = 1,
-                 verified_confidence: float = 0.99, negative_face_distance: float | None = None,
                  funnel_alpha: float = 1.5, height_same_std_m: float = 0.05,
                  height_other_std_m: float = 0.12, alike_face_distance: float | None = None) -> None:
         if not isinstance(likelihood, LikelihoodModel):
@@ -96,14 +82,6 @@ class BodyEvidence:
         self.other_log_odds = check_real("other_log_odds", other_log_odds)
         self.track_buffer = check_int("track_buffer", track_buffer, 1)
         self.min_interval_s = check_real("min_interval_s", min_interval_s, 0.0)
-        if online is not None and not isinstance(online, OnlineBodyMetric):
-            raise ValueError(f"online must be an OnlineBodyMetric or None, got {type(online).__name__}")
-        self.online = online
-        self.mine_interval_s = check_real("mine_interval_s", mine_interval_s, 0.0)
-        self.rank_limit = check_int("rank_limit", rank_limit, 1)
-        self.verified_confidence = check_real("verified_confidence", verified_confidence, 0.0, 1.0)
-        self.negative_face_distance = None if negative_face_distance is None else check_real(
-            "negative_face_distance", negative_face_distance, 0.0, math.inf, low_open=True)
         self.funnel_alpha = check_real("funnel_alpha", funnel_alpha, 1.0, math.inf, low_open=True)
         self.height_same_std_m = check_real("height_same_std_m", height_same_std_m, 0.0, math.inf, low_open=True)
         self.height_other_std_m = check_real("height_other_std_m", height_other_std_m, self.height_same_std_m,
@@ -112,23 +90,19 @@ class BodyEvidence:
             "alike_face_distance", alike_face_distance, 0.0, math.inf, low_open=True)
         self._faces = FaceBodyPool(self.gallery_size)
         self._tracks: dict[int, _TrackBodies] = {}
-        self._mined_at: dict[int, float] = {}  # track -> stamp of its last probe
 
     # ------------------------------------------------------------------ faces
-    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float, track_id: int = -1,
+    def add_face_bodies(self, face_id: int, embeddings: F32, stamp_s: float,
                         heights: npt.ArrayLike | None = None) -> None:
         """What the person of ``face_id`` wears now (rows of the body metric's embedding) and their head
-        ``heights`` (m per row, None = unknown), seen on track ``track_id`` (-1: not verified by the face; such
-        rows are never mined)."""
+        ``heights`` (m per row, None = unknown)."""
         if embeddings.shape[0] == 0:
             return
-        self._faces.add(face_id, embeddings, stamp_s, track_id, _heights(heights, embeddings.shape[0]))
+        self._faces.add(face_id, embeddings, stamp_s, _heights(heights, embeddings.shape[0]))
 
     def forget_face(self, face_id: int) -> None:
-        """Drop a face's bodies and mined pairs (the face was forgotten)."""
+        """Drop a face's bodies (the face was forgotten)."""
         self._faces.release(face_id)
-        if self.online is not None:
-            self.online.pool.remove_face(face_id)
         for track in self._tracks.values():
             track.log_ratio.pop(face_id, None)
             track.counts.pop(face_id, None)
@@ -197,77 +171,8 @@ class BodyEvidence:
         return np.stack(track.rows), max(track.stamps), np.array(track.heights)
 
     def forget_track(self, track_id: int) -> None:
+        """Drop a track's bodies and evidence (it was deleted, or its bodies joined its face's gallery)."""
         self._tracks.pop(track_id, None)
-
-    def track_ended(self, track_id: int) -> None:
-        """The track was deleted: nothing of it is kept but its faces' galleries and its mined pairs."""
-        self._tracks.pop(track_id, None)
-        self._mined_at.pop(track_id, None)
-        if self.online is not None:
-            self.online.pool.track_ended(track_id)
-
-    def track_unverified(self, track_id: int) -> None:
-        """The track's face decision was wrong (a swap): the pairs it gave are dropped."""
-        if self.online is not None:
-            self.online.pool.remove_track(track_id)
-
-    # ------------------------------------------------------------------ online metric update
-    def wants_probe(self, track_id: int, stamp_s: float) -> bool:
-        """Whether a verified track's bodies at ``stamp_s`` should be mined (rate and pair budget)."""
-        return (self.online is not None and stamp_s >= self._mined_at.get(track_id, -math.inf) + self.mine_interval_s
-                and self.online.room_for(track_id, track_id))
-
-    def mine(self, face_id: int, track_id: int, probe: F32, stamp_s: float,
-             differ: Callable[[int, int], bool]) -> int:
-        """Algorithm 1 of the second seed for one face-verified body ``probe`` (r,) of ``track_id``, face
-        ``face_id``: ranked against every face's recent face-verified bodies (those of other tracks), its own
-        face beyond ``rank_limit`` gives an error positive and a face within it that ``differ`` says is
-        somebody else an error negative (each with the nearest body of that face). Pairs kept."""
-        if self.online is None:
-            return 0
-        self._mined_at[track_id] = stamp_s
-        pool = self._faces
-        if probe.shape[0] != pool.dim or not pool.slots:
-            return 0
-        verified = (pool.stamps >= stamp_s - self.window_s) & (pool.tracks >= 0) & (pool.tracks != track_id)
-        best, where = pool.nearest(probe[None, :], verified)
-        best, where = best[0], where[0]
-        slots = np.flatnonzero(np.isfinite(best))
-        if not slots.size:
-            return 0
-        rank = np.empty(slots.size, np.intp)
-        rank[np.argsort(best[slots], kind="stable")] = np.arange(1, slots.size + 1)
-        pairs = []
-        for k, slot in enumerate(slots.tolist()):
-            fid = int(pool.face[slot])
-            wanted = rank[k] > self.rank_limit if fid == face_id else \
-                rank[k] <= self.rank_limit and differ(face_id, fid)
-            if not wanted:
-                continue
-            row = int(where[slot])
-            other = int(pool.tracks[row])
-            if self.online.room_for(track_id, other):
-                pairs.append(MinedPair(probe - pool.rows[row], fid == face_id, face_id, fid, track_id, other,
-                                       stamp_s))
-        return self.online.add(pairs)
-
-    def conversion_snapshot(self) -> PoolSnapshot:
-        """What an off-thread conversion of the face galleries needs."""
-        return self._faces.snapshot()
-
-    @staticmethod
-    def convert_snapshot(snapshot: object, change: F32) -> tuple[PoolSnapshot, F32, FloatArray]:
-        """The snapshot's face galleries in the new metric's embedding (runs off the frame's thread)."""
-        assert isinstance(snapshot, PoolSnapshot)
-        return FaceBodyPool.convert(snapshot, change)
-
-    def change_metric(self, change: F32, converted: tuple[PoolSnapshot, F32, FloatArray] | None = None) -> None:
-        """Every kept embedding to the new metric (rows @ ``change``); face galleries converted off-thread and
-        not written since are taken from ``converted``."""
-        self._faces.change_metric(change, converted)
-        for track in self._tracks.values():
-            if track.rows:
-                track.rows = list(np.stack(track.rows) @ change)
 
     def posterior(self, track_id: int, candidates: list[int], now_s: float) -> dict[int, float]:
         """{face_id: posterior} over the candidates with recent bodies, plus 0 = someone else."""

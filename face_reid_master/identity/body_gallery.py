@@ -1,8 +1,8 @@
 """The recent bodies of every learned face in one array, so that a body is compared with all of them at once.
 
 Face slot s owns rows [s * size, (s + 1) * size) (a ring of its newest ``size`` bodies). With each row: its
-stamp (rows older than a window no longer count; a free or unwritten row has -inf), the track it came from
-(-1: not verified by a face) and the person's head height (NaN: unknown). One GEMM over the whole array and
+stamp (rows older than a window no longer count; a free or unwritten row has -inf) and the person's head
+height (NaN: unknown). One GEMM over the whole array and
 a min over each slot's rows give every face's nearest body: no per-face loop.
 """
 
@@ -10,34 +10,22 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["FaceBodyPool", "PoolSnapshot"]
+__all__ = ["FaceBodyPool"]
 
 F32 = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
 
 
-@dataclass(frozen=True)
-class PoolSnapshot:
-    """The rows of a pool at one moment (for a conversion off the frame's thread): the array, which slots
-    had been written how often, and the pool's allocation generation."""
-
-    rows: F32
-    written: npt.NDArray[np.int64]
-    generation: int
-
-
 class FaceBodyPool:
-    """Every face's newest ``size`` body embeddings, stamps, tracks and head heights (see the module doc)."""
+    """Every face's newest ``size`` body embeddings, stamps and head heights (see the module doc)."""
 
     def __init__(self, size: int) -> None:
         self.size = size
         self.dim = 0
-        self.generation = 0  # bumped when the arrays are reallocated
         self.slot_of: dict[int, int] = {}
         self._free: list[int] = []
         self._alloc(0, 0)
@@ -47,33 +35,29 @@ class FaceBodyPool:
         self.rows = np.zeros((n, dim), np.float32)
         self.norms = np.zeros(n)  # squared norms of the rows
         self.stamps = np.full(n, -math.inf)
-        self.tracks = np.full(n, -1, np.int64)
         self.heights = np.full(n, math.nan)
         self.face = np.zeros(slots, np.int64)  # face id per slot (0: free)
         self.next = np.zeros(slots, np.int64)
-        self.written = np.zeros(slots, np.int64)
 
     @property
     def slots(self) -> int:
         return int(self.face.size)
 
     def _grow(self) -> None:
-        old = (self.rows, self.norms, self.stamps, self.tracks, self.heights, self.face, self.next, self.written)
+        old = (self.rows, self.norms, self.stamps, self.heights, self.face, self.next)
         n_old = self.slots
         self._alloc(max(8, 2 * n_old), self.dim)
-        for new, prev in zip((self.rows, self.norms, self.stamps, self.tracks, self.heights, self.face, self.next,
-                              self.written), old, strict=True):
+        for new, prev in zip((self.rows, self.norms, self.stamps, self.heights, self.face, self.next), old,
+                             strict=True):
             new[: prev.shape[0]] = prev
         self._free.extend(range(self.slots - 1, n_old - 1, -1))
-        self.generation += 1
 
-    def add(self, face_id: int, embeddings: F32, stamp_s: float, track_id: int, heights: FloatArray) -> None:
+    def add(self, face_id: int, embeddings: F32, stamp_s: float, heights: FloatArray) -> None:
         """Keep a face's new bodies (the oldest of its ring go). Another embedding length than the kept ones
         (another metric) starts every face afresh."""
         if embeddings.shape[1] != self.dim:
             self.dim, self.slot_of, self._free = embeddings.shape[1], {}, []
             self._alloc(0, self.dim)
-            self.generation += 1
         slot = self.slot_of.get(face_id)
         if slot is None:
             if not self._free:
@@ -85,9 +69,8 @@ class FaceBodyPool:
             i = base + int(self.next[slot])
             self.rows[i] = row
             self.norms[i] = float(row.astype(np.float64) @ row)
-            self.stamps[i], self.tracks[i], self.heights[i] = stamp_s, track_id, height
+            self.stamps[i], self.heights[i] = stamp_s, height
             self.next[slot] = (self.next[slot] + 1) % self.size
-        self.written[slot] += embeddings.shape[0]
 
     def release(self, face_id: int) -> None:
         """Drop a face's bodies."""
@@ -96,9 +79,8 @@ class FaceBodyPool:
             return
         rows = slice(slot * self.size, (slot + 1) * self.size)
         self.rows[rows] = 0.0
-        self.norms[rows], self.stamps[rows], self.tracks[rows], self.heights[rows] = 0.0, -math.inf, -1, math.nan
+        self.norms[rows], self.stamps[rows], self.heights[rows] = 0.0, -math.inf, math.nan
         self.face[slot], self.next[slot] = 0, 0
-        self.written[slot] += 1
         self._free.append(slot)
 
     def face_rows(self, face_id: int, since: float) -> F32:
@@ -134,38 +116,3 @@ class FaceBodyPool:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slots: NaN is the answer
             return np.nanmedian(h, axis=1) if self.slots else np.zeros(0)
-
-    # ------------------------------------------------------------------ metric changes
-    def snapshot(self) -> PoolSnapshot:
-        return PoolSnapshot(self.rows, self.written.copy(), self.generation)
-
-    @staticmethod
-    def convert(snapshot: PoolSnapshot, change: F32) -> tuple[PoolSnapshot, F32, FloatArray]:
-        """The snapshot's rows in another metric (rows @ ``change``) and their squared norms, computed off the
-        frame's thread."""
-        if snapshot.rows.shape[1] != change.shape[0]:  # nothing kept yet
-            return snapshot, snapshot.rows, np.zeros(snapshot.rows.shape[0])
-        rows = (snapshot.rows @ change).astype(np.float32, copy=False)
-        return snapshot, rows, np.einsum("ij,ij->i", rows, rows).astype(np.float64)
-
-    def change_metric(self, change: F32, converted: tuple[PoolSnapshot, F32, FloatArray] | None = None) -> None:
-        """Every row to the new metric: from ``converted`` where it was not written since the snapshot,
-        converted here otherwise (the rows written meanwhile: a few)."""
-        if self.rows.shape[1] != change.shape[0]:  # nothing kept yet
-            return
-        if converted is not None and converted[0].generation == self.generation \
-                and converted[1].shape == self.rows.shape:
-            snap, new, norms = converted
-            fresh = []
-            for slot in np.flatnonzero(self.written != snap.written).tolist():
-                k = int(self.written[slot] - snap.written[slot])
-                ring = np.arange(self.size) if k >= self.size else (int(self.next[slot]) - 1 - np.arange(k)) % self.size
-                fresh.append(slot * self.size + ring)
-            if fresh:
-                rows = np.concatenate(fresh)
-                new[rows] = self.rows[rows] @ change
-                norms[rows] = np.einsum("ij,ij->i", new[rows], new[rows])
-        else:
-            new = (self.rows @ change).astype(np.float32, copy=False)
-            norms = np.einsum("ij,ij->i", new, new).astype(np.float64)
-        self.rows, self.norms = new, norms

@@ -103,4 +103,3 @@ class IdentityStats:
     body_observations: int = 0
     assigned_by_body: int = 0
     lent_faces_taken: int = 0  # faces of LOST tracks given to another track (the person came back as it)
-    body_pairs_mined: int = 0  # body pairs the faces labelled kept for the online metric update

@@ -90,15 +90,9 @@ CREATE INDEX faces_name ON faces(name);
 INSERT INTO meta(key, value) VALUES ('schema_version', '{SCHEMA_VERSION}');
 """
 _EXPECTED_TABLES = {"meta", "faces", "features"}
-# body pairs the faces labelled for the online body-metric update (created by the first save_body_pairs)
-_BODY_PAIRS_SCHEMA = """
-CREATE TABLE IF NOT EXISTS body_pairs (
-    face_a INTEGER NOT NULL REFERENCES faces(face_id) ON DELETE CASCADE,
-    face_b INTEGER NOT NULL REFERENCES faces(face_id) ON DELETE CASCADE,
-    positive INTEGER NOT NULL CHECK (positive IN (0, 1)),
-    stamp_s REAL NOT NULL,
-    vector BLOB NOT NULL
-)"""
+# tables earlier versions kept beside the faces (body pairs of a retired online body-metric update): dropped on open
+_RETIRED_TABLES = ("body_pairs",)
+_RETIRED_META = ("body_pairs_subspace",)
 
 
 class FaceStoreError(RuntimeError):
@@ -330,10 +324,26 @@ class FaceStore:
             if not self.read_only:
                 self._enable_wal(conn)
                 conn.execute(f"PRAGMA synchronous={self.synchronous}")
+                self._drop_retired(conn)
         except BaseException:
             conn.close()
             raise
         return conn
+
+    @staticmethod
+    def _drop_retired(conn: sqlite3.Connection) -> None:
+        """Delete what earlier versions stored beside the faces and no longer use (secure_delete zeroes it; the
+        WAL is truncated once the store is open)."""
+        present = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()}
+        retired = [t for t in _RETIRED_TABLES if t in present]
+        if not retired:
+            return
+        conn.execute("BEGIN IMMEDIATE")
+        for table in retired:
+            conn.execute(f"DROP TABLE {table}")
+        conn.executemany("DELETE FROM meta WHERE key = ?", [(k,) for k in _RETIRED_META])
+        conn.execute("COMMIT")
+        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
 
     def _enable_wal(self, conn: sqlite3.Connection) -> None:
         try:
@@ -635,17 +645,10 @@ class FaceStore:
             self._row_hashes.pop(f, None)
         with self._transaction() as conn:
             conn.executemany("DELETE FROM features WHERE face_id = ?", [(f,) for f in face_ids])
-            if self._has_body_pairs(conn):
-                conn.executemany("DELETE FROM body_pairs WHERE face_a = ? OR face_b = ?", [(f, f) for f in face_ids])
             conn.executemany("DELETE FROM faces WHERE face_id = ?", [(f,) for f in face_ids])
         self._ledger_ids -= set(face_ids)
         self._write_ledger()
         self._scrub_wal()
-
-    @staticmethod
-    def _has_body_pairs(conn: sqlite3.Connection) -> bool:
-        return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'body_pairs'").fetchone() \
-            is not None
 
     def _scrub_wal(self) -> None:
         """Checkpoint every WAL frame into the (zeroed) database pages and truncate the WAL to 0 bytes."""
@@ -665,41 +668,6 @@ class FaceStore:
     def save_face(self, face: LearnedFace) -> None:
         """Insert or replace one face (row + all its features) in one transaction, committed on return."""
         self.save_faces([face])
-
-    def save_body_pairs(self, rows: Iterable[tuple[Any, bool, int, int, float]], subspace: str) -> int:
-        """Replace the stored body pairs of the online metric update with ``rows`` (difference vector,
-        positive, face a, face b, stamp) of metric subspace ``subspace``; pairs of faces not stored are left
-        out. How many were stored. One transaction."""
-        encoded = []
-        for vector, positive, fa, fb, stamp in rows:
-            v = np.ascontiguousarray(np.asarray(vector, dtype=_VECTOR_DTYPE).reshape(-1))
-            if v.size and np.all(np.isfinite(v)) and math.isfinite(float(stamp)):
-                encoded.append((_check_face_id(fa), _check_face_id(fb), int(bool(positive)), float(stamp),
-                                v.tobytes(), int(fa), int(fb)))
-        with self._transaction() as conn:
-            conn.execute(_BODY_PAIRS_SCHEMA)
-            conn.execute("DELETE FROM body_pairs")
-            conn.executemany(
-                "INSERT INTO body_pairs(face_a, face_b, positive, stamp_s, vector) SELECT ?, ?, ?, ?, ? WHERE "
-                "EXISTS (SELECT 1 FROM faces WHERE face_id = ?) AND EXISTS (SELECT 1 FROM faces WHERE face_id = ?)",
-                encoded)
-            self._set_meta(conn, "body_pairs_subspace", str(subspace))
-            return int(conn.execute("SELECT COUNT(*) FROM body_pairs").fetchone()[0])
-
-    def load_body_pairs(self, subspace: str) -> list[tuple[np.ndarray, bool, int, int, float]]:
-        """The stored body pairs if they were saved for metric subspace ``subspace`` (else none)."""
-        conn = self._db
-        try:
-            if not self._has_body_pairs(conn):
-                return []
-            row = conn.execute("SELECT value FROM meta WHERE key = 'body_pairs_subspace'").fetchone()
-            if row is None or row[0] != subspace:
-                return []
-            return [(np.frombuffer(v, dtype=_VECTOR_DTYPE).astype(np.float32), bool(p), int(a), int(b), float(t))
-                    for a, b, p, t, v in conn.execute(
-                        "SELECT face_a, face_b, positive, stamp_s, vector FROM body_pairs ORDER BY rowid")]
-        except sqlite3.Error as exc:
-            raise FaceStoreError(f"face store {self.path}: cannot read the body pairs: {exc}") from exc
 
     def save_faces(self, faces: Iterable[LearnedFace]) -> int:
         """Insert or replace several faces in one transaction (all or nothing); returns how many."""

@@ -6,7 +6,7 @@ thread (so one thread uses the SQLite connection, as :class:`~face_reid_master.s
 requires) and runs every call there, in the order made:
 
 - ``save_faces`` hands the faces over and returns at once; faces handed over before the worker got to them
-  are written together (the newest snapshot of each face, one transaction); ``save_body_pairs`` too;
+  are written together (the newest snapshot of each face, one transaction);
 - every other method (load, forget, prune, list, ...) waits for its result, after the saves handed over
   before it: a face forgotten after a save stays forgotten.
 
@@ -94,19 +94,6 @@ class WriteBehindStore:
             _LOG.error("face store: forgetting faces %s failed: %s", face_ids[:20], str(exc)[:_MAX_ERROR_CHARS])
         else:
             self.last_write_ok = True
-
-    def save_body_pairs(self, rows: Iterable[Any], subspace: str) -> None:
-        """Hand the online body-metric update's pairs (copies) to the worker and return at once; they are
-        written after the faces handed over before them (a pair is stored only with both its faces)."""
-        batch = list(rows)
-        self._pool.submit(self._write_pairs, batch, subspace)
-
-    def _write_pairs(self, rows: list[Any], subspace: str) -> None:
-        try:
-            self._store.save_body_pairs(rows, subspace)
-        except Exception as exc:  # the pairs stay in memory; the next save may succeed
-            self._failed(exc)
-            _LOG.error("face store: saving %d body pairs failed: %s", len(rows), str(exc)[:_MAX_ERROR_CHARS])
 
     def flush(self) -> None:
         """Wait until every face handed over so far is written (or its failure counted)."""

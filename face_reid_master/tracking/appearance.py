@@ -36,11 +36,6 @@ class AppearanceGallery:
         self._next = (self._next + 1) % self._rows.shape[0]
         self.count = min(self.count + 1, self._rows.shape[0])
 
-    def convert(self, change: F32) -> None:
-        """The kept embeddings in another metric of the same subspace (rows @ ``change``, r x r)."""
-        if self.count:
-            self._rows[: self.count] = self._rows[: self.count] @ change
-
     @property
     def rows(self) -> F32:
         """The kept embeddings (count, dim), in no particular order."""

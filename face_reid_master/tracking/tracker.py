@@ -292,12 +292,6 @@ class Tracker:
             t_a[i], z_a[i], x_a[i], P_a[i] = step.stamp_s, step.z, step.x, step.P
         return x_a, P_a, t_a, z_a
 
-    def change_appearance(self, change: NDArray[np.float32]) -> None:
-        """The body metric changed (online update): every track's appearance to the new embedding
-        (rows @ ``change``)."""
-        for looks in self._looks:
-            looks.convert(change)
-
     def _match(self, z: FloatArray, r2: FloatArray, stamp: float, appearance: NDArray[np.float32] | None
                ) -> _Matched:
         """Predict the tracks that could take a detection to ``stamp`` and associate the detections

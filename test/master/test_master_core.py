@@ -240,43 +240,6 @@ def _joint_stub_likelihood():
     return LikelihoodModel(SkewNormal(0.0, 0.8, 0.2), SkewNormal(0.0, 1.6, 0.2))
 
 
-def test_the_online_body_metric_survives_a_restart_and_forgetting_removes_its_pairs(tmp_path) -> None:
-    """Pairs the faces labelled are stored with the faces: a restarted master uses the metric they taught;
-    forgetting a person deletes their pairs from the store and re-fits the metric without them."""
-    from face_reid_master.body.online_metric import subspace_key
-    from face_reid_master.identity.records import LearnedFace
-    from face_reid_master.storage.face_store import FaceStore
-
-    cfg = _config(body_online_update=True, body_online_background=False, body_online_interval_s=0.0)
-    db = tmp_path / "faces.db"
-    rng = np.random.default_rng(3)
-    with FaceStore(db) as store:
-        core = MasterCore(cfg, store=store)
-        shipped = core.body_fused
-        r = shipped.metric.metric.shape[0]
-        for fid in (1, 2, 3):
-            store.save_face(LearnedFace(fid, rng.normal(size=(3, 128)).astype(np.float32), None, 0.0, 0.0, 3))
-        online = core.online_metric
-        for k in range(30):  # as mining would: same-person pairs of face 1, face 1 vs face 2 / 3
-            fb = 1 if k % 3 == 0 else 2 + k % 2
-            online.pool.add(rng.normal(size=r) * (3.0 if fb == 1 else 1.0), fb == 1, (1, fb), (100 + k, 200 + k), k)
-        core.flush()
-        key = subspace_key(shipped)
-        assert len(store.load_body_pairs(key)) == 30 and store.load_body_pairs("another:subspace") == []
-    with FaceStore(db) as store:
-        core = MasterCore(cfg, store=store)
-        restored = core.body_fused
-        assert core.online_metric.pool.count == 30
-        assert not np.allclose(restored.metric.metric, shipped.metric.metric, rtol=1e-3)
-        assert core.forget_face(2)
-        stored = store.load_body_pairs(key)
-        assert stored and all(2 not in (fa, fb) for _, _, fa, fb, _ in stored)
-        assert core.online_metric.pool.count == len(stored)
-        core.tick(1.0)  # the removal is due for a re-fit at once
-        assert core.stats.body_metric_refits == 1
-        assert not np.allclose(core.body_fused.metric.metric, restored.metric.metric, rtol=1e-6)
-
-
 def test_frames_deferred_to_one_identity_update_per_cycle_give_the_same_identities(embeddings) -> None:
     """A node applies a cycle's frames with defer_identity and then finish_frames: the events come from
     finish_frames only, and leave-and-return gives the same faces as one identity update per frame."""

@@ -440,4 +440,4 @@ def test_eval_checks_and_uses_the_body_metric_given(faces: Path, cache: Path, cr
     assert printed["protocol"]["honest"] is False
     assert metric == {"model": "body metric", "source": str(path), "identities_seen": worn}
     assert printed["body_metric"]["bodies"] == shipped["body_metric"]["bodies"] > 0
-    assert printed["body_metric"]["rank1_start"] != shipped["body_metric"]["rank1_start"]
+    assert printed["body_metric"]["rank1"] != shipped["body_metric"]["rank1"]

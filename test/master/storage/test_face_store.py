@@ -562,6 +562,30 @@ def test_a_store_from_before_spaces_is_the_dlib_space(db: Path) -> None:
         assert store.embedding_space == "dlib_resnet_v1" and len(store.load_faces()) == 1
 
 
+def test_body_pairs_an_earlier_version_stored_are_deleted_from_every_file_on_open(db: Path) -> None:
+    """Earlier versions kept body pairs of an online metric update beside the faces: the first writable open
+    drops them (their bytes too) and keeps the faces; a read-only open (the CLI listing) changes nothing."""
+    pair = _distinctive(4321.0)[0]
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(1, _feats(1, 3)))
+    with contextlib.closing(sqlite3.connect(db)) as conn, conn:
+        conn.execute("CREATE TABLE body_pairs (face_a INTEGER, face_b INTEGER, positive INTEGER, stamp_s REAL, "
+                     "vector BLOB)")
+        conn.execute("INSERT INTO body_pairs VALUES (1, 1, 1, 0.0, ?)", (pair.tobytes(),))
+        conn.execute("INSERT INTO meta(key, value) VALUES ('body_pairs_subspace', 'sub')")
+    assert _contains_any(db, pair[None, :])  # sanity: the grep finds the stored pair
+    with FaceStore(db, read_only=True) as store:
+        assert len(store.load_faces()) == 1
+    assert _contains_any(db, pair[None, :])
+    with FaceStore(db) as store:
+        assert [f.face_id for f in store.load_faces()] == [1]
+        with contextlib.closing(sqlite3.connect(f"file:{db}?mode=ro", uri=True)) as raw:
+            tables = {r[0] for r in raw.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            keys = {r[0] for r in raw.execute("SELECT key FROM meta")}
+        assert "body_pairs" not in tables and "body_pairs_subspace" not in keys
+        assert _contains_any(db, pair[None, :]) == []
+
+
 def test_cli_never_prints_raw_control_characters_and_refuses_them(db: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     import sqlite3

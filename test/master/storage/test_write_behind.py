@@ -81,16 +81,3 @@ def test_a_failed_save_is_counted_and_later_saves_still_work(tmp_path: Path) -> 
 def test_an_opening_error_is_raised_by_the_constructor(tmp_path: Path) -> None:
     with FaceStore(tmp_path / "faces.db"), pytest.raises(FaceStoreLockedError):
         WriteBehindStore(lambda: FaceStore(tmp_path / "faces.db"))
-
-
-def test_body_pairs_handed_over_are_stored_after_their_faces(tmp_path: Path) -> None:
-    store = WriteBehindStore(lambda: FaceStore(tmp_path / "faces.db"))
-    try:
-        store.save_faces([_face(1, 1), _face(2, 2)])
-        pairs = [(np.full(8, 0.5, np.float32), True, 1, 1, 10.0), (np.full(8, -0.5, np.float32), False, 1, 2, 11.0)]
-        assert store.save_body_pairs(pairs, "sub") is None  # handed over, not waited for
-        loaded = store.load_body_pairs("sub")  # on the worker, after both writes
-        assert [(p, a, b) for _, p, a, b, _ in loaded] == [(True, 1, 1), (False, 1, 2)]
-        assert store.forget(2) and [(a, b) for _, _, a, b, _ in store.load_body_pairs("sub")] == [(1, 1)]
-    finally:
-        store.close()
