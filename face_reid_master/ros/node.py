@@ -38,8 +38,9 @@ from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.ros.sealed import open_payload, open_request, seal_payload
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
+from face_reid_master.cycle_schedule import CycleSchedule
 from face_reid_master.health import MasterHealthWatch
-from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
+from face_reid_master.intake import FrameIntake, PendingFrame
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
@@ -96,16 +97,8 @@ class MasterNode(ManagedNode):
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
         self._regex: re.Pattern[str] | None = None
-        self._tokens_counted_s = -float("inf")
-        self._min_publish_interval_s = 0.0
-        self._unpublished_stamp: float | None = None  # newest frame applied but not published (rate cap)
-        self._publish_tokens = 2.0
         self._intake: FrameIntake[Any] = FrameIntake()
-        self._budget = CycleBudget()
-        self._identity_period_s = 0.0
-        self._min_cycle_period_s = 0.0
-        self._cycle_began_s = -float("inf")  # time.monotonic() when the last cycle began
-        self._identity_done_s = -float("inf")  # time.monotonic() of the last identity update
+        self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -152,11 +145,8 @@ class MasterNode(ManagedNode):
             self.get_logger().warning(
                 "UNSECURED: no network_key_path: camera frames (face embeddings, biometric data) travel in clear "
                 "and any participant of this DDS domain can read them or inject frames")
-        rate = float(values["max_publish_rate_hz"])
-        self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
-        self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
-        self._identity_period_s = float(values["identity_period_s"])
-        self._min_cycle_period_s = float(values["min_cycle_period_s"])
+        self.schedule = CycleSchedule(float(values["min_cycle_period_s"]), float(values["identity_period_s"]),
+                                      float(values["max_publish_rate_hz"]), float(values["cycle_budget_ms"]))
         self._max_topics = int(values["max_camera_topics"])
         self._known_cameras = frozenset(master_params.clean_list(values["known_camera_ids"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
@@ -199,8 +189,8 @@ class MasterNode(ManagedNode):
             self._discover()
         self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
         self._own_timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
-        if self._min_publish_interval_s:
-            self._own_timers.append(self.create_timer(self._min_publish_interval_s, self._flush))
+        if self.schedule.publish_interval_s:
+            self._own_timers.append(self.create_timer(self.schedule.publish_interval_s, self._flush))
         self._own_timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
         assert self.health is not None
         self.health.start(self.now_s())
@@ -357,7 +347,7 @@ class MasterNode(ManagedNode):
 
     def _wait_for_cycle(self) -> None:
         """Sleep out what is left of min_cycle_period_s since the last cycle began (messages queue meanwhile)."""
-        wait = self._cycle_began_s + self._min_cycle_period_s - time.monotonic()  # <= the period (monotonic clock)
+        wait = self.schedule.wait_s(time.monotonic())
         if wait > 0.0:
             time.sleep(wait)
 
@@ -437,12 +427,12 @@ class MasterNode(ManagedNode):
         core, health = self.core, self.health
         if core is None or health is None or self.tracks_pub is None:
             return
-        self._cycle_began_s = time.monotonic()
+        limit = self.schedule.begin_cycle(time.monotonic())
         self._drain(now)
-        frames, dropped = self._intake.take(self._budget.frames())
+        frames, dropped = self._intake.take(limit)
         if dropped:
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
-                                           f"({len(frames)} applied, budget {self._budget.budget_ms:g} ms)",
+                                           f"({len(frames)} applied, budget {self.schedule.budget.budget_ms:g} ms)",
                                self.frames_dropped_overload, warn=True)
         t_cycle = time.perf_counter()
         newest = -float("inf")
@@ -458,44 +448,30 @@ class MasterNode(ManagedNode):
                 publish_s = time.perf_counter() - t_publish
         finally:  # one identity update for the frames applied since the last one, at most every identity_period_s
             t_identity = time.perf_counter()
-            if time.monotonic() - self._identity_done_s >= self._identity_period_s:
+            if self.schedule.identity_due(time.monotonic()):
                 self._finish_frames()
         t_end = time.perf_counter()
-        self._budget.spent(len(frames), (t_end - t_cycle - publish_s) * 1e3, (t_end - t_identity) * 1e3)
+        self.schedule.cycle_cost(len(frames), (t_end - t_cycle - publish_s) * 1e3, (t_end - t_identity) * 1e3)
 
     def _finish_frames(self) -> None:
         """The identity update of the frames applied since the last one (MasterCore.finish_frames), its events
         logged."""
         if self.core is not None:
-            self._identity_done_s = time.monotonic()
+            self.schedule.identity_ran(time.monotonic())
             self._log_identity_events(self.core.finish_frames())
 
     def _publish_cycle(self, newest: float) -> None:
         """Publish the state after a cycle's frames (``newest``: the newest stamp applied), within the rate cap."""
         now = self.now_s()
-        if not self._publish_allowed(now):
-            self._unpublished_stamp = newest  # rate cap: _flush publishes it when a token is back
-            return
-        self._publish(newest, now)
-
-    def _publish_allowed(self, now: float) -> bool:
-        """Rate cap as a token bucket (max_publish_rate_hz, bursts of 2): a camera's jitter around the cap's
-        period does not delay every other message, and the average rate stays at the cap."""
-        if not self._min_publish_interval_s:
-            return True
-        elapsed = max(0.0, now - self._tokens_counted_s)
-        self._publish_tokens = min(2.0, self._publish_tokens + elapsed / self._min_publish_interval_s)
-        self._tokens_counted_s = now  # tokens are counted from here on (also when this cycle does not publish)
-        if self._publish_tokens >= 1.0:
-            self._publish_tokens -= 1.0
-            return True
-        return False
+        if self.schedule.may_publish(now, newest):
+            self._publish(newest, now)
 
     def _flush(self) -> None:
         """Timer at max_publish_rate_hz: publish the state a capped cycle left unpublished."""
         now = self.now_s()
-        if self._unpublished_stamp is not None and self._publish_allowed(now):
-            self._publish(self._unpublished_stamp, now)
+        stamp = self.schedule.due_publish(now)
+        if stamp is not None:
+            self._publish(stamp, now)
 
     def _apply(self, core: MasterCore, health: NodeHealth, record: CameraFrameRecord, now: float) -> float | None:
         """One camera frame received by ``now`` into the core; its stamp when applied, None when refused
@@ -541,7 +517,7 @@ class MasterNode(ManagedNode):
         frame_id = str(self.values["world_frame_id"])
         cdr = tracks_to_cdr(tracks, stamp_s, frame_id)  # serialized here: see track_cdr
         self.tracks_pub.publish(cdr if self._tracks_sealer is None else seal_payload(self._tracks_sealer, cdr))
-        self._unpublished_stamp = None
+        self.schedule.published()
         if self.health is not None:
             self.health.published()
         # Markers are for a person looking at RViz: building them for nobody costs the master time.
@@ -583,8 +559,8 @@ class MasterNode(ManagedNode):
             "frames_applied": stats["frames_applied"],
             "frames_dropped_overload": self.frames_dropped_overload,
             "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
-            "cycle_frame_cost_ms": self._budget.mean_cost_ms,
-            "cycle_fixed_cost_ms": self._budget.mean_cycle_ms,
+            "cycle_frame_cost_ms": self.schedule.budget.mean_cost_ms,
+            "cycle_fixed_cost_ms": self.schedule.budget.mean_cycle_ms,
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
                                                                        "embeddings_rejected", "faces_", "store_",

@@ -320,7 +320,7 @@ def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context,
         assert node.core.identity.face_ids() == []  # 5 observations wait for the next update
         node._tick()
         assert node.core.identity.face_ids() == [1]
-        node._identity_done_s -= 1.0  # the period has passed: the next cycle updates again
+        node.schedule.identity_done -= 1.0  # the period has passed: the next cycle updates again
         _feed(node, _frame(100.6, emb=_unit(2)))
         assert node.core._deferred == []
         _feed(node, _frame(100.7, emb=_unit(2)))  # within the period again: waits
@@ -346,10 +346,10 @@ def test_a_message_sooner_than_min_cycle_period_waits_for_its_cycle(ros_context,
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         _feed(node, _frame(10.0))
         assert slept == []  # no cycle before it
-        node._cycle_began_s = time.monotonic()  # a cycle began just now
+        node.schedule.cycle_began = time.monotonic()  # a cycle began just now
         _feed(node, _frame(10.1))
         assert len(slept) == 1 and 0.05 < slept[0] <= 0.1
-        node._cycle_began_s -= 1.0  # long ago
+        node.schedule.cycle_began -= 1.0  # long ago
         _feed(node, _frame(10.2))
         assert len(slept) == 1 and node.core.stats.frames_applied == 3
     finally:
@@ -363,7 +363,7 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
                    "cycle_budget_ms:=1.0")
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
-        node._budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
+        node.schedule.budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
         for k in range(30):  # camera a sends 20 frames, camera b 10, interleaved, all waiting together
             node._receive(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"), node.now_s())
         node._cycle(node.now_s())
@@ -374,7 +374,8 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
         assert values["frames_dropped"] == "26"
         assert node.core.stats.frames_received == 4
         # fair: camera a (20 waiting) lost its 18 oldest, camera b (10) its 8 oldest; each applied its newest 2
-        assert {cam: len(times) for cam, times in node.core._camera_frames.items()} == {"cam_a": 2, "cam_b": 2}
+        applied = node.core.admission._camera_frames
+        assert {cam: len(times) for cam, times in applied.items()} == {"cam_a": 2, "cam_b": 2}
     finally:
         node.destroy_node()
 
