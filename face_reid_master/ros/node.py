@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -35,7 +34,7 @@ from face_reid_camera.common.embedding_spaces import embedder_for_space, space_d
 from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import open_payload, open_request, seal_payload
+from face_reid_camera.ros.sealed import open_payload, seal_payload
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.core import MasterCore
 from face_reid_master.cycle_schedule import CycleSchedule
@@ -44,13 +43,13 @@ from face_reid_master.intake import FrameIntake, PendingFrame
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
+from face_reid_master.ros.admin_services import AdminServices
 from face_reid_master.ros.convert import frame_from_msg, markers_for
 from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
 from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
 from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
-from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
 USAGE = """usage: face-reid-master [--ros-args --params-file config/master.yaml -p name:=value ...]
 
@@ -59,13 +58,10 @@ face_reid_msgs/CameraFrame in, named tracks on /tracks_named out, status on /dia
 Parameters (all declared with descriptions and ranges; `ros2 param describe` lists them):
 """
 
-_MAX_REPLY_CHARS = 1000  # service replies are cut to this
-_MAX_LOG_CHARS = 300  # log lines about a request are cut to this
+_MAX_LOG_CHARS = 300  # log lines about a frame are cut to this
 # A camera message (plain or sealed) larger than this is refused before it is read: a frame of 50 people with
 # 256-d embeddings and body descriptors is ~0.2 MB, and the bound keeps what a stranger's traffic costs small.
 MAX_FRAME_BYTES = 1 << 20
-_MAX_PHOTO_PIXELS = 40_000_000  # an add-person photo larger than this (by its header) is refused: 40 MP
-_REQUEST_PIXEL_BUDGET = 200_000_000  # pixels one add-person request may decode in all (a few seconds of work)
 
 
 class MasterNode(ManagedNode):
@@ -76,13 +72,10 @@ class MasterNode(ManagedNode):
         self.values: dict[str, Any] = {}
         self.core: MasterCore | None = None
         self._photos: Any = None  # PhotoEmbedder of the master's space, loaded on first use
-        self._admin_worker: Any = None  # the thread that decodes add-person photos (off the frame path)
         self.store: Any = None
         self.health: NodeHealth | None = None
         self._watch = MasterHealthWatch()  # store failures, faces lost at open, overload, another master
-        self._own_services: list[Any] = []
-        self._service_calls: dict[str, int] = {}
-        self._service_refusals: dict[str, int] = {}
+        self.admin = AdminServices(self)  # ~/list_faces, ~/add_person, ~/forget_face
         self._subscribed: dict[str, Any] = {}
         self._unmatched: set[str] = set()  # camera topics said to have only publishers that do not match
         self._refused_topics: set[str] = set()  # camera topics not subscribed (cap reached, unknown camera)
@@ -150,20 +143,7 @@ class MasterNode(ManagedNode):
         self._max_topics = int(values["max_camera_topics"])
         self._known_cameras = frozenset(master_params.clean_list(values["known_camera_ids"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
-        self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
-        if values["admin_services"]:
-            # their own callback group: while a request waits for its photos, frames and timers go on
-            admin = MutuallyExclusiveCallbackGroup()
-            self._own_services += [
-                self.create_service(AddPerson, "~/add_person", self._add_person, callback_group=admin),
-                self.create_service(ForgetFace, "~/forget_face", self._forget_face, callback_group=admin)]
-            if not values["network_key_path"]:
-                self.get_logger().warning(
-                    "admin services on (admin_services: true) without a network key: any participant of this "
-                    "DDS domain can call ~/add_person and ~/forget_face")
-        else:
-            self.get_logger().info("admin services off (admin_services: false): ~/add_person and ~/forget_face "
-                                   "are not offered")
+        self.admin.create(bool(values["admin_services"]), secured=bool(values["network_key_path"]))
         self.get_logger().info(
             f"master: method={config.method}, {len(self.core.identity.face_ids())} learned faces loaded, "
             f"{len(self.core.people.names())} predefined people, body appearance "
@@ -200,7 +180,7 @@ class MasterNode(ManagedNode):
         self.get_logger().info(f"master: publishing {self.tracks_pub.topic_name}")
 
     def deactivate(self) -> None:
-        self._finish_frames()  # the face table as the applied frames leave it (no tick runs while inactive)
+        self.finish_frames()  # the face table as the applied frames leave it (no tick runs while inactive)
         for timer in self._own_timers:
             self.destroy_timer(timer)
         self._own_timers = []
@@ -218,16 +198,14 @@ class MasterNode(ManagedNode):
             self.people_topics.deactivate()
 
     def cleanup(self) -> None:
-        for srv in self._own_services:
-            self.destroy_service(srv)
-        self._own_services = []
+        self.admin.destroy()
         if self.core is not None:
             self.core.flush()
         if self.store is not None:
             self.store.close()
         self.core = self.store = None
 
-    def _core(self) -> MasterCore:
+    def configured_core(self) -> MasterCore:
         if self.core is None:
             raise ValueError("the master is not configured")
         return self.core
@@ -261,7 +239,7 @@ class MasterNode(ManagedNode):
             return {}
         from face_reid_master.storage.gallery import load_gallery
 
-        result = load_gallery(Path(path), self._photo_embedder())
+        result = load_gallery(Path(path), self.photo_embedder())
         skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
         if skipped:
             self.get_logger().warning(
@@ -270,7 +248,7 @@ class MasterNode(ManagedNode):
             )
         return dict(result.people)
 
-    def _photo_embedder(self) -> Any:
+    def photo_embedder(self) -> Any:
         """Photos -> embeddings of the master's space (gallery folder, add-person service)."""
         from face_reid_camera.faces.embedder import load_embedder
         from face_reid_camera.faces.photos import PhotoEmbedder
@@ -449,11 +427,11 @@ class MasterNode(ManagedNode):
         finally:  # one identity update for the frames applied since the last one, at most every identity_period_s
             t_identity = time.perf_counter()
             if self.schedule.identity_due(time.monotonic()):
-                self._finish_frames()
+                self.finish_frames()
         t_end = time.perf_counter()
         self.schedule.cycle_cost(len(frames), (t_end - t_cycle - publish_s) * 1e3, (t_end - t_identity) * 1e3)
 
-    def _finish_frames(self) -> None:
+    def finish_frames(self) -> None:
         """The identity update of the frames applied since the last one (MasterCore.finish_frames), its events
         logged."""
         if self.core is not None:
@@ -500,7 +478,7 @@ class MasterNode(ManagedNode):
     def _tick(self) -> None:
         if self.core is None:
             return
-        self._finish_frames()  # what waits for the identity update (frames stopped within identity_period_s)
+        self.finish_frames()  # what waits for the identity update (frames stopped within identity_period_s)
         now = self.now_s()
         if self.values["check_stamps_against_clock"]:
             # Lag by the tracker's delay bound so that frames in flight still arrive in order.
@@ -541,11 +519,11 @@ class MasterNode(ManagedNode):
                 stats["frames_dropped_overload"] = self.frames_dropped_overload
             if self.health is not None:
                 stats.update({f"rejected_{k}": v for k, v in sorted(self.health.rejected.items())})
-            stats.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
+            stats.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
             self.get_logger().info(f"stats: {stats}")
 
     def diagnostics(self, now_s: float) -> DiagnosticReport:
-        core, health = self._core(), self.health
+        core, health = self.configured_core(), self.health
         assert health is not None
         tracks = core.tracks()
         stats = core.stats.as_dict()
@@ -565,8 +543,8 @@ class MasterNode(ManagedNode):
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
                                                                        "embeddings_rejected", "faces_", "store_",
                                                                        "detections_rejected", "bodies_", "body_"))})
-        extra.update({f"{k}_calls": v for k, v in self._service_calls.items()})
-        extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
+        extra.update({f"{k}_calls": v for k, v in self.admin.calls.items()})
+        extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         warnings = [] if self._subscribed else ["no camera topic found yet"]
         extra["camera_topics_refused"] = len(self._refused_topics)
@@ -608,116 +586,6 @@ class MasterNode(ManagedNode):
             store_last_write_ok=getattr(store, "last_write_ok", None),
             store_last_error=getattr(store, "last_error", ""), other_publishers=others,
             output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
-
-    # ------------------------------------------------------------------ services
-    async def _add_person(self, request: Any, response: Any) -> Any:
-        return await self._handle("add_person", self._do_add_person, request, response)
-
-    async def _forget_face(self, request: Any, response: Any) -> Any:
-        return await self._handle("forget_face", self._do_forget_face, request, response)
-
-    async def _handle(self, what: str, handler: Any, request: Any, response: Any) -> Any:
-        """Run a service handler (a coroutine: the executor goes on with frames while it waits): a refused request
-        (ValueError) or any other error is reported in the response and logged (cut), never raised into the
-        executor."""
-        try:
-            if self._openers:  # secured: only what a holder of the network key sealed is done
-                try:
-                    request = open_request(self._openers["requests"], request, time.time())
-                except SealError as exc:
-                    raise ValueError(f"refused: {exc}") from exc
-            await handler(request, response)
-        except ValueError as exc:
-            response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]
-        except Exception as exc:  # a request must never take the node down
-            response.success = False
-            response.message = f"internal error: {type(exc).__name__}: {str(exc)[:200]}"
-        self._service_calls[what] = self._service_calls.get(what, 0) + 1
-        if not response.success:
-            self._service_refusals[what] = self._service_refusals.get(what, 0) + 1
-        self.get_logger().info(f"{what}: {response.message[:_MAX_LOG_CHARS]}", throttle_duration_sec=1.0)
-        return response
-
-    async def _off_the_frame_path(self, work: Any) -> Any:
-        """``work()`` on the admin worker thread; the executor serves frames meanwhile (rclpy resumes the awaiting
-        service coroutine when the worker's result arrives)."""
-        from concurrent.futures import ThreadPoolExecutor
-
-        from rclpy.task import Future
-
-        if self._admin_worker is None:
-            self._admin_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="face_reid_admin")
-        done: Future[Any] = Future(executor=self.executor)
-        done.add_done_callback(lambda _: None)  # its completion wakes the executor, which resumes the coroutine
-
-        def finished(job: Any) -> None:
-            if job.exception() is not None:
-                done.set_exception(job.exception())
-            else:
-                done.set_result(job.result())
-
-        self._admin_worker.submit(work).add_done_callback(finished)
-        return await done
-
-    async def _do_add_person(self, request: Any, response: Any) -> None:
-        from face_reid_camera.faces.photos import embed_request_photos
-        from face_reid_master.identity.predefined_people import check_person_name
-
-        name = check_person_name(request.name.strip())
-        dim = space_dim(str(self.values["embedding_space"]))
-        max_rows = int(self.values["max_embeddings_per_request"])
-        max_photos = int(self.values["max_photos_per_request"])
-        if len(request.embeddings) > max_rows * dim:
-            raise ValueError(f"more than {max_rows} embeddings in one request (max_embeddings_per_request)")
-        if len(request.embeddings) % dim:
-            raise ValueError(f"embeddings must hold k x {dim} values (space {self.values['embedding_space']}), "
-                             f"got {len(request.embeddings)}")
-        if len(request.image_paths) > max_photos:
-            raise ValueError(f"more than {max_photos} photos in one request (max_photos_per_request)")
-        emb = np.asarray(request.embeddings, dtype=np.float32)
-        rows: list[np.ndarray] = list(emb.reshape(-1, dim)) if emb.size else []
-        notes: list[str] = []
-        if request.image_paths:  # read, decoded and embedded off the frame path, within the request's pixel budget
-            paths, root, max_bytes = [str(p) for p in request.image_paths], str(self.values["photo_root"]), int(
-                self.values["max_photo_bytes"])
-            photos = await self._off_the_frame_path(lambda: embed_request_photos(
-                self._photo_embedder(), root, paths, max_bytes, _MAX_PHOTO_PIXELS, _REQUEST_PIXEL_BUDGET))
-            rows += photos.embeddings
-            notes += photos.notes
-        try:
-            if not rows:
-                raise ValueError("no usable face embedding")
-            self._finish_frames()  # the request acts on the face table as the frames applied so far left it
-            self._core().add_person(name, np.stack(rows))
-        except ValueError as exc:
-            raise ValueError("; ".join([str(exc), *notes])[:_MAX_REPLY_CHARS]) from None
-        response.success, response.num_embeddings = True, len(rows)
-        response.message = "; ".join([f"added {name} with {len(rows)} embeddings", *notes])[:_MAX_REPLY_CHARS]
-
-    async def _do_forget_face(self, request: Any, response: Any) -> None:
-        self._finish_frames()  # the request acts on the face table as the frames applied so far left it
-        core = self._core()
-        if not request.face_id and not request.name:
-            raise ValueError("give a face_id or a name")
-        ids = [int(request.face_id)] if request.face_id else [
-            fid for fid in core.identity.face_ids() if core.face_name(fid) == request.name
-        ]
-        forgotten = [fid for fid in ids if core.forget_face(fid)]
-        person = bool(request.name) and not request.face_id and core.forget_person(request.name)
-        response.forgotten_face_ids = forgotten
-        response.success = bool(forgotten) or person
-        said = ([f"forgot faces {forgotten}"] if forgotten else []) + (
-            [f"removed the predefined person {shown(request.name, 64)}"] if person else [])
-        response.message = "; ".join(said) if said else "no such face or person"
-
-    def _list_faces(self, request: Any, response: Any) -> Any:
-        core = self._core()
-        for face in core.identity.export_faces():
-            response.face_ids.append(face.face_id)
-            response.names.append(core.face_name(face.face_id))
-            response.num_features.append(int(face.features.shape[0]))
-            response.last_seen_s.append(float(face.last_seen_s))
-        return response
 
 
 def _read_frame(frame: bytes | Any) -> tuple[CameraFrameRecord, float]:

@@ -219,7 +219,8 @@ def test_add_person_survives_hostile_photo_paths_names_and_sizes(ros_context, tm
         ):
             replies: list = []
             worker = threading.Thread(
-                target=lambda r=req, out=replies: out.append(call_handler(node._add_person, r, AddPerson.Response())),
+                target=lambda r=req, out=replies: out.append(
+                    call_handler(node.admin.add_person, r, AddPerson.Response())),
                 daemon=True)
             worker.start()
             worker.join(30.0)
@@ -227,10 +228,10 @@ def test_add_person_survives_hostile_photo_paths_names_and_sizes(ros_context, tm
             assert not replies[0].success and why in replies[0].message, (why, replies[0].message[:300])
             assert len(replies[0].message) <= 1000
         assert node.core.people.names() == []  # nothing stored by any of them
-        reply = call_handler(node._add_person, AddPerson.Request(name="Alice", image_paths=["alice.jpg"]),
+        reply = call_handler(node.admin.add_person, AddPerson.Request(name="Alice", image_paths=["alice.jpg"]),
                              AddPerson.Response())
         assert reply.success and reply.num_embeddings == 1 and node.core.people.names() == ["Alice"]
-        assert node._service_refusals["add_person"] == 13 and node._service_calls["add_person"] == 14
+        assert node.admin.refusals["add_person"] == 13 and node.admin.calls["add_person"] == 14
     finally:
         node.destroy_node()
 
@@ -542,7 +543,7 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
     import cv2
     from conftest import FACES_DIR
 
-    from face_reid_master.ros import node as node_module
+    from face_reid_master.ros import admin_services as admin_module
 
     root = tmp_path / "gallery"
     root.mkdir()
@@ -550,9 +551,9 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
     big = cv2.resize(face, (4000, 4000), interpolation=cv2.INTER_LINEAR)  # 16 MP each: a slow request
     for k in range(6):
         cv2.imwrite(str(root / f"big{k}.jpg"), big)
-    huge = f"{node_module._MAX_PHOTO_PIXELS // 1000 + 1}x1000.png"  # over the photo cap by its header alone
+    huge = f"{admin_module._MAX_PHOTO_PIXELS // 1000 + 1}x1000.png"  # over the photo cap by its header alone
     (root / huge).write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR"
-                              + (node_module._MAX_PHOTO_PIXELS // 1000 + 1).to_bytes(4, "big")
+                              + (admin_module._MAX_PHOTO_PIXELS // 1000 + 1).to_bytes(4, "big")
                               + (1000).to_bytes(4, "big") + b"\x08\x02\x00\x00\x00" + bytes(64))
     node = _master(ros_context, tmp_path, "admin_services:=true", f"photo_root:={root}", "tick_rate_hz:=20.0")
     client = Node("admin", context=node.context)
@@ -575,7 +576,7 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
         assert reply.success, reply.message
         assert during >= 5, f"only {during} /tracks_named messages while the request ran: {reply.message}"
         assert reply.num_embeddings == 6 or "budget" in reply.message  # 6 x 16 MP fit the 200 MP budget
-        assert f"more than {node_module._MAX_PHOTO_PIXELS}" in reply.message  # the huge PNG, by its header
+        assert f"more than {admin_module._MAX_PHOTO_PIXELS}" in reply.message  # the huge PNG, by its header
     finally:
         executor.shutdown()
         client.destroy_node()

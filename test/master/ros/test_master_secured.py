@@ -143,12 +143,12 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
     master = MasterNode(context=ctx)
     try:
         assert master.trigger_configure() == OK
-        reply = call_handler(master._add_person, early, AddPerson.Response())
+        reply = call_handler(master.admin.add_person, early, AddPerson.Response())
         assert not reply.success and "before this receiver started" in reply.message
         sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=_face(1).tolist()))
-        assert call_handler(master._add_person, sealed, AddPerson.Response()).success
+        assert call_handler(master.admin.add_person, sealed, AddPerson.Response()).success
         assert master.trigger_cleanup() == OK and master.trigger_configure() == OK  # a restart of the master
-        reply = call_handler(master._add_person, sealed, AddPerson.Response())  # captured, replayed after it
+        reply = call_handler(master.admin.add_person, sealed, AddPerson.Response())  # captured, replayed after it
         assert not reply.success and "before this receiver started" in reply.message
     finally:
         master.destroy_node()
