@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import MarkerArray
@@ -44,6 +43,7 @@ from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.admin_services import AdminServices
+from face_reid_master.ros.camera_topics import CameraTopics
 from face_reid_master.ros.convert import frame_from_msg, markers_for
 from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
 from face_reid_master.ros.people_topics import PeopleTopics
@@ -76,11 +76,7 @@ class MasterNode(ManagedNode):
         self.health: NodeHealth | None = None
         self._watch = MasterHealthWatch()  # store failures, faces lost at open, overload, another master
         self.admin = AdminServices(self)  # ~/list_faces, ~/add_person, ~/forget_face
-        self._subscribed: dict[str, Any] = {}
-        self._unmatched: set[str] = set()  # camera topics said to have only publishers that do not match
-        self._refused_topics: set[str] = set()  # camera topics not subscribed (cap reached, unknown camera)
-        self._max_topics = 0
-        self._known_cameras: frozenset[str] = frozenset()  # known_camera_ids ({} = any)
+        self.cameras = CameraTopics(self, self._on_camera_message, self._reject)
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
         self._clocks = ClockOffsets()
         self._own_timers: list[Any] = []
@@ -89,7 +85,6 @@ class MasterNode(ManagedNode):
         self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
-        self._regex: re.Pattern[str] | None = None
         self._intake: FrameIntake[Any] = FrameIntake()
         self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
 
@@ -117,7 +112,10 @@ class MasterNode(ManagedNode):
 
             confidence_map = load_confidence_map(str(values["confidence_map_path"]))
         self.core = MasterCore(config, likelihood, self.store, gallery, body_metric, confidence_map)
-        self._regex = re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex
+        self.cameras.configure(re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex,
+                               int(values["max_camera_topics"]),
+                               frozenset(master_params.clean_list(values["known_camera_ids"])),
+                               sealed=bool(values["network_key_path"]))
         self._openers, self._tracks_sealer = {}, None
         if values["network_key_path"]:
             from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
@@ -140,8 +138,6 @@ class MasterNode(ManagedNode):
                 "and any participant of this DDS domain can read them or inject frames")
         self.schedule = CycleSchedule(float(values["min_cycle_period_s"]), float(values["identity_period_s"]),
                                       float(values["max_publish_rate_hz"]), float(values["cycle_budget_ms"]))
-        self._max_topics = int(values["max_camera_topics"])
-        self._known_cameras = frozenset(master_params.clean_list(values["known_camera_ids"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
         self.admin.create(bool(values["admin_services"]), secured=bool(values["network_key_path"]))
         self.get_logger().info(
@@ -153,7 +149,7 @@ class MasterNode(ManagedNode):
     def activate(self) -> None:
         values = self.values
         qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-        self._frame_qos = qos
+        self.cameras.qos = qos
         # secured: the tracks only sealed (so that no consumer takes a spoof on the plain topic for the master's)
         self.tracks_pub = (self.create_publisher(Sealed, sealed_topic(str(values["tracks_topic"])), qos)
                            if self._tracks_sealer is not None else
@@ -164,10 +160,10 @@ class MasterNode(ManagedNode):
         if self.people_topics is not None:
             self.people_topics.activate()
         for topic in master_params.clean_list(values["camera_topics"]):
-            self._subscribe(topic)
-        if self._regex is not None:
-            self._discover()
-        self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
+            self.cameras.subscribe(topic)
+        if self.cameras.regex is not None:
+            self.cameras.discover()
+        self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self.cameras.discover))
         self._own_timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
         if self.schedule.publish_interval_s:
             self._own_timers.append(self.create_timer(self.schedule.publish_interval_s, self._flush))
@@ -184,11 +180,7 @@ class MasterNode(ManagedNode):
         for timer in self._own_timers:
             self.destroy_timer(timer)
         self._own_timers = []
-        for sub in self._subscribed.values():
-            self.destroy_subscription(sub)
-        self._subscribed = {}
-        self._unmatched.clear()
-        self._refused_topics.clear()
+        self.cameras.destroy()
         self._intake.clear()  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
@@ -258,56 +250,13 @@ class MasterNode(ManagedNode):
             self._photos = PhotoEmbedder(embedder=load_embedder(choice))
         return self._photos
 
-    # ------------------------------------------------------------------ camera topics
-    def _subscribe(self, topic: str) -> None:
-        if topic in self._subscribed or topic in self._refused_topics:
-            return
-        if len(self._subscribed) >= self._max_topics:  # memory before authentication: DDS buffers per topic
-            self._refused_topics.add(topic)
-            self._reject("topic_cap", f"camera topic {shown(topic, 128)} not subscribed: already "
-                                      f"{len(self._subscribed)} camera topics (max_camera_topics)")
-            return
-        # Without rclpy's default QoS-event handlers (two per subscription, each walked by the executor on every
-        # cycle): publishers that do not match are found by _warn_unmatched instead.
-        events = SubscriptionEventCallbacks(use_default_callbacks=False)
+    # ------------------------------------------------------------------ camera messages
+    def _on_camera_message(self, message: bytes) -> None:
+        """A camera topic's message (CDR bytes): sealed on a secured network, else a CameraFrame."""
         if self._openers:
-            self._subscribed[topic] = self.create_subscription(Sealed, topic, self._on_sealed, self._frame_qos,
-                                                               event_callbacks=events, raw=True)
+            self._on_sealed(message)
         else:
-            self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos,
-                                                               event_callbacks=events, raw=True)
-        self.get_logger().info(f"subscribed to camera topic {topic}")
-
-    def _warn_unmatched(self) -> None:
-        """Say once per camera topic when it has publishers but none is matched: their QoS is incompatible with the
-        master's reliable subscription (a best-effort camera publisher), so its frames never arrive."""
-        for topic, sub in self._subscribed.items():
-            if sub.get_publisher_count() > 0:
-                self._unmatched.discard(topic)
-                continue
-            offered = self.get_publishers_info_by_topic(topic)
-            if not offered or topic in self._unmatched:
-                continue
-            self._unmatched.add(topic)
-            policies = sorted({str(info.qos_profile.reliability.name).lower() for info in offered})
-            self.get_logger().warning(
-                f"camera topic {shown(topic, 128)}: {len(offered)} publisher(s) offering reliability "
-                f"{'/'.join(policies)} do not match the master's subscription (reliable, depth 50): their frames "
-                "are not received; publish camera frames reliable")
-
-    def _discover(self) -> None:
-        self._warn_unmatched()
-        if self._regex is None:
-            return
-        for name, types in self.get_topic_names_and_types():
-            wanted = "face_reid_msgs/msg/Sealed" if self._openers else "face_reid_msgs/msg/CameraFrame"
-            if wanted in types and self._regex.search(name) and name not in self._refused_topics:
-                if self._known_cameras and self._known_cameras.isdisjoint(name.split("/")):
-                    self._refused_topics.add(name)  # a stranger's topic: not even buffered
-                    self._reject("topic_unknown_camera", f"camera topic {shown(name, 128)} not subscribed: none of "
-                                 "its namespaces is a known_camera_ids entry (list it in camera_topics)")
-                    continue
-                self._subscribe(name)
+            self._on_frame(message)
 
     def _on_frame(self, frame: bytes | Any) -> None:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
@@ -387,7 +336,7 @@ class MasterNode(ManagedNode):
     def _drain(self, now: float) -> None:
         """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
         one cycle sees all of them and drops the oldest when they are too many."""
-        for sub in self._subscribed.values():
+        for sub in self.cameras.subscribed.values():
             try:
                 with sub.handle:
                     while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
@@ -532,8 +481,8 @@ class MasterNode(ManagedNode):
             "tracks": len(tracks),
             "tracks_identified": sum(1 for t in tracks if t.face_id),
             "tracks_static_clutter": core.static_clutter_tracks,
-            "camera_topics": len(self._subscribed),
-            "camera_topics_unmatched": len(self._unmatched),
+            "camera_topics": len(self.cameras.subscribed),
+            "camera_topics_unmatched": len(self.cameras.unmatched),
             "frames_applied": stats["frames_applied"],
             "frames_dropped_overload": self.frames_dropped_overload,
             "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
@@ -546,15 +495,15 @@ class MasterNode(ManagedNode):
         extra.update({f"{k}_calls": v for k, v in self.admin.calls.items()})
         extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
-        warnings = [] if self._subscribed else ["no camera topic found yet"]
-        extra["camera_topics_refused"] = len(self._refused_topics)
-        if self._refused_topics:
-            warnings.append(f"{len(self._refused_topics)} camera topic(s) not subscribed (max_camera_topics "
-                            f"reached, or not named after a known camera), e.g. {shown(min(self._refused_topics), 64)}")
-        if self._unmatched:
-            warnings.append(f"{len(self._unmatched)} camera topic(s) whose publishers do not match the master's "
-                            f"reliable subscription, e.g. {shown(min(self._unmatched), 64)}: publish camera frames "
-                            "reliable")
+        warnings = [] if self.cameras.subscribed else ["no camera topic found yet"]
+        extra["camera_topics_refused"] = len(self.cameras.refused)
+        if self.cameras.refused:
+            warnings.append(f"{len(self.cameras.refused)} camera topic(s) not subscribed (max_camera_topics "
+                            f"reached, or not named after a known camera), e.g. {shown(min(self.cameras.refused), 64)}")
+        if self.cameras.unmatched:
+            warnings.append(f"{len(self.cameras.unmatched)} camera topic(s) whose publishers do not match the "
+                            f"master's reliable subscription, e.g. {shown(min(self.cameras.unmatched), 64)}: publish "
+                            "camera frames reliable")
         limit = float(self.values["clock_offset_warning_s"])
         off = self._clocks.beyond(limit)
         extra["cameras_clock_off"] = len(off)

@@ -509,14 +509,14 @@ def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_
     executor = SingleThreadedExecutor(context=node.context)
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
-        assert all(len(sub.event_handlers) == 0 for sub in node._subscribed.values())
+        assert all(len(sub.event_handlers) == 0 for sub in node.cameras.subscribed.values())
         executor.add_node(node)
         executor.add_node(camera)
         lossy = camera.create_publisher(CameraFrame, CAM,
                                         QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT))
 
         def seen() -> bool:
-            node._warn_unmatched()
+            node.cameras.warn_unmatched()
             return node.diagnostics(node.now_s()).values["camera_topics_unmatched"] == "1"
 
         assert spin_until(executor, seen, 20.0)
@@ -526,7 +526,7 @@ def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_
         camera.create_publisher(CameraFrame, CAM, QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
 
         def matched() -> bool:
-            node._warn_unmatched()
+            node.cameras.warn_unmatched()
             return node.diagnostics(node.now_s()).values["camera_topics_unmatched"] == "0"
 
         assert spin_until(executor, matched, 20.0)

@@ -65,8 +65,9 @@ def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) 
         forged_pub = stranger.create_publisher(Sealed, "/cam_c/face_reid/frames_sealed", 10)
         overheard: list = []
         stranger.create_subscription(Sealed, "/cam_a/face_reid/frames_sealed", overheard.append, 10)
-        assert spin_until(executor, lambda: len(master._subscribed) == 2 and sealed_pub.get_subscription_count() == 2)
-        assert "/cam_b/face_reid/frames" not in master._subscribed  # plain frames are not even listened to
+        assert spin_until(executor, lambda: len(master.cameras.subscribed) == 2
+                          and sealed_pub.get_subscription_count() == 2)
+        assert "/cam_b/face_reid/frames" not in master.cameras.subscribed  # plain frames are not even listened to
 
         alice, mallory = _face(1), _face(2)
         cam_sealer, forger = Sealer(key, "cam_a"), Sealer(stranger_key, "cam_c")
@@ -171,7 +172,7 @@ def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_
     try:
         assert master.trigger_configure() == OK and master.trigger_activate() == OK
         pubs = [stranger.create_publisher(Sealed, f"/s{k}/face_reid/frames_sealed", 10) for k in range(3)]
-        assert spin_until(executor, lambda: len(master._subscribed) == 2 and len(master._refused_topics) == 1)
+        assert spin_until(executor, lambda: len(master.cameras.subscribed) == 2 and len(master.cameras.refused) == 1)
         assert spin_until(executor, lambda: sum(p.get_subscription_count() for p in pubs) == 2)
         big = Sealed(sender_id="s0", counter=time.time_ns(), nonce=bytes(12), ciphertext=bytes(MAX_FRAME_BYTES + 1))
         matched = [p for p in pubs if p.get_subscription_count() > 0]
@@ -202,10 +203,10 @@ def test_with_known_cameras_only_their_topics_are_subscribed(ros_context, tmp_pa
         for name in ("/cam_a/face_reid/frames_sealed", "/evil/face_reid/frames_sealed"):
             stranger.create_publisher(Sealed, name, 10)
         assert spin_until(executor, lambda: master.health.rejected.get("topic_unknown_camera", 0) == 1
-                          and len(master._subscribed) == 1)
-        assert set(master._subscribed) == {"/cam_a/face_reid/frames_sealed"}
+                          and len(master.cameras.subscribed) == 1)
+        assert set(master.cameras.subscribed) == {"/cam_a/face_reid/frames_sealed"}
         for _ in range(5):  # discovery goes on: the refused topic is neither subscribed nor counted again
-            master._discover()
+            master.cameras.discover()
         assert master.health.rejected["topic_unknown_camera"] == 1
     finally:
         executor.shutdown()
