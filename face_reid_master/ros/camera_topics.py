@@ -94,6 +94,21 @@ class CameraTopics:
                     continue
                 self.subscribe(name)
 
+    def status(self) -> tuple[dict[str, object], list[str]]:
+        """Their counts for /diagnostics and the warnings those call for."""
+        counts: dict[str, object] = {"camera_topics": len(self.subscribed),
+                                     "camera_topics_unmatched": len(self.unmatched),
+                                     "camera_topics_refused": len(self.refused)}
+        warnings = [] if self.subscribed else ["no camera topic found yet"]
+        if self.refused:
+            warnings.append(f"{len(self.refused)} camera topic(s) not subscribed (max_camera_topics reached, or not "
+                            f"named after a known camera), e.g. {shown(min(self.refused), 64)}")
+        if self.unmatched:
+            warnings.append(f"{len(self.unmatched)} camera topic(s) whose publishers do not match the master's "
+                            f"reliable subscription, e.g. {shown(min(self.unmatched), 64)}: publish camera frames "
+                            "reliable")
+        return counts, warnings
+
     def destroy(self) -> None:
         for sub in self.subscribed.values():
             self.node.destroy_subscription(sub)

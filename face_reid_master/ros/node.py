@@ -24,32 +24,28 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import MarkerArray
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
-from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import open_payload, seal_payload
-from face_reid_master.clock_offsets import ClockOffsets
+from face_reid_camera.ros.sealed import seal_payload
 from face_reid_master.core import MasterCore
 from face_reid_master.cycle_schedule import CycleSchedule
 from face_reid_master.health import MasterHealthWatch
-from face_reid_master.intake import FrameIntake, PendingFrame
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
 from face_reid_master.ros.admin_services import AdminServices
 from face_reid_master.ros.camera_topics import CameraTopics
-from face_reid_master.ros.convert import frame_from_msg, markers_for
-from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
+from face_reid_master.ros.convert import markers_for
+from face_reid_master.ros.frame_receiver import FrameReceiver
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
 from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
-from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
+from face_reid_msgs.msg import NamedTrackArray, Sealed
 
 USAGE = """usage: face-reid-master [--ros-args --params-file config/master.yaml -p name:=value ...]
 
@@ -59,9 +55,6 @@ Parameters (all declared with descriptions and ranges; `ros2 param describe` lis
 """
 
 _MAX_LOG_CHARS = 300  # log lines about a frame are cut to this
-# A camera message (plain or sealed) larger than this is refused before it is read: a frame of 50 people with
-# 256-d embeddings and body descriptors is ~0.2 MB, and the bound keeps what a stranger's traffic costs small.
-MAX_FRAME_BYTES = 1 << 20
 
 
 class MasterNode(ManagedNode):
@@ -78,14 +71,13 @@ class MasterNode(ManagedNode):
         self.admin = AdminServices(self)  # ~/list_faces, ~/add_person, ~/forget_face
         self.cameras = CameraTopics(self, self._on_camera_message, self._reject)
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
-        self._clocks = ClockOffsets()
         self._own_timers: list[Any] = []
         self.tracks_pub: Any = None  # /tracks_named, or <tracks_topic>_sealed on a secured network
         self._tracks_sealer: Any = None  # seals the tracks (purpose "tracks") when the network has a key
         self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
-        self._intake: FrameIntake[Any] = FrameIntake()
+        self.receiver = FrameReceiver(None, {}, self._reject, self.log_throttled)  # messages into the next cycle
         self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
 
     # ------------------------------------------------------------------ lifecycle
@@ -139,6 +131,7 @@ class MasterNode(ManagedNode):
         self.schedule = CycleSchedule(float(values["min_cycle_period_s"]), float(values["identity_period_s"]),
                                       float(values["max_publish_rate_hz"]), float(values["cycle_budget_ms"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
+        self.receiver.health, self.receiver.openers = self.health, self._openers
         self.admin.create(bool(values["admin_services"]), secured=bool(values["network_key_path"]))
         self.get_logger().info(
             f"master: method={config.method}, {len(self.core.identity.face_ids())} learned faces loaded, "
@@ -181,7 +174,7 @@ class MasterNode(ManagedNode):
             self.destroy_timer(timer)
         self._own_timers = []
         self.cameras.destroy()
-        self._intake.clear()  # frames of a cycle that will not run
+        self.receiver.intake.clear()  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
                 self.destroy_publisher(pub)
@@ -264,13 +257,13 @@ class MasterNode(ManagedNode):
         meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
-        self._receive(frame, now)
+        self.receiver.receive(frame, now)
         self._cycle(now)
 
     @property
     def frames_dropped_overload(self) -> int:
         """Frames dropped for overload since start (oldest first, fairly across cameras)."""
-        return self._intake.dropped
+        return self.receiver.intake.dropped
 
     def _wait_for_cycle(self) -> None:
         """Sleep out what is left of min_cycle_period_s since the last cycle began (messages queue meanwhile)."""
@@ -282,71 +275,8 @@ class MasterNode(ManagedNode):
         """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one."""
         self._wait_for_cycle()
         now = self.now_s()
-        if self._receive_sealed(sealed, now):
+        if self.receiver.receive_sealed(sealed, now):
             self._cycle(now)
-
-    def _receive_sealed(self, raw: bytes, now: float) -> bool:
-        """The CameraFrame inside a sealed message's CDR bytes received (True), or refused (counted by reason,
-        logged): an oversized one before it is even read."""
-        if self.health is not None:
-            self.health.frame_in(now)
-        if len(raw) > MAX_FRAME_BYTES:
-            self._reject("oversized", f"sealed message of {len(raw)} bytes refused unread (more than "
-                                      f"{MAX_FRAME_BYTES})")
-            return False
-        try:
-            sealed = deserialize_message(raw, Sealed)
-        except Exception as exc:  # rclpy raises RMWError for bytes that are not one
-            self._reject("sealed_malformed", f"not a face_reid_msgs/Sealed: {str(exc)[:200]}")
-            return False
-        sender = str(sealed.sender_id)
-        try:
-            payload = open_payload(self._openers["frames"], sealed, time.time())
-        except SealError as exc:
-            self._reject(f"sealed_{exc.code}", f"sealed frame from {shown(sender, 64)} refused: {exc}")
-            return False
-        return self._receive(payload, now, sender, counted=True)
-
-    def _receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None, counted: bool = False) -> bool:
-        """A camera frame (CDR bytes or a CameraFrame message; ``sealed_by``: the sender of the seal it came in)
-        read into a record and queued for the next cycle (True); one that cannot be read, or sealed by another
-        camera than it names, is refused (counted, logged)."""
-        if self.health is not None and not counted:
-            self.health.frame_in(now)
-        if isinstance(frame, bytes) and len(frame) > MAX_FRAME_BYTES:
-            self._reject("oversized", f"camera message of {len(frame)} bytes refused unread (more than "
-                                      f"{MAX_FRAME_BYTES})")
-            return False
-        try:
-            record, processing_ms = _read_frame(frame)
-        except (ValueError, TypeError, AttributeError) as exc:
-            self._reject("malformed" if sealed_by is None else "sealed_malformed", f"malformed CameraFrame: {exc}")
-            return False
-        if sealed_by is not None and record.camera_id != sealed_by:
-            self._reject("sealed_sender_mismatch", f"sealed by {shown(sealed_by, 64)} but says camera "
-                                                   f"{shown(record.camera_id, 64)}")
-            return False
-        self._intake.add(PendingFrame(record.camera_id, record.stamp_s, record))
-        try:
-            self._clocks.observe(record.camera_id, record.stamp_s, time.time(), processing_ms * 1e-3)
-        except (TypeError, ValueError):
-            pass
-        return True
-
-    def _drain(self, now: float) -> None:
-        """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
-        one cycle sees all of them and drops the oldest when they are too many."""
-        for sub in self.cameras.subscribed.values():
-            try:
-                with sub.handle:
-                    while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                        if self._openers:
-                            self._receive_sealed(taken[0], now)
-                        else:
-                            self._receive(taken[0], now)
-            except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
-                self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
-                                   1, warn=True)
 
     def _cycle(self, now: float) -> None:
         """One master cycle: everything received since the last one (by ``now``, the node clock's seconds), in
@@ -355,8 +285,8 @@ class MasterNode(ManagedNode):
         if core is None or health is None or self.tracks_pub is None:
             return
         limit = self.schedule.begin_cycle(time.monotonic())
-        self._drain(now)
-        frames, dropped = self._intake.take(limit)
+        self.receiver.drain(self.cameras.subscribed.values(), now)
+        frames, dropped = self.receiver.intake.take(limit)
         if dropped:
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
                                            f"({len(frames)} applied, budget {self.schedule.budget.budget_ms:g} ms)",
@@ -481,8 +411,6 @@ class MasterNode(ManagedNode):
             "tracks": len(tracks),
             "tracks_identified": sum(1 for t in tracks if t.face_id),
             "tracks_static_clutter": core.static_clutter_tracks,
-            "camera_topics": len(self.cameras.subscribed),
-            "camera_topics_unmatched": len(self.cameras.unmatched),
             "frames_applied": stats["frames_applied"],
             "frames_dropped_overload": self.frames_dropped_overload,
             "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
@@ -495,17 +423,10 @@ class MasterNode(ManagedNode):
         extra.update({f"{k}_calls": v for k, v in self.admin.calls.items()})
         extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
-        warnings = [] if self.cameras.subscribed else ["no camera topic found yet"]
-        extra["camera_topics_refused"] = len(self.cameras.refused)
-        if self.cameras.refused:
-            warnings.append(f"{len(self.cameras.refused)} camera topic(s) not subscribed (max_camera_topics "
-                            f"reached, or not named after a known camera), e.g. {shown(min(self.cameras.refused), 64)}")
-        if self.cameras.unmatched:
-            warnings.append(f"{len(self.cameras.unmatched)} camera topic(s) whose publishers do not match the "
-                            f"master's reliable subscription, e.g. {shown(min(self.cameras.unmatched), 64)}: publish "
-                            "camera frames reliable")
+        topics, warnings = self.cameras.status()
+        extra.update(topics)
         limit = float(self.values["clock_offset_warning_s"])
-        off = self._clocks.beyond(limit)
+        off = self.receiver.clocks.beyond(limit)
         extra["cameras_clock_off"] = len(off)
         for cam, offset in list(off.items())[:5]:
             extra[f"clock_offset_ms_{shown(cam, 64)}"] = round(offset * 1e3, 1)
@@ -535,19 +456,6 @@ class MasterNode(ManagedNode):
             store_last_write_ok=getattr(store, "last_write_ok", None),
             store_last_error=getattr(store, "last_error", ""), other_publishers=others,
             output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
-
-
-def _read_frame(frame: bytes | Any) -> tuple[CameraFrameRecord, float]:
-    """A camera frame's record and ``processing_time_ms``: CDR bytes read directly (rclpy reads an encoding other
-    than plain little-endian CDR), a CameraFrame message converted. ValueError / TypeError when it is not one."""
-    if isinstance(frame, bytes):
-        if is_plain_cdr(frame):
-            return frame_from_cdr(frame)
-        try:
-            frame = deserialize_message(frame, CameraFrame)
-        except Exception as exc:  # rclpy raises RMWError (a RuntimeError) for bytes that are not one
-            raise ValueError(f"not a CameraFrame in an encoding rclpy reads: {str(exc)[:200]}") from exc
-    return frame_from_msg(frame), float(frame.processing_time_ms)
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up

@@ -296,7 +296,7 @@ def test_a_cycle_applies_its_frames_in_stamp_order_and_publishes_once(ros_contex
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         stamps = [10.0 + 0.1 * k for k in range(8)]
         for k, t in enumerate(reversed(stamps)):  # newest first: one by one, all but the first would be late
-            node._receive(_frame(t, camera="cam_a" if k % 2 else "cam_b"), node.now_s())  # waiting together
+            node.receiver.receive(_frame(t, camera="cam_a" if k % 2 else "cam_b"), node.now_s())  # waiting together
         published = node.health.messages_published
         node._cycle(node.now_s())
         stats = node.core.stats
@@ -366,7 +366,7 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         node.schedule.budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
         for k in range(30):  # camera a sends 20 frames, camera b 10, interleaved, all waiting together
-            node._receive(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"), node.now_s())
+            node.receiver.receive(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"), node.now_s())
         node._cycle(node.now_s())
         assert node.frames_dropped_overload == 26 and node.core.stats.frames_applied == 4
         values = node.diagnostics(node.now_s()).values

@@ -158,7 +158,7 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
 def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_context, tmp_path: Path) -> None:
     """Memory before authentication: a message larger than MAX_FRAME_BYTES is refused before it is read (no
     deserialization, no decryption), and at most max_camera_topics camera topics are subscribed."""
-    from face_reid_master.ros.node import MAX_FRAME_BYTES
+    from face_reid_master.ros.frame_receiver import MAX_FRAME_BYTES
 
     write_network_key(tmp_path / "network.key")
     ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
