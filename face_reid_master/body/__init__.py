@@ -1,1 +1,2 @@
-"""Body appearance evidence in the master: metrics learned from person pairs and their re-id evaluation."""
+"""The body metric the master embeds body descriptors with (its file and the features it fuses); it is learned
+offline by :mod:`face_reid_master.training.body`."""

@@ -18,80 +18,23 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Iterable
-from dataclasses import dataclass, field
-from itertools import accumulate
-from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
+from face_reid_master.identity.body_identification import BodyIdentification
+from face_reid_master.identity.entries import Chunk, FaceEntry, TrackEntry, checked_observations, eye_rows, rows_of
+from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats, LearnedFace
+from face_reid_master.identity.swap_guard import SwapGuard
 
-__all__ = ["Chunk", "IdentityManagerBase", "TrackEntry", "Vote"]
+__all__ = ["IdentityManagerBase"]
 
 FloatArray = npt.NDArray[np.float64]
 F32Array = npt.NDArray[np.float32]
-
-
-@dataclass
-class _Face:
-    """A learned face: its bank slot, metadata, and the live track carrying it (None = in face_list)."""
-
-    face_id: int
-    slot: int
-    name: str | None
-    created_s: float
-    last_seen_s: float
-    n_observations: int
-    track_id: int | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Vote:
-    """One observation's vote of the threshold baseline: a face id (0 = new person) and its distance."""
-
-    face_id: int
-    distance: float
-
-
-class Chunk(NamedTuple):
-    """Observations of one track queued by one :meth:`IdentityManagerBase.add_observations` call: the
-    embeddings (K, dim), their eye distances (px; None = unknown), the stamp (s) and the camera."""
-
-    embeddings: F32Array
-    eye_px: FloatArray | None
-    stamp_s: float
-    source: str
-
-
-@dataclass
-class TrackEntry:
-    """A live track of track_list, as seen by the identity layer (read by the classification methods)."""
-
-    track_id: int
-    slot: int | None = None  # bank slot buffering observed features while unassigned (track.face_images)
-    n_observations: int = 0
-    first_seen_s: float = 0.0
-    last_seen_s: float = 0.0
-    face_id: int | None = None
-    confidence: float = 0.0
-    votes: list[Vote] = field(default_factory=list)  # threshold baseline only
-    inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
-    evidence: str = ""  # identified: "face", "body" (no face seen yet) or "both" (body, then its face agreed)
-    new_face: bool = False  # identified: its decision created the face (a person not known before)
-
-
-def _rows(chunks: list[Chunk]) -> F32Array:
-    """The embeddings of a track's queued chunks, stacked."""
-    return chunks[0].embeddings if len(chunks) == 1 else np.concatenate([c.embeddings for c in chunks])
-
-
-def _eye_rows(chunks: list[Chunk]) -> FloatArray:
-    """Eye distance (px) of every row of a track's queued chunks (0 = unknown)."""
-    return np.concatenate([c.eye_px if c.eye_px is not None else np.zeros(c.embeddings.shape[0]) for c in chunks])
 
 
 class IdentityManagerBase:
@@ -109,21 +52,15 @@ class IdentityManagerBase:
     ``shortlist_faces`` faces with the nearest centroids are compared per observation.  Track ids must not
     be reused after :meth:`track_deleted` (late observations of a deleted id are ignored).
 
-    ``feature_gate_distance`` (None = the paper: every observation of an identified track joins its face):
-    an observation farther than this from every feature of the track's face is not learned (counted in
-    ``stats.observations_not_learned_inconsistent``).  When the tracker swaps two people, the face then
-    does not absorb the other person's features, which would make that person's later tracks look like
-    this face.  ``release_after_inconsistent`` (0 = never, the paper; needs the gate): an identified track
-    whose last this many observations were all beyond the gate has been swapped onto someone else: its
-    face goes back to face_list (a SWAPPED event) and the track is classified afresh from those
-    observations on, so the other person does not carry this face's name.
-
-    ``lend_lost_faces`` (False = the paper): the face of a track the tracker lost goes back to face_list
-    while the track is LOST (:meth:`track_lost`), so that the person's new track can take it.
+    Our extensions, each off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
+    (:mod:`~face_reid_master.identity.swap_guard`), ``body_evidence``
+    (:mod:`~face_reid_master.identity.body_identification`) and ``lend_lost_faces``: the face of a track the
+    tracker lost goes back to face_list while the track is LOST (:meth:`track_lost`), so that the person's
+    new track can take it.
 
     Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
     ``_current_confidence`` and may override the ``_on_*`` notifications; the single-underscore state
-    (``_tracks``, ``_available``, ``_available_slots``, ``_bank``) is shared with them only.
+    (``_tracks``, ``_list``: the learned faces and face_list, ``_bank``) is shared with them only.
     """
 
     _DEAD_TRACK_MEMORY = 4096  # ids of deleted tracks remembered to ignore late observations
@@ -141,35 +78,29 @@ class IdentityManagerBase:
         lend_lost_faces: bool = False,
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
-        if body_evidence is not None and not isinstance(body_evidence, BodyEvidence):
-            raise ValueError(f"body_evidence must be a BodyEvidence or None, got {type(body_evidence).__name__}")
+        self._bodies = None if body_evidence is None else BodyIdentification(body_evidence)
         self.body_evidence = body_evidence
         self.lend_lost_faces = bool(lend_lost_faces)
-        self._pending_bodies: dict[int, list[tuple[F32Array, float, str, FloatArray | None]]] = {}
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
                 "feature_gate_distance", feature_gate_distance, 0.0, math.inf, low_open=True, high_open=True
             )
         self.feature_gate_distance = feature_gate_distance
         self.release_after_inconsistent = check_int("release_after_inconsistent", release_after_inconsistent, 0)
-        if self.release_after_inconsistent and feature_gate_distance is None:
-            raise ValueError("release_after_inconsistent needs feature_gate_distance (it counts the observations "
-                             "beyond it); 0 = never release")
         self.max_features_per_face = check_int("max_features_per_face", max_features_per_face, 1)
         self.exact_search_max_features = check_int("exact_search_max_features", exact_search_max_features, 0)
         self.shortlist_faces = check_int("shortlist_faces", shortlist_faces, 1)
         self._bank = FeatureBank(self.embedding_dim, self.max_features_per_face)
-        self._faces: dict[int, _Face] = {}
+        self.stats = IdentityStats()
+        self._swaps = SwapGuard(feature_gate_distance, self.release_after_inconsistent, self._bank, self.stats)
+        self._list = FaceList(self._bank, self.stats, self.exact_search_max_features, self.shortlist_faces,
+                              self._on_face_available, self._on_faces_unavailable)
         self._tracks: dict[int, TrackEntry] = {}
-        self._available: list[int] = []  # face_list in column order (Bayes: table columns 1..M)
-        self._available_slots = np.zeros(0, dtype=np.intp)
         self._pending_obs: dict[int, list[Chunk]] = {}
         self._pending_deleted: dict[int, float] = {}
         self._lent: dict[int, int] = {}  # face id -> the LOST track holding it while it is in face_list
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
         self._dead: OrderedDict[int, float] = OrderedDict()
-        self._next_face_id = 1
-        self.stats = IdentityStats()
 
     # ------------------------------------------------------------------------------ public inputs
     def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float,
@@ -182,28 +113,8 @@ class IdentityManagerBase:
         """
         tid = check_int("track_id", track_id, -(2**63))
         stamp = check_stamp(stamp_s)
-        emb = np.asarray(embeddings)
-        if emb.ndim != 2 or emb.shape[1] != self.embedding_dim:
-            raise ValueError(
-                f"embeddings must have shape (K, {self.embedding_dim}), got {emb.shape} for track {tid}"
-            )
-        if not (np.issubdtype(emb.dtype, np.floating) or np.issubdtype(emb.dtype, np.integer)) or (
-            emb.dtype == np.bool_
-        ):
-            raise ValueError(f"embeddings must be a real numeric array, got dtype {emb.dtype}")
-        if not np.all(np.isfinite(emb)):
-            raise ValueError(f"embeddings of track {tid} contain NaN or Inf")
-        if emb.shape[0] == 0:
-            return True
-        eye = None
-        if eye_px is not None:
-            eye = np.asarray(eye_px, dtype=np.float64).reshape(-1)
-            if eye.shape != (emb.shape[0],):
-                raise ValueError(f"eye_px must have one value per embedding ({emb.shape[0]}), got {eye.shape}")
-        if not isinstance(source, str):
-            raise ValueError(f"source must be a str, got {type(source).__name__}")
-        return self.add_validated_observations(tid, np.ascontiguousarray(emb, dtype=np.float32), stamp, eye,
-                                               source)
+        checked = checked_observations(tid, embeddings, eye_px, source, self.embedding_dim)
+        return checked is None or self.add_validated_observations(tid, checked[0], stamp, checked[1], source)
 
     def add_validated_observations(self, tid: int, emb: F32Array, stamp: float,
                                    eye_px: FloatArray | None = None, source: str = "") -> bool:
@@ -227,9 +138,9 @@ class IdentityManagerBase:
         """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) and head
         ``heights`` (k, m; None = unknown) seen by camera ``source`` for the next :meth:`step`; ignored
         without body evidence or for a deleted track."""
-        if self.body_evidence is None or track_id in self._dead or track_id in self._pending_deleted:
+        if self._bodies is None or track_id in self._dead or track_id in self._pending_deleted:
             return
-        self._pending_bodies.setdefault(track_id, []).append((embeddings, stamp_s, source, heights))
+        self._bodies.queue(track_id, embeddings, stamp_s, source, heights)
         self.stats.body_observations += embeddings.shape[0]
         if track_id not in self._tracks:
             self._tracks[track_id] = TrackEntry(track_id, first_seen_s=stamp_s, last_seen_s=stamp_s)
@@ -248,9 +159,9 @@ class IdentityManagerBase:
         it (the person came back as a new track) before it is found again."""
         track = self._tracks.get(track_id)
         fid = None if track is None else track.face_id
-        if not self.lend_lost_faces or fid is None or fid in self._lent or fid in self._available:
+        if not self.lend_lost_faces or fid is None or fid in self._lent or fid in self._list.available:
             return
-        self._make_available(fid)
+        self._list.make_available(fid)
         self._lent[fid] = track_id
 
     def track_recovered(self, track_id: int) -> None:
@@ -259,8 +170,8 @@ class IdentityManagerBase:
         fid = None if track is None else track.face_id
         if fid is not None and self._lent.get(fid) == track_id:
             del self._lent[fid]
-            self._make_unavailable([fid])
-            self._faces[fid].track_id = track_id
+            self._list.make_unavailable([fid])
+            self._list.entries[fid].track_id = track_id
 
     def _take_lent(self, fid: int, stamp: float) -> None:
         """Face ``fid`` goes to another track: a LOST track that lent it is no longer identified."""
@@ -283,64 +194,15 @@ class IdentityManagerBase:
                 self.track_deleted(tid, stamp_s)
 
     def step(self, stamp_s: float) -> list[IdentityEvent]:
-        """Run one update of Algorithm 1: ingest queued observations, classify, then handle deaths."""
+        """Run one update of Algorithm 1: learn the queued observations, classify the unassigned tracks (by face,
+        then by body), then handle deaths."""
         stamp = check_stamp(stamp_s)
         self.stats.steps += 1
         events: list[IdentityEvent] = []
-        pending = self._pending_obs
-        self._pending_obs = {}
-        unassigned_ids: list[int] = []
-        unassigned_obs: list[F32Array] = []
-        unassigned_eye: list[FloatArray] = []
-        bank = self._bank
-        single_slots: list[int] = []  # one new feature into a full feature set: batched below
-        single_obs: list[F32Array] = []
-        rows = {tid: _rows(chunks) for tid, chunks in pending.items()}
-        near = self._near_own_face(rows)
-        for tid, chunks in pending.items():
-            obs = rows[tid]
-            track = self._tracks[tid]
-            track.n_observations += obs.shape[0]
-            if track.face_id is not None:
-                face = self._faces[track.face_id]
-                slot: int | None = face.slot
-                face.n_observations += obs.shape[0]
-                face.last_seen_s = max(face.last_seen_s, stamp)
-                if tid in near:
-                    keep = near[tid]
-                    swapped = self._swapped_rows(track, chunks, keep)
-                    obs = obs if keep.all() else obs[keep]
-                    if swapped is not None:  # the face keeps what was its person's, then lets the track go
-                        if obs.shape[0]:
-                            bank.add_features(face.slot, obs)
-                        events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
-                        chunks = swapped
-                        obs = _rows(chunks)
-                        track.n_observations = obs.shape[0]
-                    elif obs.shape[0] == 0:
-                        continue
-                if track.evidence == "body" and track.face_id is not None and obs.shape[0]:
-                    track.evidence = "both"  # its own face agrees with the body decision
-            if track.face_id is None:
-                slot = track.slot
-                if slot is None:
-                    track.slot = bank.new_slot(obs)
-                unassigned_ids.append(tid)
-                unassigned_obs.append(obs)
-                unassigned_eye.append(_eye_rows(chunks))
-            if slot is not None:
-                if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
-                    single_slots.append(slot)
-                    single_obs.append(obs)
-                else:
-                    bank.add_features(slot, obs)
-        if single_slots:
-            bank.add_one_each(np.array(single_slots, dtype=np.intp), np.concatenate(single_obs))
-        if unassigned_ids:
-            self._ingest_unassigned(unassigned_ids, unassigned_obs, unassigned_eye)
+        self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
-        if self.body_evidence is not None:
+        if self._bodies is not None:
             events.extend(self._body_step(stamp))
         events.extend(self._side_events)
         self._side_events = []
@@ -351,34 +213,87 @@ class IdentityManagerBase:
         self._pending_deleted.clear()
         return events
 
+    def _learn(self, stamp: float, events: list[IdentityEvent]) -> None:
+        """The queued observations: an identified track's join its face (those its face accepts; a swap releases
+        the track, :class:`SwapGuard`); an unassigned track's join its buffer and go to the classification."""
+        pending, self._pending_obs = self._pending_obs, {}
+        unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
+        singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
+        rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
+        near = self._swaps.consistent(rows, {tid: self._list.entries[fid].slot for tid in rows
+                                             if (fid := self._tracks[tid].face_id) is not None})
+        bank = self._bank
+        for tid, chunks in pending.items():
+            track = self._tracks[tid]
+            track.n_observations += rows[tid].shape[0]
+            slot: int | None = None
+            obs: F32Array | None = rows[tid]
+            if track.face_id is not None:
+                slot, chunks, obs = self._learn_identified(track, chunks, rows[tid], near.get(tid), stamp, events)
+            if obs is None:
+                continue
+            if track.face_id is None:
+                slot = track.slot
+                if slot is None:
+                    track.slot = bank.new_slot(obs)
+                unassigned[0].append(tid)
+                unassigned[1].append(obs)
+                unassigned[2].append(eye_rows(chunks))
+            if slot is not None:
+                if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
+                    singles[0].append(slot)
+                    singles[1].append(obs)
+                else:
+                    bank.add_features(slot, obs)
+        if singles[0]:
+            bank.add_one_each(np.array(singles[0], dtype=np.intp), np.concatenate(singles[1]))
+        if unassigned[0]:
+            self._ingest_unassigned(*unassigned)
+
+    def _learn_identified(self, track: TrackEntry, chunks: list[Chunk], obs: F32Array,
+                          keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
+                          ) -> tuple[int | None, list[Chunk], F32Array | None]:
+        """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
+        the rows it learns (None: none), or, when they show a swap, the released track's chunks and rows."""
+        assert track.face_id is not None
+        face = self._list.entries[track.face_id]
+        face.n_observations += obs.shape[0]
+        face.last_seen_s = max(face.last_seen_s, stamp)
+        if keep is not None:
+            swapped = self._swaps.swapped(track, chunks, keep)
+            obs = obs if keep.all() else obs[keep]
+            if swapped is not None:  # the face keeps what was its person's, then lets the track go
+                if obs.shape[0]:
+                    self._bank.add_features(face.slot, obs)
+                events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
+                obs = rows_of(swapped)
+                track.n_observations = obs.shape[0]
+                return None, swapped, obs
+            if obs.shape[0] == 0:
+                return face.slot, chunks, None
+        if track.evidence == "body" and obs.shape[0]:
+            track.evidence = "both"  # its own face agrees with the body decision
+        return face.slot, chunks, obs
+
     def _body_step(self, stamp: float) -> list[IdentityEvent]:
         """Bodies of identified tracks join their face's gallery; faceless tracks gather body evidence against
         every learned face and are given one of face_list when that evidence is strong enough (their own face,
         once seen, overrules it)."""
-        body = self.body_evidence
-        assert body is not None
-        pending, self._pending_bodies = self._pending_bodies, {}
-        for tid, parts in pending.items():
-            track = self._tracks.get(tid)
-            if track is None:
-                continue
-            for emb, t, source, heights in parts:
-                if track.face_id is not None:
-                    body.add_face_bodies(track.face_id, emb, t, heights)
-                else:  # faceless tracks are compared; the others only keep their bodies for their face
-                    body.observe(tid, emb, t, list(self._faces) if track.slot is None else [], source, heights)
+        bodies = self._bodies
+        assert bodies is not None
+        bodies.observe(self._tracks, list(self._list.entries))
         events = []
-        for tid, fid, p in body.decide(self._available, stamp, self._faces_alike):
+        for tid, fid, p in bodies.decide(self._list.available, stamp, self._faces_alike):
             track = self._tracks.get(tid)
-            if track is not None and track.face_id is None and track.slot is None and fid in self._available:
+            if track is not None and track.face_id is None and track.slot is None and fid in self._list.available:
                 events.append(self._apply_body_decision(track, fid, p, stamp))
         return events
 
     def _apply_body_decision(self, track: TrackEntry, fid: int, confidence: float, stamp: float) -> IdentityEvent:
         """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
-        face = self._faces[fid]
+        face = self._list.entries[fid]
         self._take_lent(fid, stamp)
-        self._make_unavailable([fid])
+        self._list.make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track.track_id)
@@ -393,27 +308,8 @@ class IdentityManagerBase:
 
     def _move_track_bodies(self, tid: int, fid: int) -> None:
         """The bodies a track gathered before its decision join its face's gallery."""
-        body = self.body_evidence
-        if body is None:
-            return
-        emb, newest, heights = body.track_bodies(tid)
-        if emb.shape[0]:
-            body.add_face_bodies(fid, emb, newest, heights=heights)
-        body.forget_track(tid)
-
-    def _face_distances(self, face: int, others: list[int]) -> FloatArray:
-        """The smallest distance between the stored features of learned ``face`` and of each of ``others``, in one
-        batched computation (NaN where either face is unknown)."""
-        out = np.full(len(others), np.nan)
-        top = self._faces.get(face)
-        known = [k for k, f in enumerate(others) if f in self._faces]
-        if top is None or not known:
-            return out
-        slots = np.array([self._faces[others[k]].slot for k in known], dtype=np.intp)
-        d = self._bank.exact_min_distances(self._bank.features(top.slot), slots)
-        if d.size:
-            out[known] = d.min(axis=0)
-        return out
+        if self._bodies is not None:
+            self._bodies.move_track_bodies(tid, fid)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are the same person as learned ``face``: features closer than the body evidence's
@@ -424,52 +320,7 @@ class IdentityManagerBase:
             limit = 0.5 * self.feature_gate_distance
         if limit is None:
             return [False] * len(others)
-        return (self._face_distances(face, others) < limit).tolist()
-
-    def _near_own_face(self, rows: dict[int, F32Array]) -> dict[int, npt.NDArray[np.bool_]]:
-        """For each identified track's new observations: which lie within ``feature_gate_distance`` of a stored
-        feature of its face (all tracks in one batched product; {} when the gate is off)."""
-        gate = self.feature_gate_distance
-        ident = [tid for tid in rows if self._tracks[tid].face_id is not None] if gate is not None else []
-        if not ident:
-            return {}
-        obs = np.concatenate([rows[tid] for tid in ident])
-        counts = [rows[tid].shape[0] for tid in ident]
-        slots = np.repeat(np.array([self._faces[self._tracks[tid].face_id].slot for tid in ident], np.intp), counts)
-        keep = self._bank.own_min_distances(obs, slots) <= gate
-        self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
-        ends = list(accumulate(counts))
-        return {tid: keep[end - n:end] for tid, n, end in zip(ident, counts, ends, strict=True)}
-
-    def _swapped_rows(self, track: TrackEntry, chunks: list[Chunk], keep: npt.NDArray[np.bool_]
-                      ) -> list[Chunk] | None:
-        """Follow the identified track's run of inconsistent observations; once it is
-        ``release_after_inconsistent`` long, the chunks from the run's start on (None: no swap)."""
-        k = self.release_after_inconsistent
-        if not k:
-            return None
-        if keep.size and keep.all():  # every observation consistent: any run is over
-            track.inconsistent.clear()
-            return None
-        start = 0
-        for c in chunks:
-            n = c.embeddings.shape[0]
-            ok = keep[start:start + n]
-            start += n
-            if ok.all():
-                track.inconsistent.clear()
-                continue
-            last_ok = int(np.flatnonzero(ok)[-1]) if ok.any() else -1
-            if last_ok >= 0:
-                track.inconsistent.clear()
-            rows = slice(last_ok + 1, None)
-            track.inconsistent.append(Chunk(c.embeddings[rows], None if c.eye_px is None else c.eye_px[rows],
-                                            c.stamp_s, c.source))
-        run = track.inconsistent
-        if sum(c.embeddings.shape[0] for c in run) < k:
-            return None
-        track.inconsistent = []
-        return run
+        return (self._list.min_distances(face, others) < limit).tolist()
 
     # ------------------------------------------------------------------------------ queries
     def evidence_of(self, track_id: int) -> str:
@@ -512,24 +363,24 @@ class IdentityManagerBase:
 
     def face_ids(self) -> list[int]:
         """All learned face ids (assigned or in face_list)."""
-        return sorted(self._faces)
+        return sorted(self._list.entries)
 
     def available_face_ids(self) -> list[int]:
         """face_list: learned faces not carried by a live track, in table-column order."""
-        return list(self._available)
+        return list(self._list.available)
 
     def face_features(self, face_id: int) -> F32Array:
         """Copy of a learned face's stored features (k, embedding_dim)."""
-        return self._bank.features(self._face(face_id).slot).copy()
+        return self._bank.features(self._list.get(face_id).slot).copy()
 
     def face_name(self, face_id: int) -> str | None:
-        return self._face(face_id).name
+        return self._list.get(face_id).name
 
     def set_face_name(self, face_id: int, name: str | None) -> None:
         """Attach a (predefined-person) name to a learned face, or clear it with None."""
         if name is not None and not isinstance(name, str):
             raise ValueError(f"name must be a str or None, got {name!r}")
-        self._face(face_id).name = name
+        self._list.get(face_id).name = name
 
     def forget_face(self, face_id: int) -> bool:
         """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
@@ -541,7 +392,7 @@ class IdentityManagerBase:
         *new* face id after ``min_observations``.  Face ids are never reused within this manager.
         """
         fid = check_int("face_id", face_id, -(2**63))
-        face = self._faces.get(fid)
+        face = self._list.entries.get(fid)
         if face is None:
             return False
         lender = self._lent.pop(fid, None)
@@ -549,7 +400,7 @@ class IdentityManagerBase:
             self._tracks[lender].face_id = None  # a LOST track lent it: it holds nothing now
             self._tracks[lender].confidence = 0.0
         if face.track_id is None:
-            self._make_unavailable([fid])
+            self._list.make_unavailable([fid])
         else:
             track = self._tracks.get(face.track_id)
             if track is not None and track.face_id == fid:
@@ -560,7 +411,7 @@ class IdentityManagerBase:
                 track.inconsistent.clear()
                 self._pending_obs.pop(track.track_id, None)
         self._bank.free_slot(face.slot)
-        del self._faces[fid]
+        del self._list.entries[fid]
         if self.body_evidence is not None:
             self.body_evidence.forget_face(fid)
         self.stats.faces_forgotten += 1
@@ -569,95 +420,39 @@ class IdentityManagerBase:
     def eviction_order(self, exclude: Iterable[int] = ()) -> list[int]:
         """The unnamed faces of face_list (no live or lost track holds them) not in ``exclude``, least recently
         seen first: what the face cap may evict (named faces never)."""
-        skip = set(exclude) | set(self._lent)
-        faces = [self._faces[fid] for fid in self._available if fid not in skip and not self._faces[fid].name]
-        return [f.face_id for f in sorted(faces, key=lambda f: (f.last_seen_s, f.face_id))]
+        return self._list.eviction_order(set(exclude) | set(self._lent))
 
     def export_face(self, face_id: int) -> LearnedFace:
         """Snapshot (copy) of one learned face, e.g. to save it when its track is released; KeyError if unknown."""
-        f = self._face(face_id)
-        return LearnedFace(
-            f.face_id, self._bank.features(f.slot).copy(), f.name, f.created_s, f.last_seen_s, f.n_observations
-        )
+        return self._list.export(face_id)
 
     def export_faces(self) -> list[LearnedFace]:
         """Snapshot of all learned faces (copies), for the persistent memory."""
-        return [self.export_face(fid) for fid in sorted(self._faces)]
+        return [self._list.export(fid) for fid in sorted(self._list.entries)]
 
     def reserve_face_ids(self, highest_used_id: int) -> None:
         """Never hand out face ids <= ``highest_used_id`` (ids of forgotten faces stay retired)."""
-        self._next_face_id = max(self._next_face_id, check_int("highest_used_id", highest_used_id, 0) + 1)
+        self._list.reserve_ids(check_int("highest_used_id", highest_used_id, 0))
 
     def import_faces(self, faces: Iterable[LearnedFace]) -> None:
         """Add previously exported faces to face_list; ValueError on an id clash or wrong dimension."""
-        batch = list(faces)
-        seen: set[int] = set()
-        for f in batch:
-            if not isinstance(f, LearnedFace):
-                raise ValueError(f"import_faces expects LearnedFace records, got {type(f).__name__}")
-            if f.features.shape[1] != self.embedding_dim:
-                raise ValueError(
-                    f"face {f.face_id}: features have dim {f.features.shape[1]}, "
-                    f"expected {self.embedding_dim}"
-                )
-            if f.face_id in self._faces or f.face_id in seen:
-                raise ValueError(f"face id {f.face_id} already exists")
-            seen.add(f.face_id)
-        for f in batch:
-            slot = self._bank.new_slot(f.features)
-            self._faces[f.face_id] = _Face(
-                f.face_id, slot, f.name, f.created_s, f.last_seen_s, f.n_observations, track_id=None
-            )
-            self._next_face_id = max(self._next_face_id, f.face_id + 1)
-            self._make_available(f.face_id)
+        self._list.import_faces(faces, self.embedding_dim)
 
     # ------------------------------------------------------------------------------ internals
-    def _face(self, face_id: int) -> _Face:
-        face = self._faces.get(face_id)
-        if face is None:
-            raise KeyError(f"unknown face id {face_id}")
-        return face
-
-    def _available_distances(self, obs: F32Array) -> FloatArray:
-        """Eq. 4 distances (Q, M) from observations to every face in face_list (column order)."""
-        slots = self._available_slots
-        if len(slots) == 0:
-            return np.zeros((obs.shape[0], 0))
-        n_feats = int(self._bank.count[slots].sum())
-        if n_feats > self.exact_search_max_features and len(slots) > self.shortlist_faces:
-            self.stats.shortlist_searches += 1
-            return self._bank.shortlist_min_distances(obs, slots, self.shortlist_faces)
-        return self._bank.exact_min_distances(obs, slots)
-
-    def _make_available(self, face_id: int) -> None:
-        self._faces[face_id].track_id = None
-        self._available.append(face_id)
-        self._available_slots = np.append(self._available_slots, self._faces[face_id].slot).astype(np.intp)
-        self._on_face_available(face_id)
-
-    def _make_unavailable(self, face_ids: list[int]) -> None:
-        idx = [self._available.index(f) for f in face_ids]
-        keep = np.ones(len(self._available), dtype=bool)
-        keep[idx] = False
-        self._on_faces_unavailable(idx)
-        self._available = [f for f, k in zip(self._available, keep, strict=True) if k]
-        self._available_slots = self._available_slots[keep]
-
     def _apply_decision(self, tid: int, face_or_new: int, confidence: float, stamp: float) -> IdentityEvent:
         track = self._tracks[tid]
         assert track.slot is not None, "a track is only classified after observations"
         if face_or_new == 0:
-            fid = self._next_face_id
-            self._next_face_id += 1
+            fid = self._list.new_id()
             slot = track.slot  # the track's buffer becomes the new face's feature set
-            self._faces[fid] = _Face(fid, slot, None, stamp, stamp, track.n_observations, track_id=tid)
+            self._list.entries[fid] = FaceEntry(fid, slot, None, stamp, stamp, track.n_observations, track_id=tid)
             kind = IdentityEventKind.NEW_FACE
             self.stats.new_faces += 1
         else:
             fid = face_or_new
-            face = self._faces[fid]
+            face = self._list.entries[fid]
             self._take_lent(fid, stamp)
-            self._make_unavailable([fid])
+            self._list.make_unavailable([fid])
             self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
             self._bank.free_slot(track.slot)
             face.track_id = tid
@@ -666,7 +461,7 @@ class IdentityManagerBase:
             kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
         self._on_track_identified(tid)
-        self._faces[fid].track_id = tid
+        self._list.entries[fid].track_id = tid
         track.face_id = fid
         track.confidence = float(confidence)
         track.slot = None
@@ -680,7 +475,7 @@ class IdentityManagerBase:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
-        self._make_available(fid)
+        self._list.make_available(fid)
         track.face_id = None
         track.confidence = 0.0
         track.votes.clear()
@@ -693,9 +488,8 @@ class IdentityManagerBase:
         while len(self._dead) > self._DEAD_TRACK_MEMORY:
             self._dead.popitem(last=False)
         self._pending_obs.pop(tid, None)
-        self._pending_bodies.pop(tid, None)
-        if self.body_evidence is not None:
-            self.body_evidence.forget_track(tid)
+        if self._bodies is not None:
+            self._bodies.forget_track(tid)
         track = self._tracks.pop(tid, None)
         if track is None:
             return None
@@ -707,7 +501,7 @@ class IdentityManagerBase:
         if self._lent.get(track.face_id) == tid:  # already in face_list
             del self._lent[track.face_id]
         else:
-            self._make_available(track.face_id)
+            self._list.make_available(track.face_id)
         self.stats.released += 1
         return IdentityEvent(IdentityEventKind.RELEASED, tid, track.face_id, stamp, track.confidence)
 

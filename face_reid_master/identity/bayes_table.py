@@ -30,7 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry
+from face_reid_master.identity.algorithm1 import IdentityManagerBase
+from face_reid_master.identity.entries import TrackEntry
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
@@ -109,7 +110,7 @@ class BayesIdentityManager(IdentityManagerBase):
     # ------------------------------------------------------------------------------ queries
     def posterior_table(self) -> tuple[FloatArray, list[int], list[int]]:
         """(copy of the table, track ids of rows 1..N, face ids of columns 1..M)."""
-        return self._table.copy(), list(self._rows), list(self._available)
+        return self._table.copy(), list(self._rows), list(self._list.available)
 
     @property
     def is_normalised(self) -> bool:
@@ -126,7 +127,7 @@ class BayesIdentityManager(IdentityManagerBase):
             return {}
         p = self._table[row]
         out = {0: float(p[0])}
-        out.update({fid: float(v) for fid, v in zip(self._available, p[1:], strict=True)})
+        out.update({fid: float(v) for fid, v in zip(self._list.available, p[1:], strict=True)})
         return out
 
     def _current_confidence(self, track: TrackEntry) -> float:
@@ -183,13 +184,13 @@ class BayesIdentityManager(IdentityManagerBase):
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
         sizes = np.array([o.shape[0] for o in observations])
         rows = np.array([self._row_of[t] for t in track_ids])
-        m = len(self._available)
+        m = len(self._list.available)
         log_ev = np.empty((len(track_ids), m + 1))
         log_ev[:, 0] = sizes * self._log_c  # column 0: c per observation (ratio form, see module doc)
         lr = np.zeros((obs.shape[0], 0))
         if m:
-            d = self._available_distances(obs)
-            n_feats = self._bank.count[self._available_slots].astype(np.float64)[None, :]  # K of eq. 4
+            d = self._list.distances(obs)
+            n_feats = self._bank.count[self._list.slots].astype(np.float64)[None, :]  # K of eq. 4
             model = self.likelihood
             buckets = model.bucket_of(eye_px[0] if len(eye_px) == 1 else np.concatenate(eye_px)) \
                 if model.conditioned else None
@@ -239,7 +240,7 @@ class BayesIdentityManager(IdentityManagerBase):
         decisions = []
         for r in ok:
             col = int(best[r])
-            face = 0 if col == 0 else self._available[col - 1]
+            face = 0 if col == 0 else self._list.available[col - 1]
             decisions.append((self._rows[r], face, float(p[r])))
         return decisions
 

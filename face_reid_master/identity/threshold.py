@@ -9,7 +9,8 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.identity.algorithm1 import IdentityManagerBase, TrackEntry, Vote
+from face_reid_master.identity.algorithm1 import IdentityManagerBase
+from face_reid_master.identity.entries import TrackEntry, Vote
 
 __all__ = ["ThresholdIdentityManager"]
 
@@ -40,7 +41,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
                            eye_px: list[npt.NDArray[np.float64]]) -> None:
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
-        d = self._available_distances(obs)
+        d = self._list.distances(obs)
         if d.shape[1]:
             j = np.argmin(d, axis=1)
             dmin = d[np.arange(d.shape[0]), j]
@@ -52,14 +53,14 @@ class ThresholdIdentityManager(IdentityManagerBase):
             votes = self._tracks[tid].votes
             for r in range(pos, pos + o.shape[0]):
                 if dmin[r] < self.distance_threshold:
-                    votes.append(Vote(self._available[int(j[r])], float(dmin[r])))
+                    votes.append(Vote(self._list.available[int(j[r])], float(dmin[r])))
                 else:
                     votes.append(Vote(0, float(dmin[r])))
             pos += o.shape[0]
 
     def _tally(self, track: TrackEntry) -> tuple[int, float]:
         """(winner: face id or 0 = new, vote fraction) over votes for faces still in face_list."""
-        available = set(self._available)
+        available = set(self._list.available)
         counts: dict[int, list[float]] = {}
         for vote in track.votes:
             if vote.face_id == 0 or vote.face_id in available:

@@ -23,33 +23,29 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import MarkerArray
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
-from face_reid_camera.common.sealing import SealError
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import open_payload, open_request, seal_payload
-from face_reid_master.clock_offsets import ClockOffsets
+from face_reid_camera.ros.sealed import seal_payload
 from face_reid_master.core import MasterCore
+from face_reid_master.cycle_schedule import CycleSchedule
 from face_reid_master.health import MasterHealthWatch
-from face_reid_master.intake import CycleBudget, FrameIntake, PendingFrame
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
-from face_reid_master.ros.convert import frame_from_msg, markers_for
-from face_reid_master.ros.frame_cdr import frame_from_cdr, is_plain_cdr
+from face_reid_master.ros.admin_services import AdminServices
+from face_reid_master.ros.camera_topics import CameraTopics
+from face_reid_master.ros.convert import markers_for
+from face_reid_master.ros.frame_receiver import FrameReceiver
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
 from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
-from face_reid_msgs.msg import CameraFrame, NamedTrackArray, Sealed
-from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
+from face_reid_msgs.msg import NamedTrackArray, Sealed
 
 USAGE = """usage: face-reid-master [--ros-args --params-file config/master.yaml -p name:=value ...]
 
@@ -58,13 +54,7 @@ face_reid_msgs/CameraFrame in, named tracks on /tracks_named out, status on /dia
 Parameters (all declared with descriptions and ranges; `ros2 param describe` lists them):
 """
 
-_MAX_REPLY_CHARS = 1000  # service replies are cut to this
-_MAX_LOG_CHARS = 300  # log lines about a request are cut to this
-# A camera message (plain or sealed) larger than this is refused before it is read: a frame of 50 people with
-# 256-d embeddings and body descriptors is ~0.2 MB, and the bound keeps what a stranger's traffic costs small.
-MAX_FRAME_BYTES = 1 << 20
-_MAX_PHOTO_PIXELS = 40_000_000  # an add-person photo larger than this (by its header) is refused: 40 MP
-_REQUEST_PIXEL_BUDGET = 200_000_000  # pixels one add-person request may decode in all (a few seconds of work)
+_MAX_LOG_CHARS = 300  # log lines about a frame are cut to this
 
 
 class MasterNode(ManagedNode):
@@ -75,37 +65,20 @@ class MasterNode(ManagedNode):
         self.values: dict[str, Any] = {}
         self.core: MasterCore | None = None
         self._photos: Any = None  # PhotoEmbedder of the master's space, loaded on first use
-        self._admin_worker: Any = None  # the thread that decodes add-person photos (off the frame path)
         self.store: Any = None
         self.health: NodeHealth | None = None
         self._watch = MasterHealthWatch()  # store failures, faces lost at open, overload, another master
-        self._own_services: list[Any] = []
-        self._service_calls: dict[str, int] = {}
-        self._service_refusals: dict[str, int] = {}
-        self._subscribed: dict[str, Any] = {}
-        self._unmatched: set[str] = set()  # camera topics said to have only publishers that do not match
-        self._refused_topics: set[str] = set()  # camera topics not subscribed (cap reached, unknown camera)
-        self._max_topics = 0
-        self._known_cameras: frozenset[str] = frozenset()  # known_camera_ids ({} = any)
+        self.admin = AdminServices(self)  # ~/list_faces, ~/add_person, ~/forget_face
+        self.cameras = CameraTopics(self, self._on_camera_message, self._reject)
         self._openers: dict[str, Any] = {}  # purpose -> Opener, when the network has a key
-        self._clocks = ClockOffsets()
         self._own_timers: list[Any] = []
         self.tracks_pub: Any = None  # /tracks_named, or <tracks_topic>_sealed on a secured network
         self._tracks_sealer: Any = None  # seals the tracks (purpose "tracks") when the network has a key
         self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
-        self._regex: re.Pattern[str] | None = None
-        self._tokens_counted_s = -float("inf")
-        self._min_publish_interval_s = 0.0
-        self._unpublished_stamp: float | None = None  # newest frame applied but not published (rate cap)
-        self._publish_tokens = 2.0
-        self._intake: FrameIntake[Any] = FrameIntake()
-        self._budget = CycleBudget()
-        self._identity_period_s = 0.0
-        self._min_cycle_period_s = 0.0
-        self._cycle_began_s = -float("inf")  # time.monotonic() when the last cycle began
-        self._identity_done_s = -float("inf")  # time.monotonic() of the last identity update
+        self.receiver = FrameReceiver(None, {}, self._reject, self.log_throttled)  # messages into the next cycle
+        self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -131,7 +104,10 @@ class MasterNode(ManagedNode):
 
             confidence_map = load_confidence_map(str(values["confidence_map_path"]))
         self.core = MasterCore(config, likelihood, self.store, gallery, body_metric, confidence_map)
-        self._regex = re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex
+        self.cameras.configure(re.compile(str(values["sealed_topic_regex"])) if values["network_key_path"] else regex,
+                               int(values["max_camera_topics"]),
+                               frozenset(master_params.clean_list(values["known_camera_ids"])),
+                               sealed=bool(values["network_key_path"]))
         self._openers, self._tracks_sealer = {}, None
         if values["network_key_path"]:
             from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
@@ -152,28 +128,11 @@ class MasterNode(ManagedNode):
             self.get_logger().warning(
                 "UNSECURED: no network_key_path: camera frames (face embeddings, biometric data) travel in clear "
                 "and any participant of this DDS domain can read them or inject frames")
-        rate = float(values["max_publish_rate_hz"])
-        self._min_publish_interval_s = 1.0 / rate if rate > 0 else 0.0
-        self._budget = CycleBudget(budget_ms=float(values["cycle_budget_ms"]))
-        self._identity_period_s = float(values["identity_period_s"])
-        self._min_cycle_period_s = float(values["min_cycle_period_s"])
-        self._max_topics = int(values["max_camera_topics"])
-        self._known_cameras = frozenset(master_params.clean_list(values["known_camera_ids"]))
+        self.schedule = CycleSchedule(float(values["min_cycle_period_s"]), float(values["identity_period_s"]),
+                                      float(values["max_publish_rate_hz"]), float(values["cycle_budget_ms"]))
         self.health = NodeHealth(self.get_name(), self.get_fully_qualified_name(), float(values["no_input_warning_s"]))
-        self._own_services = [self.create_service(ListFaces, "~/list_faces", self._list_faces)]
-        if values["admin_services"]:
-            # their own callback group: while a request waits for its photos, frames and timers go on
-            admin = MutuallyExclusiveCallbackGroup()
-            self._own_services += [
-                self.create_service(AddPerson, "~/add_person", self._add_person, callback_group=admin),
-                self.create_service(ForgetFace, "~/forget_face", self._forget_face, callback_group=admin)]
-            if not values["network_key_path"]:
-                self.get_logger().warning(
-                    "admin services on (admin_services: true) without a network key: any participant of this "
-                    "DDS domain can call ~/add_person and ~/forget_face")
-        else:
-            self.get_logger().info("admin services off (admin_services: false): ~/add_person and ~/forget_face "
-                                   "are not offered")
+        self.receiver.health, self.receiver.openers = self.health, self._openers
+        self.admin.create(bool(values["admin_services"]), secured=bool(values["network_key_path"]))
         self.get_logger().info(
             f"master: method={config.method}, {len(self.core.identity.face_ids())} learned faces loaded, "
             f"{len(self.core.people.names())} predefined people, body appearance "
@@ -183,7 +142,7 @@ class MasterNode(ManagedNode):
     def activate(self) -> None:
         values = self.values
         qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-        self._frame_qos = qos
+        self.cameras.qos = qos
         # secured: the tracks only sealed (so that no consumer takes a spoof on the plain topic for the master's)
         self.tracks_pub = (self.create_publisher(Sealed, sealed_topic(str(values["tracks_topic"])), qos)
                            if self._tracks_sealer is not None else
@@ -194,13 +153,13 @@ class MasterNode(ManagedNode):
         if self.people_topics is not None:
             self.people_topics.activate()
         for topic in master_params.clean_list(values["camera_topics"]):
-            self._subscribe(topic)
-        if self._regex is not None:
-            self._discover()
-        self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self._discover))
+            self.cameras.subscribe(topic)
+        if self.cameras.regex is not None:
+            self.cameras.discover()
+        self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self.cameras.discover))
         self._own_timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
-        if self._min_publish_interval_s:
-            self._own_timers.append(self.create_timer(self._min_publish_interval_s, self._flush))
+        if self.schedule.publish_interval_s:
+            self._own_timers.append(self.create_timer(self.schedule.publish_interval_s, self._flush))
         self._own_timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
         assert self.health is not None
         self.health.start(self.now_s())
@@ -210,16 +169,12 @@ class MasterNode(ManagedNode):
         self.get_logger().info(f"master: publishing {self.tracks_pub.topic_name}")
 
     def deactivate(self) -> None:
-        self._finish_frames()  # the face table as the applied frames leave it (no tick runs while inactive)
+        self.finish_frames()  # the face table as the applied frames leave it (no tick runs while inactive)
         for timer in self._own_timers:
             self.destroy_timer(timer)
         self._own_timers = []
-        for sub in self._subscribed.values():
-            self.destroy_subscription(sub)
-        self._subscribed = {}
-        self._unmatched.clear()
-        self._refused_topics.clear()
-        self._intake.clear()  # frames of a cycle that will not run
+        self.cameras.destroy()
+        self.receiver.intake.clear()  # frames of a cycle that will not run
         for pub in (self.tracks_pub, self.markers_pub):
             if pub is not None:
                 self.destroy_publisher(pub)
@@ -228,16 +183,14 @@ class MasterNode(ManagedNode):
             self.people_topics.deactivate()
 
     def cleanup(self) -> None:
-        for srv in self._own_services:
-            self.destroy_service(srv)
-        self._own_services = []
+        self.admin.destroy()
         if self.core is not None:
             self.core.flush()
         if self.store is not None:
             self.store.close()
         self.core = self.store = None
 
-    def _core(self) -> MasterCore:
+    def configured_core(self) -> MasterCore:
         if self.core is None:
             raise ValueError("the master is not configured")
         return self.core
@@ -271,7 +224,7 @@ class MasterNode(ManagedNode):
             return {}
         from face_reid_master.storage.gallery import load_gallery
 
-        result = load_gallery(Path(path), self._photo_embedder())
+        result = load_gallery(Path(path), self.photo_embedder())
         skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
         if skipped:
             self.get_logger().warning(
@@ -280,7 +233,7 @@ class MasterNode(ManagedNode):
             )
         return dict(result.people)
 
-    def _photo_embedder(self) -> Any:
+    def photo_embedder(self) -> Any:
         """Photos -> embeddings of the master's space (gallery folder, add-person service)."""
         from face_reid_camera.faces.embedder import load_embedder
         from face_reid_camera.faces.photos import PhotoEmbedder
@@ -290,56 +243,13 @@ class MasterNode(ManagedNode):
             self._photos = PhotoEmbedder(embedder=load_embedder(choice))
         return self._photos
 
-    # ------------------------------------------------------------------ camera topics
-    def _subscribe(self, topic: str) -> None:
-        if topic in self._subscribed or topic in self._refused_topics:
-            return
-        if len(self._subscribed) >= self._max_topics:  # memory before authentication: DDS buffers per topic
-            self._refused_topics.add(topic)
-            self._reject("topic_cap", f"camera topic {shown(topic, 128)} not subscribed: already "
-                                      f"{len(self._subscribed)} camera topics (max_camera_topics)")
-            return
-        # Without rclpy's default QoS-event handlers (two per subscription, each walked by the executor on every
-        # cycle): publishers that do not match are found by _warn_unmatched instead.
-        events = SubscriptionEventCallbacks(use_default_callbacks=False)
+    # ------------------------------------------------------------------ camera messages
+    def _on_camera_message(self, message: bytes) -> None:
+        """A camera topic's message (CDR bytes): sealed on a secured network, else a CameraFrame."""
         if self._openers:
-            self._subscribed[topic] = self.create_subscription(Sealed, topic, self._on_sealed, self._frame_qos,
-                                                               event_callbacks=events, raw=True)
+            self._on_sealed(message)
         else:
-            self._subscribed[topic] = self.create_subscription(CameraFrame, topic, self._on_frame, self._frame_qos,
-                                                               event_callbacks=events, raw=True)
-        self.get_logger().info(f"subscribed to camera topic {topic}")
-
-    def _warn_unmatched(self) -> None:
-        """Say once per camera topic when it has publishers but none is matched: their QoS is incompatible with the
-        master's reliable subscription (a best-effort camera publisher), so its frames never arrive."""
-        for topic, sub in self._subscribed.items():
-            if sub.get_publisher_count() > 0:
-                self._unmatched.discard(topic)
-                continue
-            offered = self.get_publishers_info_by_topic(topic)
-            if not offered or topic in self._unmatched:
-                continue
-            self._unmatched.add(topic)
-            policies = sorted({str(info.qos_profile.reliability.name).lower() for info in offered})
-            self.get_logger().warning(
-                f"camera topic {shown(topic, 128)}: {len(offered)} publisher(s) offering reliability "
-                f"{'/'.join(policies)} do not match the master's subscription (reliable, depth 50): their frames "
-                "are not received; publish camera frames reliable")
-
-    def _discover(self) -> None:
-        self._warn_unmatched()
-        if self._regex is None:
-            return
-        for name, types in self.get_topic_names_and_types():
-            wanted = "face_reid_msgs/msg/Sealed" if self._openers else "face_reid_msgs/msg/CameraFrame"
-            if wanted in types and self._regex.search(name) and name not in self._refused_topics:
-                if self._known_cameras and self._known_cameras.isdisjoint(name.split("/")):
-                    self._refused_topics.add(name)  # a stranger's topic: not even buffered
-                    self._reject("topic_unknown_camera", f"camera topic {shown(name, 128)} not subscribed: none of "
-                                 "its namespaces is a known_camera_ids entry (list it in camera_topics)")
-                    continue
-                self._subscribe(name)
+            self._on_frame(message)
 
     def _on_frame(self, frame: bytes | Any) -> None:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
@@ -347,17 +257,17 @@ class MasterNode(ManagedNode):
         meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
-        self._receive(frame, now)
+        self.receiver.receive(frame, now)
         self._cycle(now)
 
     @property
     def frames_dropped_overload(self) -> int:
         """Frames dropped for overload since start (oldest first, fairly across cameras)."""
-        return self._intake.dropped
+        return self.receiver.intake.dropped
 
     def _wait_for_cycle(self) -> None:
         """Sleep out what is left of min_cycle_period_s since the last cycle began (messages queue meanwhile)."""
-        wait = self._cycle_began_s + self._min_cycle_period_s - time.monotonic()  # <= the period (monotonic clock)
+        wait = self.schedule.wait_s(time.monotonic())
         if wait > 0.0:
             time.sleep(wait)
 
@@ -365,71 +275,8 @@ class MasterNode(ManagedNode):
         """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one."""
         self._wait_for_cycle()
         now = self.now_s()
-        if self._receive_sealed(sealed, now):
+        if self.receiver.receive_sealed(sealed, now):
             self._cycle(now)
-
-    def _receive_sealed(self, raw: bytes, now: float) -> bool:
-        """The CameraFrame inside a sealed message's CDR bytes received (True), or refused (counted by reason,
-        logged): an oversized one before it is even read."""
-        if self.health is not None:
-            self.health.frame_in(now)
-        if len(raw) > MAX_FRAME_BYTES:
-            self._reject("oversized", f"sealed message of {len(raw)} bytes refused unread (more than "
-                                      f"{MAX_FRAME_BYTES})")
-            return False
-        try:
-            sealed = deserialize_message(raw, Sealed)
-        except Exception as exc:  # rclpy raises RMWError for bytes that are not one
-            self._reject("sealed_malformed", f"not a face_reid_msgs/Sealed: {str(exc)[:200]}")
-            return False
-        sender = str(sealed.sender_id)
-        try:
-            payload = open_payload(self._openers["frames"], sealed, time.time())
-        except SealError as exc:
-            self._reject(f"sealed_{exc.code}", f"sealed frame from {shown(sender, 64)} refused: {exc}")
-            return False
-        return self._receive(payload, now, sender, counted=True)
-
-    def _receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None, counted: bool = False) -> bool:
-        """A camera frame (CDR bytes or a CameraFrame message; ``sealed_by``: the sender of the seal it came in)
-        read into a record and queued for the next cycle (True); one that cannot be read, or sealed by another
-        camera than it names, is refused (counted, logged)."""
-        if self.health is not None and not counted:
-            self.health.frame_in(now)
-        if isinstance(frame, bytes) and len(frame) > MAX_FRAME_BYTES:
-            self._reject("oversized", f"camera message of {len(frame)} bytes refused unread (more than "
-                                      f"{MAX_FRAME_BYTES})")
-            return False
-        try:
-            record, processing_ms = _read_frame(frame)
-        except (ValueError, TypeError, AttributeError) as exc:
-            self._reject("malformed" if sealed_by is None else "sealed_malformed", f"malformed CameraFrame: {exc}")
-            return False
-        if sealed_by is not None and record.camera_id != sealed_by:
-            self._reject("sealed_sender_mismatch", f"sealed by {shown(sealed_by, 64)} but says camera "
-                                                   f"{shown(record.camera_id, 64)}")
-            return False
-        self._intake.add(PendingFrame(record.camera_id, record.stamp_s, record))
-        try:
-            self._clocks.observe(record.camera_id, record.stamp_s, time.time(), processing_ms * 1e-3)
-        except (TypeError, ValueError):
-            pass
-        return True
-
-    def _drain(self, now: float) -> None:
-        """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
-        one cycle sees all of them and drops the oldest when they are too many."""
-        for sub in self._subscribed.values():
-            try:
-                with sub.handle:
-                    while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                        if self._openers:
-                            self._receive_sealed(taken[0], now)
-                        else:
-                            self._receive(taken[0], now)
-            except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
-                self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
-                                   1, warn=True)
 
     def _cycle(self, now: float) -> None:
         """One master cycle: everything received since the last one (by ``now``, the node clock's seconds), in
@@ -437,12 +284,12 @@ class MasterNode(ManagedNode):
         core, health = self.core, self.health
         if core is None or health is None or self.tracks_pub is None:
             return
-        self._cycle_began_s = time.monotonic()
-        self._drain(now)
-        frames, dropped = self._intake.take(self._budget.frames())
+        limit = self.schedule.begin_cycle(time.monotonic())
+        self.receiver.drain(self.cameras.subscribed.values(), now)
+        frames, dropped = self.receiver.intake.take(limit)
         if dropped:
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
-                                           f"({len(frames)} applied, budget {self._budget.budget_ms:g} ms)",
+                                           f"({len(frames)} applied, budget {self.schedule.budget.budget_ms:g} ms)",
                                self.frames_dropped_overload, warn=True)
         t_cycle = time.perf_counter()
         newest = -float("inf")
@@ -458,44 +305,30 @@ class MasterNode(ManagedNode):
                 publish_s = time.perf_counter() - t_publish
         finally:  # one identity update for the frames applied since the last one, at most every identity_period_s
             t_identity = time.perf_counter()
-            if time.monotonic() - self._identity_done_s >= self._identity_period_s:
-                self._finish_frames()
+            if self.schedule.identity_due(time.monotonic()):
+                self.finish_frames()
         t_end = time.perf_counter()
-        self._budget.spent(len(frames), (t_end - t_cycle - publish_s) * 1e3, (t_end - t_identity) * 1e3)
+        self.schedule.cycle_cost(len(frames), (t_end - t_cycle - publish_s) * 1e3, (t_end - t_identity) * 1e3)
 
-    def _finish_frames(self) -> None:
+    def finish_frames(self) -> None:
         """The identity update of the frames applied since the last one (MasterCore.finish_frames), its events
         logged."""
         if self.core is not None:
-            self._identity_done_s = time.monotonic()
+            self.schedule.identity_ran(time.monotonic())
             self._log_identity_events(self.core.finish_frames())
 
     def _publish_cycle(self, newest: float) -> None:
         """Publish the state after a cycle's frames (``newest``: the newest stamp applied), within the rate cap."""
         now = self.now_s()
-        if not self._publish_allowed(now):
-            self._unpublished_stamp = newest  # rate cap: _flush publishes it when a token is back
-            return
-        self._publish(newest, now)
-
-    def _publish_allowed(self, now: float) -> bool:
-        """Rate cap as a token bucket (max_publish_rate_hz, bursts of 2): a camera's jitter around the cap's
-        period does not delay every other message, and the average rate stays at the cap."""
-        if not self._min_publish_interval_s:
-            return True
-        elapsed = max(0.0, now - self._tokens_counted_s)
-        self._publish_tokens = min(2.0, self._publish_tokens + elapsed / self._min_publish_interval_s)
-        self._tokens_counted_s = now  # tokens are counted from here on (also when this cycle does not publish)
-        if self._publish_tokens >= 1.0:
-            self._publish_tokens -= 1.0
-            return True
-        return False
+        if self.schedule.may_publish(now, newest):
+            self._publish(newest, now)
 
     def _flush(self) -> None:
         """Timer at max_publish_rate_hz: publish the state a capped cycle left unpublished."""
         now = self.now_s()
-        if self._unpublished_stamp is not None and self._publish_allowed(now):
-            self._publish(self._unpublished_stamp, now)
+        stamp = self.schedule.due_publish(now)
+        if stamp is not None:
+            self._publish(stamp, now)
 
     def _apply(self, core: MasterCore, health: NodeHealth, record: CameraFrameRecord, now: float) -> float | None:
         """One camera frame received by ``now`` into the core; its stamp when applied, None when refused
@@ -524,7 +357,7 @@ class MasterNode(ManagedNode):
     def _tick(self) -> None:
         if self.core is None:
             return
-        self._finish_frames()  # what waits for the identity update (frames stopped within identity_period_s)
+        self.finish_frames()  # what waits for the identity update (frames stopped within identity_period_s)
         now = self.now_s()
         if self.values["check_stamps_against_clock"]:
             # Lag by the tracker's delay bound so that frames in flight still arrive in order.
@@ -541,7 +374,7 @@ class MasterNode(ManagedNode):
         frame_id = str(self.values["world_frame_id"])
         cdr = tracks_to_cdr(tracks, stamp_s, frame_id)  # serialized here: see track_cdr
         self.tracks_pub.publish(cdr if self._tracks_sealer is None else seal_payload(self._tracks_sealer, cdr))
-        self._unpublished_stamp = None
+        self.schedule.published()
         if self.health is not None:
             self.health.published()
         # Markers are for a person looking at RViz: building them for nobody costs the master time.
@@ -565,11 +398,11 @@ class MasterNode(ManagedNode):
                 stats["frames_dropped_overload"] = self.frames_dropped_overload
             if self.health is not None:
                 stats.update({f"rejected_{k}": v for k, v in sorted(self.health.rejected.items())})
-            stats.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
+            stats.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
             self.get_logger().info(f"stats: {stats}")
 
     def diagnostics(self, now_s: float) -> DiagnosticReport:
-        core, health = self._core(), self.health
+        core, health = self.configured_core(), self.health
         assert health is not None
         tracks = core.tracks()
         stats = core.stats.as_dict()
@@ -578,31 +411,22 @@ class MasterNode(ManagedNode):
             "tracks": len(tracks),
             "tracks_identified": sum(1 for t in tracks if t.face_id),
             "tracks_static_clutter": core.static_clutter_tracks,
-            "camera_topics": len(self._subscribed),
-            "camera_topics_unmatched": len(self._unmatched),
             "frames_applied": stats["frames_applied"],
             "frames_dropped_overload": self.frames_dropped_overload,
             "frames_dropped_overload_fraction": self.frames_dropped_overload / max(1, health.frames_in),
-            "cycle_frame_cost_ms": self._budget.mean_cost_ms,
-            "cycle_fixed_cost_ms": self._budget.mean_cycle_ms,
+            "cycle_frame_cost_ms": self.schedule.budget.mean_cost_ms,
+            "cycle_fixed_cost_ms": self.schedule.budget.mean_cycle_ms,
         }
         extra.update({k: v for k, v in stats.items() if k.startswith(("frames_rejected", "frames_future", "clock_",
                                                                        "embeddings_rejected", "faces_", "store_",
                                                                        "detections_rejected", "bodies_", "body_"))})
-        extra.update({f"{k}_calls": v for k, v in self._service_calls.items()})
-        extra.update({f"{k}_refused": v for k, v in self._service_refusals.items()})
+        extra.update({f"{k}_calls": v for k, v in self.admin.calls.items()})
+        extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
-        warnings = [] if self._subscribed else ["no camera topic found yet"]
-        extra["camera_topics_refused"] = len(self._refused_topics)
-        if self._refused_topics:
-            warnings.append(f"{len(self._refused_topics)} camera topic(s) not subscribed (max_camera_topics "
-                            f"reached, or not named after a known camera), e.g. {shown(min(self._refused_topics), 64)}")
-        if self._unmatched:
-            warnings.append(f"{len(self._unmatched)} camera topic(s) whose publishers do not match the master's "
-                            f"reliable subscription, e.g. {shown(min(self._unmatched), 64)}: publish camera frames "
-                            "reliable")
+        topics, warnings = self.cameras.status()
+        extra.update(topics)
         limit = float(self.values["clock_offset_warning_s"])
-        off = self._clocks.beyond(limit)
+        off = self.receiver.clocks.beyond(limit)
         extra["cameras_clock_off"] = len(off)
         for cam, offset in list(off.items())[:5]:
             extra[f"clock_offset_ms_{shown(cam, 64)}"] = round(offset * 1e3, 1)
@@ -632,129 +456,6 @@ class MasterNode(ManagedNode):
             store_last_write_ok=getattr(store, "last_write_ok", None),
             store_last_error=getattr(store, "last_error", ""), other_publishers=others,
             output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
-
-    # ------------------------------------------------------------------ services
-    async def _add_person(self, request: Any, response: Any) -> Any:
-        return await self._handle("add_person", self._do_add_person, request, response)
-
-    async def _forget_face(self, request: Any, response: Any) -> Any:
-        return await self._handle("forget_face", self._do_forget_face, request, response)
-
-    async def _handle(self, what: str, handler: Any, request: Any, response: Any) -> Any:
-        """Run a service handler (a coroutine: the executor goes on with frames while it waits): a refused request
-        (ValueError) or any other error is reported in the response and logged (cut), never raised into the
-        executor."""
-        try:
-            if self._openers:  # secured: only what a holder of the network key sealed is done
-                try:
-                    request = open_request(self._openers["requests"], request, time.time())
-                except SealError as exc:
-                    raise ValueError(f"refused: {exc}") from exc
-            await handler(request, response)
-        except ValueError as exc:
-            response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]
-        except Exception as exc:  # a request must never take the node down
-            response.success = False
-            response.message = f"internal error: {type(exc).__name__}: {str(exc)[:200]}"
-        self._service_calls[what] = self._service_calls.get(what, 0) + 1
-        if not response.success:
-            self._service_refusals[what] = self._service_refusals.get(what, 0) + 1
-        self.get_logger().info(f"{what}: {response.message[:_MAX_LOG_CHARS]}", throttle_duration_sec=1.0)
-        return response
-
-    async def _off_the_frame_path(self, work: Any) -> Any:
-        """``work()`` on the admin worker thread; the executor serves frames meanwhile (rclpy resumes the awaiting
-        service coroutine when the worker's result arrives)."""
-        from concurrent.futures import ThreadPoolExecutor
-
-        from rclpy.task import Future
-
-        if self._admin_worker is None:
-            self._admin_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="face_reid_admin")
-        done: Future[Any] = Future(executor=self.executor)
-        done.add_done_callback(lambda _: None)  # its completion wakes the executor, which resumes the coroutine
-
-        def finished(job: Any) -> None:
-            if job.exception() is not None:
-                done.set_exception(job.exception())
-            else:
-                done.set_result(job.result())
-
-        self._admin_worker.submit(work).add_done_callback(finished)
-        return await done
-
-    async def _do_add_person(self, request: Any, response: Any) -> None:
-        from face_reid_camera.faces.photos import embed_request_photos
-        from face_reid_master.identity.predefined_people import check_person_name
-
-        name = check_person_name(request.name.strip())
-        dim = space_dim(str(self.values["embedding_space"]))
-        max_rows = int(self.values["max_embeddings_per_request"])
-        max_photos = int(self.values["max_photos_per_request"])
-        if len(request.embeddings) > max_rows * dim:
-            raise ValueError(f"more than {max_rows} embeddings in one request (max_embeddings_per_request)")
-        if len(request.embeddings) % dim:
-            raise ValueError(f"embeddings must hold k x {dim} values (space {self.values['embedding_space']}), "
-                             f"got {len(request.embeddings)}")
-        if len(request.image_paths) > max_photos:
-            raise ValueError(f"more than {max_photos} photos in one request (max_photos_per_request)")
-        emb = np.asarray(request.embeddings, dtype=np.float32)
-        rows: list[np.ndarray] = list(emb.reshape(-1, dim)) if emb.size else []
-        notes: list[str] = []
-        if request.image_paths:  # read, decoded and embedded off the frame path, within the request's pixel budget
-            paths, root, max_bytes = [str(p) for p in request.image_paths], str(self.values["photo_root"]), int(
-                self.values["max_photo_bytes"])
-            photos = await self._off_the_frame_path(lambda: embed_request_photos(
-                self._photo_embedder(), root, paths, max_bytes, _MAX_PHOTO_PIXELS, _REQUEST_PIXEL_BUDGET))
-            rows += photos.embeddings
-            notes += photos.notes
-        try:
-            if not rows:
-                raise ValueError("no usable face embedding")
-            self._finish_frames()  # the request acts on the face table as the frames applied so far left it
-            self._core().add_person(name, np.stack(rows))
-        except ValueError as exc:
-            raise ValueError("; ".join([str(exc), *notes])[:_MAX_REPLY_CHARS]) from None
-        response.success, response.num_embeddings = True, len(rows)
-        response.message = "; ".join([f"added {name} with {len(rows)} embeddings", *notes])[:_MAX_REPLY_CHARS]
-
-    async def _do_forget_face(self, request: Any, response: Any) -> None:
-        self._finish_frames()  # the request acts on the face table as the frames applied so far left it
-        core = self._core()
-        if not request.face_id and not request.name:
-            raise ValueError("give a face_id or a name")
-        ids = [int(request.face_id)] if request.face_id else [
-            fid for fid in core.identity.face_ids() if core.face_name(fid) == request.name
-        ]
-        forgotten = [fid for fid in ids if core.forget_face(fid)]
-        person = bool(request.name) and not request.face_id and core.forget_person(request.name)
-        response.forgotten_face_ids = forgotten
-        response.success = bool(forgotten) or person
-        said = ([f"forgot faces {forgotten}"] if forgotten else []) + (
-            [f"removed the predefined person {shown(request.name, 64)}"] if person else [])
-        response.message = "; ".join(said) if said else "no such face or person"
-
-    def _list_faces(self, request: Any, response: Any) -> Any:
-        core = self._core()
-        for face in core.identity.export_faces():
-            response.face_ids.append(face.face_id)
-            response.names.append(core.face_name(face.face_id))
-            response.num_features.append(int(face.features.shape[0]))
-            response.last_seen_s.append(float(face.last_seen_s))
-        return response
-
-
-def _read_frame(frame: bytes | Any) -> tuple[CameraFrameRecord, float]:
-    """A camera frame's record and ``processing_time_ms``: CDR bytes read directly (rclpy reads an encoding other
-    than plain little-endian CDR), a CameraFrame message converted. ValueError / TypeError when it is not one."""
-    if isinstance(frame, bytes):
-        if is_plain_cdr(frame):
-            return frame_from_cdr(frame)
-        try:
-            frame = deserialize_message(frame, CameraFrame)
-        except Exception as exc:  # rclpy raises RMWError (a RuntimeError) for bytes that are not one
-            raise ValueError(f"not a CameraFrame in an encoding rclpy reads: {str(exc)[:200]}") from exc
-    return frame_from_msg(frame), float(frame.processing_time_ms)
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up

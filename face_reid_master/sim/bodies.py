@@ -1,7 +1,7 @@
 """Bodies of simulated people (``face-reid-sim --bodies DIR``): clothes from real person crops, body measures.
 
 Every identity wears, per day, a crop identity: a sub-folder of person crops (top of the head to the feet,
-:func:`~face_reid_master.body.crops.list_crops`). People present on both days **change clothes** (another
+:func:`~face_reid_master.training.body.crops.list_crops`). People present on both days **change clothes** (another
 crop identity that nobody else wears), as in the paper's long-term experiment, so body appearance must not
 carry across days; their body measures (:data:`MEASURE_FIELDS`, drawn once per person) do.
 
@@ -52,12 +52,12 @@ from face_reid_camera.body.person_body import GEOMETRY_BANDS
 from face_reid_camera.body.projection import BodyProjection
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_camera.faces.photos import PhotoError, read_photo
-from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, crop_person_mask
-from face_reid_master.body.crops import Crop, list_crops
 from face_reid_master.sim.frame_table import BodyRows
 from face_reid_master.sim.photos import choose_usable
 from face_reid_master.sim.visibility import VisibilityConfig, body_band_visibility, glance_ids
 from face_reid_master.sim.world import SimCamera, check_min_max
+from face_reid_master.training.body.crop_descriptors import CROP_SILHOUETTE, crop_person_mask
+from face_reid_master.training.body.crops import Crop, list_crops
 
 if TYPE_CHECKING:
     from face_reid_master.sim.simulate import Day

@@ -25,15 +25,10 @@ that created it (sqlite3's ``check_same_thread`` enforces it).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import datetime as _dt
-import errno
-import fcntl
 import logging
 import math
 import os
 import sqlite3
-import stat
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +40,17 @@ import numpy.typing as npt
 
 from face_reid_master.identity.predefined_people import check_person_name
 from face_reid_master.identity.records import LearnedFace, check_face_id
+from face_reid_master.storage.database_file import (
+    SCHEMA_VERSION,
+    VECTOR_DTYPE,
+    CorruptStore,
+    FaceDatabaseFile,
+    decode_face,
+    salvage_faces,
+)
+from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError
+from face_reid_master.storage.id_ledger import IdLedger
+from face_reid_master.storage.private_file import ensure_private_parent, move_aside, open_locked, secure_sidecars
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -56,61 +62,6 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
-
-SCHEMA_VERSION = 1
-_FILE_MODE = 0o600
-_DIR_MODE = 0o700
-_SIDECARS = ("-wal", "-shm")
-_LEDGER_SUFFIX = ".ids"  # face ids ever saved (no biometric data): lost rows are detected, ids never reused
-_LEDGER_FORMAT = "face_reid_ids/1"
-_DEFAULT_DIM = 128
-_LEGACY_SPACE = "dlib_resnet_v1"
-_SQLITE_MAGIC = b"SQLite format 3\x00"
-_VECTOR_DTYPE = np.dtype("<f4")  # little-endian float32 on every platform
-
-_SCHEMA = f"""
-CREATE TABLE meta (
-    key TEXT PRIMARY KEY,
-    value TEXT NOT NULL
-);
-CREATE TABLE faces (
-    face_id INTEGER PRIMARY KEY CHECK (face_id >= 1),
-    name TEXT NULL,
-    created_s REAL NOT NULL,
-    last_seen_s REAL NOT NULL,
-    n_observations INTEGER NOT NULL CHECK (n_observations >= 0)
-);
-CREATE TABLE features (
-    face_id INTEGER NOT NULL REFERENCES faces(face_id) ON DELETE CASCADE,
-    idx INTEGER NOT NULL CHECK (idx >= 0),
-    vector BLOB NOT NULL,
-    PRIMARY KEY (face_id, idx)
-) WITHOUT ROWID;
-CREATE INDEX faces_name ON faces(name);
-INSERT INTO meta(key, value) VALUES ('schema_version', '{SCHEMA_VERSION}');
-"""
-_EXPECTED_TABLES = {"meta", "faces", "features"}
-# tables earlier versions kept beside the faces (body pairs of a retired online body-metric update): dropped on open
-_RETIRED_TABLES = ("body_pairs",)
-_RETIRED_META = ("body_pairs_subspace",)
-
-
-class FaceStoreError(RuntimeError):
-    """The face store cannot be used (configuration or I/O problem; corruption is recovered instead)."""
-
-
-class FaceStoreLockedError(FaceStoreError):
-    """Another process (normally the running master node) has the store open."""
-
-
-class _CorruptStore(Exception):
-    """Internal: the file is not a usable face store (reason in args[0]); ``damaged``: a face store whose file
-    was damaged (its readable faces are worth salvaging), not another format or schema."""
-
-    def __init__(self, reason: str, damaged: bool = False) -> None:
-        super().__init__(reason)
-        self.damaged = damaged
-
 
 @dataclass(frozen=True)
 class FaceSummary:
@@ -134,16 +85,32 @@ def default_db_path() -> Path:
     return base / "face_reid" / "faces.db"
 
 
-def _utc_stamp() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-
-
 def _check_face_id(face_id: Any) -> int:
     return check_face_id(face_id)
 
 
 def _check_name(name: Any) -> str | None:
     return None if name is None else check_person_name(name)
+
+
+def _check_arguments(path: Any, retention_unnamed_s: Any, embedding_dim: Any, embedding_space: Any,
+                     synchronous: Any) -> None:
+    """ValueError naming the first argument of :class:`FaceStore` that is out of its range."""
+    if not isinstance(path, (str, Path)) or str(path) in ("", ":memory:"):
+        raise ValueError(f"path must be a file path, got {path!r}")
+    if retention_unnamed_s is not None:
+        if isinstance(retention_unnamed_s, bool) or not isinstance(retention_unnamed_s, (int, float)):
+            raise ValueError(f"retention_unnamed_s must be a number or None, got {retention_unnamed_s!r}")
+        if not (math.isfinite(retention_unnamed_s) and retention_unnamed_s > 0.0):
+            raise ValueError(f"retention_unnamed_s must be finite and > 0, got {retention_unnamed_s!r}")
+    if embedding_dim is not None and (
+        isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) or embedding_dim < 1
+    ):
+        raise ValueError(f"embedding_dim must be an int >= 1 or None, got {embedding_dim!r}")
+    if synchronous not in ("FULL", "NORMAL"):
+        raise ValueError(f"synchronous must be 'FULL' or 'NORMAL', got {synchronous!r}")
+    if embedding_space is not None and (not isinstance(embedding_space, str) or not embedding_space):
+        raise ValueError(f"embedding_space must be a non-empty str or None, got {embedding_space!r}")
 
 
 class FaceStore:
@@ -171,33 +138,17 @@ class FaceStore:
         create: bool = True,
         read_only: bool = False,
     ) -> None:
-        if not isinstance(path, (str, Path)) or str(path) in ("", ":memory:"):
-            raise ValueError(f"path must be a file path, got {path!r}")
-        if retention_unnamed_s is not None:
-            if isinstance(retention_unnamed_s, bool) or not isinstance(retention_unnamed_s, (int, float)):
-                raise ValueError(f"retention_unnamed_s must be a number or None, got {retention_unnamed_s!r}")
-            if not (math.isfinite(retention_unnamed_s) and retention_unnamed_s > 0.0):
-                raise ValueError(f"retention_unnamed_s must be finite and > 0, got {retention_unnamed_s!r}")
-            retention_unnamed_s = float(retention_unnamed_s)
-        if embedding_dim is not None and (
-            isinstance(embedding_dim, bool) or not isinstance(embedding_dim, int) or embedding_dim < 1
-        ):
-            raise ValueError(f"embedding_dim must be an int >= 1 or None, got {embedding_dim!r}")
-        if synchronous not in ("FULL", "NORMAL"):
-            raise ValueError(f"synchronous must be 'FULL' or 'NORMAL', got {synchronous!r}")
+        _check_arguments(path, retention_unnamed_s, embedding_dim, embedding_space, synchronous)
         self.path = Path(path).expanduser().absolute()
-        self.retention_unnamed_s = retention_unnamed_s
-        self.embedding_dim: int = 0 if embedding_dim is None else embedding_dim  # 0: take the store's
-        if embedding_space is not None and (not isinstance(embedding_space, str) or not embedding_space):
-            raise ValueError(f"embedding_space must be a non-empty str or None, got {embedding_space!r}")
-        self.embedding_space: str = embedding_space or ""  # "": take the store's
-        self.synchronous = synchronous
+        self.retention_unnamed_s = None if retention_unnamed_s is None else float(retention_unnamed_s)
         self.read_only = bool(read_only)
+        # 0 / "": adopt the stored dimension / space
+        self._file = FaceDatabaseFile(self.path, read_only=self.read_only, synchronous=synchronous,
+                                      embedding_dim=embedding_dim or 0, embedding_space=embedding_space or "")
         self.recovered_from: Path | None = None  # set when a corrupt file was moved aside at open
         self.lost_face_ids: list[int] = []  # saved once, missing from the database at open (reported loudly)
         self.salvaged_face_ids: list[int] = []  # faces read back from a corrupt file moved aside
-        self._ledger_ids: set[int] = set()
-        self._ledger_max = 0
+        self._ledger = IdLedger(self.path)
         # face id -> (hash of all its features, hash of each row), as this connection last committed them: a face
         # saved again rewrites only the rows that changed (the feature bank replaces one row at a time), none
         # when its features did not change (then only its counters)
@@ -206,94 +157,49 @@ class FaceStore:
         self._conn: sqlite3.Connection | None = None
         if (not create or self.read_only) and not os.path.lexists(self.path):
             raise FaceStoreError(f"no face store at {self.path}")
-        self._ensure_parent()
-        self._open_locked_file()
-        salvaged: list[LearnedFace] = []
+        ensure_private_parent(self.path, self.read_only)
+        self._lock_fd = open_locked(self.path, self.read_only)
         try:
-            self._conn = self._connect_and_validate()
-        except _CorruptStore as exc:
+            salvaged = self._connect()
+        except BaseException:
+            self._release_lock()
+            raise
+        if not self.read_only:
+            secure_sidecars(self.path)
+        self._check_ledger(salvaged)
+
+    @property
+    def embedding_dim(self) -> int:
+        """Length of the stored vectors."""
+        return self._file.embedding_dim
+
+    @property
+    def embedding_space(self) -> str:
+        """The embedder space of the stored vectors."""
+        return self._file.embedding_space
+
+    # ------------------------------------------------------------------------------ opening
+    def _connect(self) -> list[LearnedFace]:
+        """Open the database; a corrupt one is moved aside for a fresh one (then its readable faces, to be saved
+        into the fresh store, are returned)."""
+        assert self._lock_fd is not None
+        try:
+            self._conn = self._file.connect(self._lock_fd)
+            return []
+        except CorruptStore as exc:
             if self.read_only:
-                self._release_lock()
                 raise FaceStoreError(f"face store {self.path} is damaged ({exc}); left as it is (the master moves "
                                      "it aside when it starts)") from None
             try:
                 self._recover(str(exc))
             except OSError as exc2:
-                self._release_lock()
                 raise FaceStoreError(
-                    f"face store {self.path} is corrupt ({exc}) and cannot be moved aside: {exc2}"
-                ) from exc2
+                    f"face store {self.path} is corrupt ({exc}) and cannot be moved aside: {exc2}") from exc2
             try:
-                self._conn = self._connect_and_validate()
-            except _CorruptStore as exc2:  # a fresh file must work; anything else is an I/O problem
-                self._release_lock()
+                self._conn = self._file.connect(self._lock_fd)
+            except CorruptStore as exc2:  # a fresh file must work; anything else is an I/O problem
                 raise FaceStoreError(f"cannot create a fresh face store at {self.path}: {exc2}") from exc2
-            salvaged = self._salvage(self.recovered_from) if exc.damaged else []
-        except BaseException:
-            self._release_lock()
-            raise
-        if not self.read_only:
-            self._secure_sidecars()
-        self._check_ledger(salvaged)
-
-    # ------------------------------------------------------------------------------ opening
-    def _ensure_parent(self) -> None:
-        parent = self.path.parent
-        if not parent.exists() and not self.read_only:
-            parent.mkdir(mode=_DIR_MODE, parents=True, exist_ok=True)
-            os.chmod(parent, _DIR_MODE)  # mkdir's mode is filtered by the umask
-        with contextlib.suppress(FileNotFoundError):
-            mode = stat.S_IMODE(os.stat(parent).st_mode)
-            if mode & 0o022:
-                raise FaceStoreError(
-                    f"face store directory {parent} can be written by other users (mode {mode:o}): they could "
-                    "replace or link the database and its -wal; keep it in a private directory (e.g. mode 700)")
-
-    def _open_locked_file(self) -> None:
-        """Create (0600) or open the file (never through a symlink, only our own), fix broader permissions, take
-        the process lock (exclusive; shared when read-only)."""
-        flags = os.O_RDONLY if self.read_only else os.O_RDWR | os.O_CREAT
-        flags |= os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
-        try:
-            fd = os.open(self.path, flags, _FILE_MODE)
-        except OSError as exc:
-            if exc.errno == errno.ELOOP:
-                raise FaceStoreError(f"face store {self.path} is a symbolic link: give the real path (a link "
-                                     "could send the biometric data anywhere)") from None
-            raise FaceStoreError(f"cannot open face store {self.path}: {exc}") from exc
-        try:
-            info = os.fstat(fd)
-            if not stat.S_ISREG(info.st_mode):
-                raise FaceStoreError(f"face store {self.path} is not a regular file")
-            if info.st_uid != os.geteuid():
-                raise FaceStoreError(f"face store {self.path} belongs to user id {info.st_uid}, not to this user "
-                                     f"({os.geteuid()}): refused")
-            mode = stat.S_IMODE(info.st_mode)
-            if mode & ~_FILE_MODE and self.read_only:
-                _LOG.warning("face store %s has permissions %o, broader than 600 for biometric data (left as "
-                             "they are: read-only)", self.path, mode)
-            elif mode & ~_FILE_MODE:
-                try:
-                    os.fchmod(fd, _FILE_MODE)
-                except OSError as exc:
-                    raise FaceStoreError(
-                        f"face store {self.path} has permissions {mode:o} and cannot be restricted to 600: {exc}"
-                    ) from exc
-                _LOG.warning(
-                    "face store %s had permissions %o, broader than 600 for biometric data: fixed to 600",
-                    self.path,
-                    mode,
-                )
-            try:
-                fcntl.flock(fd, (fcntl.LOCK_SH if self.read_only else fcntl.LOCK_EX) | fcntl.LOCK_NB)
-            except BlockingIOError as exc:
-                raise FaceStoreLockedError(
-                    f"face store {self.path} is in use by another process (is the master node running?)"
-                ) from exc
-        except BaseException:
-            os.close(fd)
-            raise
-        self._lock_fd = fd
+            return self._salvage(self.recovered_from) if exc.damaged else []
 
     def _release_lock(self) -> None:
         # close the connection first: closing any fd of the file drops SQLite's POSIX locks of the process
@@ -301,135 +207,10 @@ class FaceStore:
             os.close(self._lock_fd)
             self._lock_fd = None
 
-    def _connect_and_validate(self) -> sqlite3.Connection:
-        assert self._lock_fd is not None
-        head = os.pread(self._lock_fd, len(_SQLITE_MAGIC), 0)
-        if head and head != _SQLITE_MAGIC:
-            # Never hand a foreign file to SQLite: with a -wal beside it, closing would delete that -wal.
-            # (An empty file is fine: a new store, or one whose whole content is still in the WAL.)
-            raise _CorruptStore("not an SQLite database (bad header)")
-        try:
-            if self.read_only:
-                conn = sqlite3.connect(f"{self.path.as_uri()}?mode=ro", uri=True, isolation_level=None, timeout=5.0)
-            else:
-                conn = sqlite3.connect(self.path, isolation_level=None, timeout=5.0)
-        except sqlite3.Error as exc:
-            raise FaceStoreError(f"cannot open face store {self.path}: {exc}") from exc
-        try:
-            # connection-level settings only: nothing may touch a file we have not recognised yet
-            conn.execute("PRAGMA secure_delete=ON")
-            conn.execute("PRAGMA foreign_keys=ON")
-            conn.execute("PRAGMA trusted_schema=OFF")
-            self._validate_or_init(conn)
-            if not self.read_only:
-                self._enable_wal(conn)
-                conn.execute(f"PRAGMA synchronous={self.synchronous}")
-                self._drop_retired(conn)
-        except BaseException:
-            conn.close()
-            raise
-        return conn
-
-    @staticmethod
-    def _drop_retired(conn: sqlite3.Connection) -> None:
-        """Delete what earlier versions stored beside the faces and no longer use (secure_delete zeroes it; the
-        WAL is truncated once the store is open)."""
-        present = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()}
-        retired = [t for t in _RETIRED_TABLES if t in present]
-        if not retired:
-            return
-        conn.execute("BEGIN IMMEDIATE")
-        for table in retired:
-            conn.execute(f"DROP TABLE {table}")
-        conn.executemany("DELETE FROM meta WHERE key = ?", [(k,) for k in _RETIRED_META])
-        conn.execute("COMMIT")
-        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-
-    def _enable_wal(self, conn: sqlite3.Connection) -> None:
-        try:
-            mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
-        except sqlite3.DatabaseError as exc:
-            raise _CorruptStore(f"cannot switch to WAL ({exc})") from exc
-        if str(mode).lower() != "wal":
-            raise FaceStoreError(f"face store {self.path}: cannot enable the WAL journal (got {mode!r})")
-
-    def _validate_or_init(self, conn: sqlite3.Connection) -> None:
-        try:
-            check = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
-            if check != ["ok"]:
-                raise _CorruptStore("integrity_check failed: " + "; ".join(str(c) for c in check[:5]), damaged=True)
-            tables = {
-                r[0]
-                for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
-                if not str(r[0]).startswith("sqlite_")
-            }
-            if not tables and self.read_only:
-                raise _CorruptStore("an empty file, not a face store")
-            if not tables:
-                if not self.embedding_dim:
-                    self.embedding_dim = _DEFAULT_DIM
-                self._enable_wal(conn)  # before the first write: the schema goes straight into the WAL
-                conn.executescript("BEGIN IMMEDIATE;" + _SCHEMA + "COMMIT;")
-                self._set_meta(conn, "embedding_dim", str(self.embedding_dim))
-                self.embedding_space = self.embedding_space or _LEGACY_SPACE
-                self._set_meta(conn, "embedding_space", self.embedding_space)
-                return
-            if not _EXPECTED_TABLES <= tables:
-                raise _CorruptStore(f"not a face store (tables {sorted(tables)})")
-            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
-            if meta.get("schema_version") != str(SCHEMA_VERSION):
-                raise _CorruptStore(f"unknown schema version {meta.get('schema_version')!r}")
-            dim = meta.get("embedding_dim")
-            if not self.embedding_dim:  # embedding_dim=None: adopt the store's (tools such as the CLI)
-                self.embedding_dim = int(dim) if dim is not None and dim.isdigit() and int(dim) > 0 else _DEFAULT_DIM
-            if dim is None and not self.read_only:
-                self._set_meta(conn, "embedding_dim", str(self.embedding_dim))
-            elif dim != str(self.embedding_dim):
-                raise FaceStoreError(
-                    f"face store {self.path} holds {dim}-dimensional features but embedding_dim is "
-                    f"{self.embedding_dim} (a different embedder?): use another file or delete this one"
-                )
-            space = meta.get("embedding_space")
-            if space is None:  # written before spaces were recorded: the dlib embedder was the only one
-                space = _LEGACY_SPACE
-                if (not self.embedding_space or self.embedding_space == space) and not self.read_only:
-                    self._set_meta(conn, "embedding_space", space)
-            if not self.embedding_space:
-                self.embedding_space = space
-            elif space != self.embedding_space:
-                raise FaceStoreError(
-                    f"face store {self.path} holds faces of embedder space {space!r} but this master compares "
-                    f"{self.embedding_space!r}: faces of different networks cannot be compared; set the master's "
-                    f"embedding_space to {space!r} to keep using these faces (the cameras must send that space or "
-                    "a joint one containing it), or give db_path another file to start a new memory"
-                )
-        except sqlite3.DatabaseError as exc:
-            raise _CorruptStore(f"unreadable database ({exc})", damaged=True) from exc
-
-    @staticmethod
-    def _set_meta(conn: sqlite3.Connection, key: str, value: str) -> None:
-        conn.execute(
-            "INSERT INTO meta(key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = excluded.value",
-            (key, value),
-        )
-
     def _recover(self, reason: str) -> None:
         """Move the corrupt file (and its -wal/-shm, which must not be replayed into a fresh file) aside."""
-        stamp = _utc_stamp()
-        backup = self.path.with_name(f"{self.path.name}.corrupt-{stamp}")
-        n = 1
-        while backup.exists():
-            backup = self.path.with_name(f"{self.path.name}.corrupt-{stamp}-{n}")
-            n += 1
         self._release_lock()
-        os.replace(self.path, backup)
-        os.chmod(backup, _FILE_MODE)
-        for suffix in _SIDECARS:
-            side = Path(str(self.path) + suffix)
-            if side.exists():
-                target = Path(str(backup) + suffix)
-                os.replace(side, target)
-                os.chmod(target, _FILE_MODE)
+        backup = move_aside(self.path)
         _LOG.error(
             "FACE STORE CORRUPT: %s (%s). Moved it to %s and started an EMPTY store: previously learned "
             "faces are not loaded.",
@@ -438,128 +219,29 @@ class FaceStore:
             backup,
         )
         self.recovered_from = backup
-        self._open_locked_file()
+        self._lock_fd = open_locked(self.path, self.read_only)
 
     def _salvage(self, backup: Path | None) -> list[LearnedFace]:
         """Every face still readable from the corrupt file moved aside (saved into the fresh store by
-        :meth:`_check_ledger`), said loudly (a damaged index or page rarely takes every face with it)."""
+        :meth:`_check_ledger`), said loudly."""
         if backup is None:
             return []
-        faces: list[LearnedFace] = []
-        total: int | str = "?"
-        try:
-            conn = sqlite3.connect(f"{backup.as_uri()}?mode=ro", uri=True)
-        except sqlite3.Error:
-            return []
-        try:
-            conn.execute("PRAGMA trusted_schema=OFF")
-            rows = conn.execute("SELECT face_id, name, created_s, last_seen_s, n_observations FROM faces").fetchall()
-            total = len(rows)
-            for row in rows:
-                try:
-                    blobs = [b for (b,) in conn.execute(
-                        "SELECT vector FROM features WHERE face_id = ? ORDER BY idx", (row[0],))]
-                    face = self._decode_face(row, blobs)
-                    try:
-                        name = _check_name(face.name)
-                    except ValueError:  # a name that is no longer accepted is dropped, not the face
-                        name = None
-                    faces.append(dataclasses.replace(face, name=name))
-                except (sqlite3.Error, ValueError, TypeError, OverflowError):
-                    continue
-        except sqlite3.Error:
-            pass
-        finally:
-            conn.close()
+        faces, total = salvage_faces(backup, self.embedding_dim)
         self.salvaged_face_ids = sorted(f.face_id for f in faces)
         _LOG.error("FACE STORE CORRUPT: %s: recovered %d of %s faces from %s (ids %s)", self.path, len(faces), total,
                    backup, ", ".join(map(str, self.salvaged_face_ids[:50])) or "none")
         return faces
 
-    def _secure_sidecars(self) -> None:
-        """SQLite gives -wal/-shm the database file's mode; enforce 0600 anyway."""
-        for suffix in _SIDECARS:
-            side = Path(str(self.path) + suffix)
-            with contextlib.suppress(FileNotFoundError):
-                if stat.S_IMODE(side.stat().st_mode) & ~_FILE_MODE:
-                    os.chmod(side, _FILE_MODE)
-
-    # ------------------------------------------------------------------------------ id ledger
-    @property
-    def ledger_path(self) -> Path:
-        """The sidecar listing the face ids saved (ids only): lost database rows are detected with it and face
-        ids are never reused, even when the database lost its last writes or was replaced."""
-        return Path(str(self.path) + _LEDGER_SUFFIX)
-
     def _check_ledger(self, salvaged: list[LearnedFace]) -> None:
-        """Compare the database with the ledger: report faces it lost (loudly), keep the id high-water mark;
-        the ``salvaged`` faces of a corrupt file are written first."""
-        ledger_max, ledger_ids = self._read_ledger()
+        """Compare the database with the id ledger (faces it lost are reported); the ``salvaged`` faces of a
+        corrupt file are written first."""
         if salvaged:
             with self._transaction() as conn:
                 for face in salvaged:
                     self._write_face(conn, face, self._encode(face))
                 self._bump_max_face_id(conn, max(f.face_id for f in salvaged))
-        stored = set(self.face_ids())
-        self.lost_face_ids = sorted(ledger_ids - stored)
-        self._ledger_max = max(ledger_max, self._meta_max_face_id(), max(stored, default=0))
-        if self.lost_face_ids:
-            _LOG.error(
-                "FACE STORE LOST FACES: %s: faces %s were saved but are not in the database (its last writes were "
-                "lost: a damaged or deleted -wal, or a replaced file); new faces get ids above %d, never these",
-                self.path, ", ".join(map(str, self.lost_face_ids[:50])), self._ledger_max)
-        self._ledger_ids = stored
-        if not self.read_only and (ledger_ids != stored or ledger_max != self._ledger_max):
-            self._write_ledger()
-
-    def _read_ledger(self) -> tuple[int, set[int]]:
-        try:
-            fd = os.open(self.ledger_path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
-        except FileNotFoundError:
-            return 0, set()
-        except OSError as exc:
-            _LOG.error("face store %s: cannot read the id ledger %s (%s): lost faces cannot be detected",
-                       self.path, self.ledger_path, exc)
-            return 0, set()
-        with os.fdopen(fd, "r", encoding="ascii", errors="replace") as f:
-            lines = f.read(10_000_000).splitlines()
-        try:
-            if lines[0] != _LEDGER_FORMAT:
-                raise ValueError(f"unknown format {lines[0][:40]!r}")
-            return int(lines[1].split()[1]), {int(v) for v in lines[2].split()[1:]}
-        except (IndexError, ValueError) as exc:
-            _LOG.error("face store %s: the id ledger %s is damaged (%s): lost faces cannot be detected this time",
-                       self.path, self.ledger_path, exc)
-            return 0, set()
-
-    def _write_ledger(self) -> None:
-        """Replace the ledger atomically (temporary file, fsync, rename, directory fsync)."""
-        text = f"{_LEDGER_FORMAT}\nmax {self._ledger_max}\nids {' '.join(map(str, sorted(self._ledger_ids)))}\n"
-        tmp = Path(str(self.ledger_path) + ".tmp")
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        try:
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0),
-                         _FILE_MODE)
-            with os.fdopen(fd, "w", encoding="ascii") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.ledger_path)
-            dfd = os.open(self.path.parent, os.O_RDONLY)
-            try:
-                os.fsync(dfd)
-            finally:
-                os.close(dfd)
-        except OSError as exc:
-            raise FaceStoreError(f"face store {self.path}: cannot write the id ledger: {exc}") from exc
-
-    def _note_saved(self, face_ids: Iterable[int]) -> None:
-        new = set(face_ids) - self._ledger_ids
-        if new:
-            self._ledger_ids |= new
-            self._ledger_max = max(self._ledger_max, *new)
-            self._write_ledger()
+        self.lost_face_ids = self._ledger.reconcile(set(self.face_ids()), self._meta_max_face_id(),
+                                                    write=not self.read_only)
 
     # ------------------------------------------------------------------------------ helpers
     @property
@@ -595,7 +277,7 @@ class FaceStore:
             )
         if not np.all(np.isfinite(feats)):
             raise ValueError(f"face {face.face_id}: features contain NaN or Inf")
-        return np.ascontiguousarray(feats, dtype=_VECTOR_DTYPE)
+        return np.ascontiguousarray(feats, dtype=VECTOR_DTYPE)
 
     def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, raw: npt.NDArray[np.float32]
                     ) -> tuple[int, list[int]]:
@@ -646,8 +328,7 @@ class FaceStore:
         with self._transaction() as conn:
             conn.executemany("DELETE FROM features WHERE face_id = ?", [(f,) for f in face_ids])
             conn.executemany("DELETE FROM faces WHERE face_id = ?", [(f,) for f in face_ids])
-        self._ledger_ids -= set(face_ids)
-        self._write_ledger()
+        self._ledger.remove(face_ids)
         self._scrub_wal()
 
     def _scrub_wal(self) -> None:
@@ -686,7 +367,7 @@ class FaceStore:
                 self._row_hashes.pop(fid, None)
             raise
         self._row_hashes.update(written)
-        self._note_saved(ids)
+        self._ledger.add(ids)
         return len(batch)
 
     def load_faces(self) -> list[LearnedFace]:
@@ -705,20 +386,10 @@ class FaceStore:
         out: list[LearnedFace] = []
         for row in meta_rows:
             try:
-                out.append(self._decode_face(row, vectors.get(row[0], [])))
+                out.append(decode_face(row, vectors.get(row[0], []), self.embedding_dim))
             except (ValueError, TypeError) as exc:
                 _LOG.error("face store %s: skipping invalid stored face %s: %s", self.path, row[0], exc)
         return out
-
-    def _decode_face(self, row: tuple[Any, ...], blobs: list[Any]) -> LearnedFace:
-        """A face from its ``faces`` row (id, name, created, last seen, observations) and its vector blobs;
-        ValueError / TypeError when they are not a valid face of this store."""
-        width = self.embedding_dim * _VECTOR_DTYPE.itemsize
-        if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
-            raise ValueError(f"{len(blobs)} stored vectors, expected >= 1 of {width} bytes each")
-        feats = np.frombuffer(b"".join(blobs), dtype=_VECTOR_DTYPE).reshape(len(blobs), -1).astype(np.float32)
-        face_id, name, created_s, last_seen_s, n_obs = row
-        return LearnedFace(face_id, feats, name, created_s, last_seen_s, n_obs)
 
     def list_faces(self) -> list[FaceSummary]:
         """Summaries of all stored faces (no vectors), sorted by id."""
@@ -735,7 +406,7 @@ class FaceStore:
     def max_face_id(self) -> int:
         """Largest face id ever saved in this store (also after it was forgotten, or lost: the ledger); 0 if
         none."""
-        return max(self._meta_max_face_id(), self._ledger_max)
+        return max(self._meta_max_face_id(), self._ledger.max_id)
 
     def _meta_max_face_id(self) -> int:
         row = self._db.execute("SELECT value FROM meta WHERE key = 'max_face_id'").fetchone()
@@ -813,10 +484,6 @@ class FaceStore:
     def integrity_ok(self) -> bool:
         """Run ``PRAGMA integrity_check`` now (diagnostics)."""
         return [r[0] for r in self._db.execute("PRAGMA integrity_check").fetchall()] == ["ok"]
-
-    @property
-    def closed(self) -> bool:
-        return self._conn is None
 
     def close(self) -> None:
         """Checkpoint, close the database and release the process lock (idempotent)."""

@@ -6,7 +6,7 @@
 ``record`` listens to every camera topic (CameraFrame, or sealed frames with ``--key``) and writes one JSON
 line per frame: camera id, stamp, the camera's configured pose, the people's floor positions. ``solve`` finds,
 with the anchor camera's pose kept, the x, y, yaw of every other camera whose view overlaps the anchor's or
-another solved camera's (face_reid_master/calibration/walk_calibration.py), prints the correction and the RMS
+another solved camera's (face_reid_master/training/walk_calibration.py), prints the correction and the RMS
 residual per camera and writes ``<out-dir>/<camera>.yaml`` (a params file with camera_id, camera_pose_xyz_m and
 camera_pose_rpy_rad; height, roll and pitch are kept from the camera's floor). Each camera's height, roll and
 pitch must be right first (the camera node measures the floor; ``face-reid-replay`` prints it).
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from face_reid_camera.camera_model import CameraPose
-from face_reid_master.calibration.walk_calibration import CameraTrack, calibrate_cameras
+from face_reid_master.training.walk_calibration import CameraTrack, calibrate_cameras
 
 DEFAULT_TOPIC_REGEX = r"^(/.*)?/face_reid/frames(_sealed)?$"
 

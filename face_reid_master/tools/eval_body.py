@@ -6,7 +6,7 @@ projection (what a camera sends) is fitted on their crops, then KISSME and XQDA 
 the other half are probes (one camera) against a gallery (the other cameras), as in the second seed.
 Euclidean distances are reported on the raw descriptors and on the projected vectors. The components kept,
 the regularisation and XQDA's subspace cap are chosen per split by cross-validation over the training
-identities only (:mod:`face_reid_master.body.model_selection`). Splits and folds without a person seen by
+identities only (:mod:`face_reid_master.training.body.model_selection`). Splits and folds without a person seen by
 two cameras are left out and counted (``left_out``); only a folder where nothing is left fails. Prints one
 JSON object; ``--plot`` saves the CMC curves.
 """
@@ -25,9 +25,6 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.body.projection import FEATURES
-from face_reid_master.body.cmc import RankScores, rank_scores
-from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, describe_crops
-from face_reid_master.body.crops import Crop, filter_crops, list_crops, reid_splits, same_camera
 from face_reid_master.body.features import (
     METRIC_FEATURES,
     feature_columns,
@@ -35,9 +32,12 @@ from face_reid_master.body.features import (
     parse_pca_dims,
     raw_feature,
 )
-from face_reid_master.body.kissme import fit_kissme
 from face_reid_master.body.linear_metric import euclidean_metric
-from face_reid_master.body.model_selection import (
+from face_reid_master.training.body.cmc import RankScores, rank_scores
+from face_reid_master.training.body.crop_descriptors import CROP_SILHOUETTE, describe_crops
+from face_reid_master.training.body.crops import Crop, filter_crops, list_crops, reid_splits, same_camera
+from face_reid_master.training.body.kissme import fit_kissme
+from face_reid_master.training.body.model_selection import (
     DEFAULT_MAX_LENGTH,
     NoCrossCameraMatch,
     SearchGrid,
@@ -45,7 +45,7 @@ from face_reid_master.body.model_selection import (
     dims_candidates,
     select_parameters,
 )
-from face_reid_master.body.xqda import fit_xqda
+from face_reid_master.training.body.xqda import fit_xqda
 
 __all__ = ["METHODS", "evaluate", "main"]
 

@@ -2,12 +2,12 @@
 compares with) on a folder of labelled person crops.
 
 CROPS_DIR holds one sub-folder of crops per identity (cameras from the file names, see
-:mod:`face_reid_master.body.crops`). The camera's descriptor code describes every crop; a PCA per
+:mod:`face_reid_master.training.body.crops`). The camera's descriptor code describes every crop; a PCA per
 descriptor block gives the projection (``--projection FILE`` keeps an existing one: cameras already send
 it, so the metric can be refitted alone); XQDA per feature (hsv, siltp, both fused) on the projected
 vectors gives the metric; skew-normal N_p / N_n fitted to held-out same / different-person distances give
 the likelihoods and the decision distance (N_p = N_n). The components kept, the regularisation and XQDA's
-subspace cap are chosen by cross-validation over the identities (:mod:`face_reid_master.body.model_selection`).
+subspace cap are chosen by cross-validation over the identities (:mod:`face_reid_master.training.body.model_selection`).
 Writes ``body_projection.npz``, ``body_metric.json`` and ``body_metric_fit.png`` into ``--out-dir``.
 ``SOURCE_DATE_EPOCH`` (seconds) fixes the recorded date: same inputs, same bytes.
 """
@@ -34,12 +34,12 @@ from face_reid_camera.body.projection import (
     save_body_projection,
 )
 from face_reid_camera.common.errors import ModelLoadError
-from face_reid_master.body.crop_descriptors import CROP_SILHOUETTE, CropDescriptors, describe_crops
-from face_reid_master.body.crops import Crop, filter_crops, list_crops
 from face_reid_master.body.features import METRIC_FEATURES, fit_projection, parse_pca_dims
 from face_reid_master.body.metric_file import BODY_METRIC_FILE, BodyMetricModel, load_body_metric, save_body_metric
-from face_reid_master.body.metric_fit import FeatureFit, fit_feature_metrics
-from face_reid_master.body.model_selection import (
+from face_reid_master.training.body.crop_descriptors import CROP_SILHOUETTE, CropDescriptors, describe_crops
+from face_reid_master.training.body.crops import Crop, filter_crops, list_crops
+from face_reid_master.training.body.metric_fit import FeatureFit, fit_feature_metrics
+from face_reid_master.training.body.model_selection import (
     DEFAULT_MAX_LENGTH,
     SearchGrid,
     dims_candidates,
@@ -179,7 +179,7 @@ def _data_metadata(args: argparse.Namespace, described: CropDescriptors, exclude
                      "scenario_crop_identities": sorted(excluded)},
         "identities": identities,
         "descriptor": "face_reid_camera.body.descriptor.body_descriptor, default row-band parts, the central "
-                      f"{args.silhouette} of each crop's columns (face_reid_master.body.crop_descriptors)",
+                      f"{args.silhouette} of each crop's columns (face_reid_master.training.body.crop_descriptors)",
         "silhouette": args.silhouette,
         "fitted_utc": _fitted_utc(),
     }
@@ -300,8 +300,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         metadata = {
             **data,
             "projection": {**projection_info, "space": projection.space, "length": projection.length},
-            "metric": "XQDA per feature on the projected vectors (face_reid_master.body.xqda), distances divided "
-                      "by the median different-person distance on the training crops",
+            "metric": "XQDA per feature on the projected vectors (face_reid_master.training.body.xqda), distances "
+                      "divided by the median different-person distance on the training crops",
             "likelihoods": f"skew-normal MLE (face_reid_master.identity.likelihood.fit_skewnormal) on held-out "
                            f"distances: {args.folds} folds of the identities, each measured by XQDA fitted on the "
                            f"other folds; every same-person pair, different-person pairs within one source "

@@ -102,7 +102,7 @@ def test_cameras_with_unusable_spaces_cannot_grow_what_the_master_remembers() ->
         person = PersonRecord(np.array([0.0, 1.0, 0.0]), 0.05, 1.75, emb, 0.9, 0.8, "some_space_" + "z" * 1000)
         out = core.process_frame(CameraFrameRecord(f"cam_{k}", 0.01 * k, (person,)), now_s=0.01 * k)
         notices += len(out.notices)
-    assert notices == 5000 and len(core._space_noticed) == 1024  # before: 5,000 entries, each a 1,000-char space
-    assert all(len(space) <= 64 for space in core._space_noticed.values())
+    assert notices == 5000 and len(core.reader._space_noticed) == 1024  # before: 5,000 entries, each a 1,000-char space
+    assert all(len(space) <= 64 for space in core.reader._space_noticed.values())
     again = core.process_frame(CameraFrameRecord("cam_4999", 50.0, (person,)), now_s=50.0)
     assert not again.notices  # still remembered: not said twice

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_master.body.crops import Crop, camera_of, list_crops, reid_splits, same_camera
+from face_reid_master.training.body.crops import Crop, camera_of, list_crops, reid_splits, same_camera
 
 
 @pytest.mark.parametrize(("name", "expected"), [

@@ -11,8 +11,6 @@ import numpy as np
 import pytest
 
 from face_reid_camera.body.descriptor import body_descriptor
-from face_reid_master.body.crop_descriptors import describe_crops
-from face_reid_master.body.crops import Crop, filter_crops, list_crops
 from face_reid_master.body.features import (
     feature_blocks,
     feature_columns,
@@ -20,6 +18,8 @@ from face_reid_master.body.features import (
     parse_pca_dims,
     raw_feature,
 )
+from face_reid_master.training.body.crop_descriptors import describe_crops
+from face_reid_master.training.body.crops import Crop, filter_crops, list_crops
 
 
 def test_feature_columns_read_their_blocks_of_the_wire_vector() -> None:

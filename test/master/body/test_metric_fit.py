@@ -11,8 +11,8 @@ import pytest
 
 from face_reid_camera.common.errors import ModelLoadError
 from face_reid_master.body.metric_file import BodyMetricModel, load_body_metric, save_body_metric
-from face_reid_master.body.metric_fit import fit_feature_metrics, pair_distances
-from face_reid_master.body.model_selection import Choice, identity_folds
+from face_reid_master.training.body.metric_fit import fit_feature_metrics, pair_distances
+from face_reid_master.training.body.model_selection import Choice, identity_folds
 
 
 def test_pair_distances_take_every_same_person_pair_and_different_people_within_a_group() -> None:

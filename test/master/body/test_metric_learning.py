@@ -7,11 +7,11 @@ import itertools
 import numpy as np
 import pytest
 
-from face_reid_master.body.cmc import rank_scores
-from face_reid_master.body.kissme import fit_kissme, kissme_from_covariances
 from face_reid_master.body.linear_metric import LinearMetric, euclidean_metric
-from face_reid_master.body.pair_covariance import pair_covariances
-from face_reid_master.body.xqda import fit_xqda, xqda_for_dims
+from face_reid_master.training.body.cmc import rank_scores
+from face_reid_master.training.body.kissme import fit_kissme, kissme_from_covariances
+from face_reid_master.training.body.pair_covariance import pair_covariances
+from face_reid_master.training.body.xqda import fit_xqda, xqda_for_dims
 
 
 def test_pair_covariances_equal_the_average_over_every_ordered_pair() -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from face_reid_master.body.model_selection import (
+from face_reid_master.training.body.model_selection import (
     NoCrossCameraMatch,
     SearchGrid,
     dims_candidates,

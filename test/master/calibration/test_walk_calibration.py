@@ -9,13 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from face_reid_master.calibration.walk_calibration import (
+from face_reid_master.robot.frames import PlanarTransform
+from face_reid_master.training.walk_calibration import (
     CameraTrack,
     calibrate_cameras,
     rigid_2d,
     time_matched,
 )
-from face_reid_master.robot.frames import PlanarTransform
 
 # (true x, y, heading) of four cameras around a 10 x 6 m room; D sees only the far end, which A does not
 TRUE = {"A": (0.0, 0.0, math.radians(30)), "B": (10.0, 0.0, math.radians(150)),

@@ -81,10 +81,10 @@ def test_bank_distances_match_float64_reference_in_exact_and_shortlist_modes() -
     exact = BayesIdentityManager()
     exact.import_faces(LearnedFace(i + 1, f) for i, f in enumerate(faces))
     # float32 ||a||^2 + ||b||^2 - 2ab: squared distances exact to ~1e-6 (d = 0 reads as ~3e-4)
-    np.testing.assert_allclose(exact._available_distances(obs) ** 2, ref**2, atol=2e-6)
+    np.testing.assert_allclose(exact._list.distances(obs) ** 2, ref**2, atol=2e-6)
     short = BayesIdentityManager(exact_search_max_features=10, shortlist_faces=8)
     short.import_faces(LearnedFace(i + 1, f) for i, f in enumerate(faces))
-    d = short._available_distances(obs)
+    d = short._list.distances(obs)
     assert short.stats.shortlist_searches == 1
     assert np.all(np.isfinite(d).sum(axis=1) == 8)
     np.testing.assert_allclose(d[np.isfinite(d)] ** 2, ref[np.isfinite(d)] ** 2, atol=2e-6)

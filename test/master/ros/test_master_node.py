@@ -219,7 +219,8 @@ def test_add_person_survives_hostile_photo_paths_names_and_sizes(ros_context, tm
         ):
             replies: list = []
             worker = threading.Thread(
-                target=lambda r=req, out=replies: out.append(call_handler(node._add_person, r, AddPerson.Response())),
+                target=lambda r=req, out=replies: out.append(
+                    call_handler(node.admin.add_person, r, AddPerson.Response())),
                 daemon=True)
             worker.start()
             worker.join(30.0)
@@ -227,10 +228,10 @@ def test_add_person_survives_hostile_photo_paths_names_and_sizes(ros_context, tm
             assert not replies[0].success and why in replies[0].message, (why, replies[0].message[:300])
             assert len(replies[0].message) <= 1000
         assert node.core.people.names() == []  # nothing stored by any of them
-        reply = call_handler(node._add_person, AddPerson.Request(name="Alice", image_paths=["alice.jpg"]),
+        reply = call_handler(node.admin.add_person, AddPerson.Request(name="Alice", image_paths=["alice.jpg"]),
                              AddPerson.Response())
         assert reply.success and reply.num_embeddings == 1 and node.core.people.names() == ["Alice"]
-        assert node._service_refusals["add_person"] == 13 and node._service_calls["add_person"] == 14
+        assert node.admin.refusals["add_person"] == 13 and node.admin.calls["add_person"] == 14
     finally:
         node.destroy_node()
 
@@ -295,7 +296,7 @@ def test_a_cycle_applies_its_frames_in_stamp_order_and_publishes_once(ros_contex
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         stamps = [10.0 + 0.1 * k for k in range(8)]
         for k, t in enumerate(reversed(stamps)):  # newest first: one by one, all but the first would be late
-            node._receive(_frame(t, camera="cam_a" if k % 2 else "cam_b"), node.now_s())  # waiting together
+            node.receiver.receive(_frame(t, camera="cam_a" if k % 2 else "cam_b"), node.now_s())  # waiting together
         published = node.health.messages_published
         node._cycle(node.now_s())
         stats = node.core.stats
@@ -320,7 +321,7 @@ def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context,
         assert node.core.identity.face_ids() == []  # 5 observations wait for the next update
         node._tick()
         assert node.core.identity.face_ids() == [1]
-        node._identity_done_s -= 1.0  # the period has passed: the next cycle updates again
+        node.schedule.identity_done -= 1.0  # the period has passed: the next cycle updates again
         _feed(node, _frame(100.6, emb=_unit(2)))
         assert node.core._deferred == []
         _feed(node, _frame(100.7, emb=_unit(2)))  # within the period again: waits
@@ -346,10 +347,10 @@ def test_a_message_sooner_than_min_cycle_period_waits_for_its_cycle(ros_context,
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         _feed(node, _frame(10.0))
         assert slept == []  # no cycle before it
-        node._cycle_began_s = time.monotonic()  # a cycle began just now
+        node.schedule.cycle_began = time.monotonic()  # a cycle began just now
         _feed(node, _frame(10.1))
         assert len(slept) == 1 and 0.05 < slept[0] <= 0.1
-        node._cycle_began_s -= 1.0  # long ago
+        node.schedule.cycle_began -= 1.0  # long ago
         _feed(node, _frame(10.2))
         assert len(slept) == 1 and node.core.stats.frames_applied == 3
     finally:
@@ -363,9 +364,9 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
                    "cycle_budget_ms:=1.0")
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
-        node._budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
+        node.schedule.budget.mean_cost_ms = 0.25  # as measured on a slow host: 4 frames per 1 ms cycle
         for k in range(30):  # camera a sends 20 frames, camera b 10, interleaved, all waiting together
-            node._receive(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"), node.now_s())
+            node.receiver.receive(_frame(10.0 + 0.01 * k, camera="cam_b" if k % 3 == 2 else "cam_a"), node.now_s())
         node._cycle(node.now_s())
         assert node.frames_dropped_overload == 26 and node.core.stats.frames_applied == 4
         values = node.diagnostics(node.now_s()).values
@@ -374,7 +375,8 @@ def test_an_overloaded_cycle_drops_the_oldest_fairly_and_reports_it(ros_context,
         assert values["frames_dropped"] == "26"
         assert node.core.stats.frames_received == 4
         # fair: camera a (20 waiting) lost its 18 oldest, camera b (10) its 8 oldest; each applied its newest 2
-        assert {cam: len(times) for cam, times in node.core._camera_frames.items()} == {"cam_a": 2, "cam_b": 2}
+        applied = node.core.admission._camera_frames
+        assert {cam: len(times) for cam, times in applied.items()} == {"cam_a": 2, "cam_b": 2}
     finally:
         node.destroy_node()
 
@@ -507,14 +509,14 @@ def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_
     executor = SingleThreadedExecutor(context=node.context)
     try:
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
-        assert all(len(sub.event_handlers) == 0 for sub in node._subscribed.values())
+        assert all(len(sub.event_handlers) == 0 for sub in node.cameras.subscribed.values())
         executor.add_node(node)
         executor.add_node(camera)
         lossy = camera.create_publisher(CameraFrame, CAM,
                                         QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT))
 
         def seen() -> bool:
-            node._warn_unmatched()
+            node.cameras.warn_unmatched()
             return node.diagnostics(node.now_s()).values["camera_topics_unmatched"] == "1"
 
         assert spin_until(executor, seen, 20.0)
@@ -524,7 +526,7 @@ def test_a_camera_publishing_best_effort_is_named_as_unmatched(ros_context, tmp_
         camera.create_publisher(CameraFrame, CAM, QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
 
         def matched() -> bool:
-            node._warn_unmatched()
+            node.cameras.warn_unmatched()
             return node.diagnostics(node.now_s()).values["camera_topics_unmatched"] == "0"
 
         assert spin_until(executor, matched, 20.0)
@@ -541,7 +543,7 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
     import cv2
     from conftest import FACES_DIR
 
-    from face_reid_master.ros import node as node_module
+    from face_reid_master.ros import admin_services as admin_module
 
     root = tmp_path / "gallery"
     root.mkdir()
@@ -549,9 +551,9 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
     big = cv2.resize(face, (4000, 4000), interpolation=cv2.INTER_LINEAR)  # 16 MP each: a slow request
     for k in range(6):
         cv2.imwrite(str(root / f"big{k}.jpg"), big)
-    huge = f"{node_module._MAX_PHOTO_PIXELS // 1000 + 1}x1000.png"  # over the photo cap by its header alone
+    huge = f"{admin_module._MAX_PHOTO_PIXELS // 1000 + 1}x1000.png"  # over the photo cap by its header alone
     (root / huge).write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR"
-                              + (node_module._MAX_PHOTO_PIXELS // 1000 + 1).to_bytes(4, "big")
+                              + (admin_module._MAX_PHOTO_PIXELS // 1000 + 1).to_bytes(4, "big")
                               + (1000).to_bytes(4, "big") + b"\x08\x02\x00\x00\x00" + bytes(64))
     node = _master(ros_context, tmp_path, "admin_services:=true", f"photo_root:={root}", "tick_rate_hz:=20.0")
     client = Node("admin", context=node.context)
@@ -574,7 +576,7 @@ def test_tracks_keep_coming_while_an_add_person_request_decodes_its_photos(ros_c
         assert reply.success, reply.message
         assert during >= 5, f"only {during} /tracks_named messages while the request ran: {reply.message}"
         assert reply.num_embeddings == 6 or "budget" in reply.message  # 6 x 16 MP fit the 200 MP budget
-        assert f"more than {node_module._MAX_PHOTO_PIXELS}" in reply.message  # the huge PNG, by its header
+        assert f"more than {admin_module._MAX_PHOTO_PIXELS}" in reply.message  # the huge PNG, by its header
     finally:
         executor.shutdown()
         client.destroy_node()

@@ -65,8 +65,9 @@ def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) 
         forged_pub = stranger.create_publisher(Sealed, "/cam_c/face_reid/frames_sealed", 10)
         overheard: list = []
         stranger.create_subscription(Sealed, "/cam_a/face_reid/frames_sealed", overheard.append, 10)
-        assert spin_until(executor, lambda: len(master._subscribed) == 2 and sealed_pub.get_subscription_count() == 2)
-        assert "/cam_b/face_reid/frames" not in master._subscribed  # plain frames are not even listened to
+        assert spin_until(executor, lambda: len(master.cameras.subscribed) == 2
+                          and sealed_pub.get_subscription_count() == 2)
+        assert "/cam_b/face_reid/frames" not in master.cameras.subscribed  # plain frames are not even listened to
 
         alice, mallory = _face(1), _face(2)
         cam_sealer, forger = Sealer(key, "cam_a"), Sealer(stranger_key, "cam_c")
@@ -143,12 +144,12 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
     master = MasterNode(context=ctx)
     try:
         assert master.trigger_configure() == OK
-        reply = call_handler(master._add_person, early, AddPerson.Response())
+        reply = call_handler(master.admin.add_person, early, AddPerson.Response())
         assert not reply.success and "before this receiver started" in reply.message
         sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=_face(1).tolist()))
-        assert call_handler(master._add_person, sealed, AddPerson.Response()).success
+        assert call_handler(master.admin.add_person, sealed, AddPerson.Response()).success
         assert master.trigger_cleanup() == OK and master.trigger_configure() == OK  # a restart of the master
-        reply = call_handler(master._add_person, sealed, AddPerson.Response())  # captured, replayed after it
+        reply = call_handler(master.admin.add_person, sealed, AddPerson.Response())  # captured, replayed after it
         assert not reply.success and "before this receiver started" in reply.message
     finally:
         master.destroy_node()
@@ -157,7 +158,7 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
 def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_context, tmp_path: Path) -> None:
     """Memory before authentication: a message larger than MAX_FRAME_BYTES is refused before it is read (no
     deserialization, no decryption), and at most max_camera_topics camera topics are subscribed."""
-    from face_reid_master.ros.node import MAX_FRAME_BYTES
+    from face_reid_master.ros.frame_receiver import MAX_FRAME_BYTES
 
     write_network_key(tmp_path / "network.key")
     ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
@@ -171,7 +172,7 @@ def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_
     try:
         assert master.trigger_configure() == OK and master.trigger_activate() == OK
         pubs = [stranger.create_publisher(Sealed, f"/s{k}/face_reid/frames_sealed", 10) for k in range(3)]
-        assert spin_until(executor, lambda: len(master._subscribed) == 2 and len(master._refused_topics) == 1)
+        assert spin_until(executor, lambda: len(master.cameras.subscribed) == 2 and len(master.cameras.refused) == 1)
         assert spin_until(executor, lambda: sum(p.get_subscription_count() for p in pubs) == 2)
         big = Sealed(sender_id="s0", counter=time.time_ns(), nonce=bytes(12), ciphertext=bytes(MAX_FRAME_BYTES + 1))
         matched = [p for p in pubs if p.get_subscription_count() > 0]
@@ -202,10 +203,10 @@ def test_with_known_cameras_only_their_topics_are_subscribed(ros_context, tmp_pa
         for name in ("/cam_a/face_reid/frames_sealed", "/evil/face_reid/frames_sealed"):
             stranger.create_publisher(Sealed, name, 10)
         assert spin_until(executor, lambda: master.health.rejected.get("topic_unknown_camera", 0) == 1
-                          and len(master._subscribed) == 1)
-        assert set(master._subscribed) == {"/cam_a/face_reid/frames_sealed"}
+                          and len(master.cameras.subscribed) == 1)
+        assert set(master.cameras.subscribed) == {"/cam_a/face_reid/frames_sealed"}
         for _ in range(5):  # discovery goes on: the refused topic is neither subscribed nor counted again
-            master._discover()
+            master.cameras.discover()
         assert master.health.rejected["topic_unknown_camera"] == 1
     finally:
         executor.shutdown()

@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from face_reid_master.body.model_selection import SearchGrid
 from face_reid_master.tools import eval_body
 from face_reid_master.tools.eval_body import METHODS, evaluate, main
+from face_reid_master.training.body.model_selection import SearchGrid
 
 
 def _crops(root: Path, people: int = 12) -> None:

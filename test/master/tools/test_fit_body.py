@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from face_reid_camera.body.projection import load_body_projection
-from face_reid_master.body.crop_descriptors import describe_crops
-from face_reid_master.body.crops import list_crops
 from face_reid_master.body.metric_file import load_body_metric
 from face_reid_master.sim.scenario_files import FORMAT_NAME, FORMAT_VERSION
 from face_reid_master.tools.fit_body import main, scenario_clothes
+from face_reid_master.training.body.crop_descriptors import describe_crops
+from face_reid_master.training.body.crops import list_crops
 
 FILES = ("body_projection.npz", "body_metric.json", "body_metric_fit.png")
 EPOCH = "1767225600"  # 2026-01-01T00:00:00Z

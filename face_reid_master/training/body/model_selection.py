@@ -21,13 +21,13 @@ import numpy.typing as npt
 
 from face_reid_camera.body.projection import FEATURES
 from face_reid_camera.common.checks import check_int, check_real
-from face_reid_master.body.cmc import rank_scores
-from face_reid_master.body.crops import camera_mask
 from face_reid_master.body.features import FUSED, METRIC_FEATURES
-from face_reid_master.body.kissme import kissme_from_covariances
 from face_reid_master.body.linear_metric import LinearMetric
-from face_reid_master.body.pair_covariance import pair_covariances
-from face_reid_master.body.xqda import xqda_for_dims
+from face_reid_master.training.body.cmc import rank_scores
+from face_reid_master.training.body.crops import camera_mask
+from face_reid_master.training.body.kissme import kissme_from_covariances
+from face_reid_master.training.body.pair_covariance import pair_covariances
+from face_reid_master.training.body.xqda import xqda_for_dims
 
 __all__ = ["DEFAULT_MAX_LENGTH", "Choice", "NoCrossCameraMatch", "SearchGrid", "Selection", "dims_candidates",
            "identity_folds", "select_parameters"]

@@ -21,9 +21,9 @@ from face_reid_camera.common.checks import check_int
 from face_reid_master.body.features import METRIC_FEATURES, feature_columns
 from face_reid_master.body.linear_metric import LinearMetric
 from face_reid_master.body.metric_file import BodyFeatureMetric
-from face_reid_master.body.model_selection import Choice
-from face_reid_master.body.xqda import fit_xqda
 from face_reid_master.identity.likelihood import LikelihoodModel, fit_skewnormal
+from face_reid_master.training.body.model_selection import Choice
+from face_reid_master.training.body.xqda import fit_xqda
 
 __all__ = ["FeatureFit", "fit_feature_metrics", "pair_distances"]
 
@@ -83,7 +83,7 @@ def fit_feature_metrics(wire: npt.ArrayLike, labels: npt.ArrayLike, groups: npt.
                         rng: np.random.Generator) -> dict[str, FeatureFit]:
     """Per feature of ``METRIC_FEATURES``: XQDA with ``choices[feature]`` on the ``wire`` vectors (n, length) of
     people ``labels``, in distance units, with skew-normal N_p / N_n fitted on the held-out distances of the
-    ``folds`` (masks over the rows, e.g. :func:`~face_reid_master.body.model_selection.identity_folds`).
+    ``folds`` (masks over the rows, e.g. :func:`~face_reid_master.training.body.model_selection.identity_folds`).
     Different-person pairs are taken within a ``groups`` value only (e.g. one source data set: people of one
     site are what a master compares), at most ``max_negative_pairs`` per fold and for the unit."""
     v = np.asarray(wire, dtype=np.float64)

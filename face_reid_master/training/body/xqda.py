@@ -16,7 +16,7 @@ import scipy.linalg
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.linear_metric import LinearMetric
-from face_reid_master.body.pair_covariance import PairCovariances, pair_covariances
+from face_reid_master.training.body.pair_covariance import PairCovariances, pair_covariances
 
 __all__ = ["fit_xqda", "xqda_for_dims", "xqda_from_covariances"]
 

@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.body.linear_metric import LinearMetric
-from face_reid_master.body.pair_covariance import PairCovariances, pair_covariances
+from face_reid_master.training.body.pair_covariance import PairCovariances, pair_covariances
 
 __all__ = ["fit_kissme", "kissme_from_covariances"]
 
@@ -20,7 +20,7 @@ __all__ = ["fit_kissme", "kissme_from_covariances"]
 def fit_kissme(features: npt.ArrayLike, labels: npt.ArrayLike, *, regularisation: float = 1e-3,
                pca_dims: int | None = None) -> LinearMetric:
     """KISSME on ``features`` (n, d) with person ``labels``; ``pca_dims`` principal components first
-    (None: the raw features); ``regularisation`` as for :func:`~face_reid_master.body.xqda.fit_xqda`,
+    (None: the raw features); ``regularisation`` as for :func:`~face_reid_master.training.body.xqda.fit_xqda`,
     on both covariances. Negative eigenvalues of M are clipped to 0 (a metric, not just a ratio)."""
     x = np.asarray(features, dtype=np.float64)
     if x.ndim != 2:

@@ -20,7 +20,7 @@ import numpy.typing as npt
 from face_reid_camera.body.descriptor import BodyDescriptorConfig, body_descriptor
 from face_reid_camera.body.projection import FEATURES, descriptor_features
 from face_reid_camera.faces.photos import PhotoError, progress_bar, read_photo
-from face_reid_master.body.crops import Crop
+from face_reid_master.training.body.crops import Crop
 
 __all__ = ["CROP_SILHOUETTE", "CropDescriptors", "crop_person_mask", "describe_crops"]
 

@@ -1,1 +1,0 @@
-"""Calibration of a camera network (pure algorithms; the tools call them)."""

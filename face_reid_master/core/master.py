@@ -1,0 +1,379 @@
+"""The master's pure core: camera frames in, named tracks out (no rclpy).
+
+One :class:`MasterCore` owns the tracker, the face-identity manager (Algorithm 1, Bayesian or threshold), the
+predefined-people matcher and the face memory. The node, the evaluation and the benchmarks all drive it the
+same way:
+
+    core.process_frame(CameraFrameRecord(...), now_s=...)   # per camera message
+    core.tick(now_s)                                          # when no frames arrive (timeouts)
+    core.tracks()                                             # -> list[NamedTrackRecord]
+
+A frame goes through five steps (:meth:`MasterCore.process_frame`): admit (:mod:`.admission`), read its
+people (:mod:`.detections`), track, observe (face and body evidence) and decide (one identity step, deferred
+to :meth:`MasterCore.finish_frames` when a caller batches frames); :meth:`MasterCore.tracks` publishes. Bad
+input never raises: it is rejected, counted in :class:`~.records.MasterStats` and reported in the
+:class:`~.records.FrameOutcome`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from face_reid_camera.common.embedding_spaces import space_dim
+from face_reid_master.body.metric_file import BodyMetricModel, default_body_metric
+from face_reid_master.core.admission import FrameAdmission
+from face_reid_master.core.config import MasterConfig
+from face_reid_master.core.detections import DetectionReader, Detections, degenerate_rows
+from face_reid_master.core.face_memory import FaceMemory
+from face_reid_master.core.records import FrameOutcome, MasterStats
+from face_reid_master.core.static_clutter import StaticClutter
+from face_reid_master.identity.algorithm1 import IdentityManagerBase
+from face_reid_master.identity.body_evidence import BodyEvidence
+from face_reid_master.identity.confidence_map import ConfidenceMap, default_confidence_map
+from face_reid_master.identity.likelihood import LikelihoodModel
+from face_reid_master.identity.methods import make_identity_manager
+from face_reid_master.identity.predefined_people import PredefinedPeople
+from face_reid_master.identity.records import IdentityEventKind
+from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
+from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
+from face_reid_master.tracking.records import FrameStatus, TrackState, UpdateResult
+from face_reid_master.tracking.tracker import Tracker
+
+__all__ = ["MasterCore"]
+
+def _derived(name: str, configured: float, derived: float | None) -> float:
+    """A configured distance, or (0) the value derived for the embedder space; ValueError if there is none."""
+    if configured > 0:
+        return configured
+    if derived is None:
+        raise ValueError(f"{name} is 0 (= derived for the embedder space) but the likelihood file derives none: "
+                         f"set {name} explicitly or refit with face-reid-fit-likelihood")
+    return derived
+
+
+def _face_likelihood(likelihood: LikelihoodModel | FaceLikelihood | None, space: str) -> FaceLikelihood:
+    """The face likelihood of the master's embedder space (the shipped one when none is given)."""
+    model = likelihood or default_face_likelihood(space)
+    if isinstance(model, LikelihoodModel):
+        model = FaceLikelihood(model, space)
+    if model.space != space:
+        raise ValueError(f"the likelihood model is fitted for embedder space {model.space!r} but "
+                         f"embedding_space is {space!r}")
+    return model
+
+
+class MasterCore:
+    """Tracking + face identities + names + persistence, frame by frame (see the module doc)."""
+
+    def __init__(
+        self,
+        config: MasterConfig | None = None,
+        likelihood: LikelihoodModel | FaceLikelihood | None = None,
+        store: Any | None = None,
+        gallery: Mapping[str, NDArray[np.floating]] | None = None,
+        body_metric: BodyMetricModel | None = None,
+        confidence_map: ConfidenceMap | None = None,
+    ) -> None:
+        self.config = cfg = config or MasterConfig()
+        # what a decision's raw posterior is worth, measured on development scenarios (the published confidence)
+        self.confidence_map = confidence_map if confidence_map is not None else default_confidence_map()
+        self.stats = MasterStats()
+        self._notices: list[str] = []  # things the node should log once, handed out with the next FrameOutcome
+        self.tracker = Tracker(cfg.tracker)
+        if body_metric is None and cfg.body_appearance_tracking:
+            body_metric = default_body_metric()
+        self.body_metric = body_metric if cfg.body_appearance_tracking else None
+        self.likelihood = model = _face_likelihood(likelihood, cfg.embedding_space)  # also the space's weights
+        self.threshold_distance = _derived("threshold_distance", cfg.threshold_distance, model.threshold_distance) \
+            if cfg.method == "threshold" else cfg.threshold_distance or model.threshold_distance
+        # naming needs a threshold only once there are predefined people (add_person checks it too)
+        self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
+            if gallery else cfg.name_threshold or model.name_threshold
+        self.identity = self._identity_manager(model)
+        dim = space_dim(cfg.embedding_space)
+        self.people = PredefinedPeople(
+            {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
+            name_threshold=self.name_threshold or 1.0, min_face_features=cfg.min_face_features_for_name,
+            embedding_dim=dim,
+        )
+        self.admission = FrameAdmission(cfg, self.stats)
+        self.reader = DetectionReader(cfg, self.stats, model, self.body_metric, self._notices)
+        self.memory = FaceMemory(cfg, self.stats, self.identity, self.people, store, self._notices)
+        self.clutter = StaticClutter(cfg.static_clutter_after_s, cfg.static_clutter_radius_m)
+        self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
+        self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed (since its last split)
+        self._split: dict[int, tuple[int, float]] = {}  # tracker id -> (published id, since s) after a swap
+        self._gone: list[int] = []  # tracks deleted since the last identity step (their split ids go after it)
+        # frames applied with defer_identity: their track update, stamp and the tracks given a face observation
+        self._deferred: list[tuple[UpdateResult, float, set[int]]] = []
+        self._last_stamp = -math.inf
+
+    def _identity_manager(self, model: FaceLikelihood) -> IdentityManagerBase:
+        """Algorithm 1 with the configured method (bayes: with body evidence where bodies are used)."""
+        cfg = self.config
+        dim = space_dim(cfg.embedding_space)
+        if cfg.method == "threshold":
+            return make_identity_manager(
+                "threshold", distance_threshold=self.threshold_distance, n_votes=cfg.threshold_votes,
+                max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
+                feature_gate_distance=self.threshold_distance if cfg.learn_only_consistent_features else None,
+                release_after_inconsistent=cfg.release_after_inconsistent,
+            )
+        body_evidence = None
+        if self.body_metric is not None and cfg.body_identity:
+            body_evidence = BodyEvidence(
+                self.body_metric.features["fused"].likelihood, window_s=cfg.body_window_s,
+                posterior_threshold=cfg.body_posterior_threshold, min_observations=cfg.body_min_observations,
+                max_log_ratio=cfg.body_max_log_ratio,
+                funnel_alpha=cfg.body_funnel_alpha, height_same_std_m=cfg.body_height_same_std_m,
+                height_other_std_m=cfg.body_height_other_std_m,
+                alike_face_distance=cfg.body_alike_face_distance or None)
+        if cfg.new_person_scale_c != model.new_person_scale_c:
+            model = model.with_new_person_scale(cfg.new_person_scale_c)
+        return make_identity_manager(
+            "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
+            prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
+            max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
+            feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
+            release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
+            lend_lost_faces=cfg.lend_lost_faces,
+        )
+
+    @property
+    def body_fused(self) -> Any:
+        """The fused body metric bodies are embedded with (None: bodies are not used)."""
+        return self.reader.body_fused
+
+    # ------------------------------------------------------------------------------ the frame path
+    def process_frame(self, frame: CameraFrameRecord, now_s: float | None = None, *,
+                      defer_identity: bool = False) -> FrameOutcome:
+        """Admit one camera frame, read its people, track them, observe their faces and bodies, and decide.
+
+        ``now_s``: the caller's clock (live; None offline: stamps are the clock). ``defer_identity``: leave the
+        identity step (and face saving) to :meth:`finish_frames`, which runs it once for every frame deferred:
+        a node that applies several frames per cycle pays for one identity update, not one per frame."""
+        admission = self.admission.admit(frame, now_s)
+        if not admission.admitted:
+            return FrameOutcome(False, admission.reason, admission.code)
+        if admission.clock_went_back:
+            assert now_s is not None
+            self._restart_tracking(now_s)
+        stamp = admission.stamp_s
+        detections = self.reader.read(frame)
+        update = self.tracker.update_arrays(detections.positions, detections.stds, detections.heights, stamp,
+                                            frame.camera_id, detections.appearance, resync_backward=now_s is None)
+        if update.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
+            self.stats.frames_rejected_tracker_late += 1
+            return FrameOutcome(False, f"tracker rejected the frame ({update.status.value})", "tracker_late")
+        self.stats.frames_applied += 1
+        self.stats.detections_rejected_position += len(update.rejected_detections)
+        self.clutter.follow(update.associations, detections.positions, stamp)
+        self._last_stamp = max(self._last_stamp, stamp)
+        touched = self._observe(update.associations, detections, stamp, frame.camera_id)
+        self._deferred.append((update, stamp, touched))
+        events = () if defer_identity else tuple(self.finish_frames())
+        notices, self._notices[:] = tuple(self._notices), []
+        return FrameOutcome(True, track_of_person={detections.person_index[det]: tid
+                                                   for tid, det in update.associations},
+                            tracks_created=tuple(update.created), tracks_deleted=tuple(update.deleted),
+                            identity_events=events, notices=notices)
+
+    def _restart_tracking(self, now_s: float) -> None:
+        """The caller's clock went back: what is pending is decided, then the tracker starts afresh."""
+        self.finish_frames()
+        self._identity_step(self.tracker.reset(), now_s, (), ())
+        self._last_stamp = -math.inf
+
+    def _observe(self, associations: list[tuple[int, int]], detections: Detections, stamp: float,
+                 camera_id: str) -> set[int]:
+        """The associated detections' faces and bodies as identity evidence; the tracks a face was added to."""
+        touched: set[int] = set()
+        for track_id, det in associations:
+            face = detections.faces.get(det)
+            if face is None:
+                continue
+            emb, eye_px = face
+            if self.identity.add_validated_observations(track_id, emb[None, :], stamp, eye_px, camera_id):
+                self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
+                touched.add(track_id)
+                self.stats.embeddings_used += 1
+        appearance = detections.appearance
+        if appearance is not None and self.identity.body_evidence is not None:
+            for track_id, det in associations:
+                row = appearance[det]
+                if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
+                    self.identity.add_body_observations(track_id, row[None, :], stamp, camera_id,
+                                                        detections.heights[det: det + 1])
+        return touched
+
+    def finish_frames(self) -> list[Any]:
+        """The identity step of the frames applied since the last call (one step at the newest stamp, after
+        their track events in order), then face saving; returns the identity events. A no-op when nothing
+        waits (process_frame without ``defer_identity`` calls it itself)."""
+        if not self._deferred:
+            return []
+        deferred, self._deferred = self._deferred, []
+        for update, stamp, _ in deferred[:-1]:
+            self._track_events(update.deleted, stamp, update.lost, update.recovered)
+        last = deferred[-1][0]
+        stamp = max(d[1] for d in deferred)
+        events = self._identity_step(last.deleted, stamp, last.lost, last.recovered)
+        for *_, touched in deferred:
+            for track_id in touched:
+                fid = self.identity.face_id_of(track_id)
+                if fid is not None:
+                    self.memory.learned(fid, stamp)
+        self.memory.maintain(stamp)
+        return events
+
+    @property
+    def time_s(self) -> float:
+        """The tracker's time: the newest frame stamp applied (at most the caller's clock) or time advanced to by
+        :meth:`tick`; -inf before either."""
+        return self._last_stamp
+
+    def tick(self, now_s: float) -> None:
+        """Advance time without a frame (tracks time out, released faces are saved)."""
+        self.finish_frames()
+        if not math.isfinite(now_s) or now_s <= self._last_stamp:
+            return
+        result = self.tracker.advance(now_s)
+        self._last_stamp = now_s
+        self._identity_step(result.deleted, now_s, result.lost, result.recovered)
+        self.memory.maintain(now_s)
+
+    # ------------------------------------------------------------------------------ decide
+    def _track_events(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
+                      recovered: Iterable[int] = ()) -> None:
+        """The tracker's lost / recovered / deleted tracks of one update, told to the face table."""
+        for track_id in lost:
+            self.identity.track_lost(track_id)
+        for track_id in recovered:
+            self.identity.track_recovered(track_id)
+        for track_id in deleted:
+            self.identity.track_deleted(track_id, stamp)
+            self._face_obs.pop(track_id, None)
+            self._gone.append(track_id)
+            self.clutter.forget(track_id)
+
+    def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
+                       recovered: Iterable[int] = ()) -> list[Any]:
+        """One identity update after the given track events; returns its events with published track ids."""
+        self._track_events(deleted, stamp, lost, recovered)
+        kept = []
+        for ev in self.identity.step(stamp):
+            if ev.kind == IdentityEventKind.NEW_FACE and not self.memory.room_for(ev.face_id):
+                continue  # not learned (max_faces): the track stays unidentified
+            public = self.public_id(ev.track_id)
+            kept.append(ev if public == ev.track_id else dataclasses.replace(ev, track_id=public))
+            if ev.kind == IdentityEventKind.NEW_FACE:
+                self.stats.faces_created += 1
+            elif ev.kind == IdentityEventKind.ASSIGNED_KNOWN:
+                self.stats.faces_reidentified += 1
+            elif ev.kind in (IdentityEventKind.RELEASED, IdentityEventKind.SWAPPED):
+                self.stats.faces_released += 1
+            self.memory.changed(ev.face_id)
+            if ev.kind == IdentityEventKind.SWAPPED:
+                self.stats.faces_released_swapped += 1
+                self._split_track(ev.track_id, stamp)
+        for track_id in self._gone:
+            self._split.pop(track_id, None)
+        self._gone.clear()
+        return kept
+
+    def _split_track(self, track_id: int, stamp: float) -> None:
+        """A swapped track is someone else from now on: it is published under a new id, so that no consumer
+        carries the person it was over to the one it has become (its old id ends here)."""
+        self._split[track_id] = (self.tracker.reserve_id(), stamp)
+        self._face_obs[track_id] = 0
+
+    def public_id(self, track_id: int) -> int:
+        """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
+        split = self._split.get(track_id)
+        return track_id if split is None else split[0]
+
+    def published_confidence(self, track_id: int) -> float:
+        """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
+        (how often such decisions were right); 0 for an undecided track (it claims no face: its candidates' raw
+        posteriors are the overconfident numbers the map exists to correct)."""
+        evidence = self.identity.evidence_of(track_id)
+        if not evidence:
+            return 0.0
+        raw = float(self.identity.confidence_of(track_id))
+        return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
+
+    # ------------------------------------------------------------------------------ people and faces
+    def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
+        """Add or replace a predefined person (gallery embeddings (k, dim) of the master's space) at run time."""
+        _derived("name_threshold", self.config.name_threshold, self.likelihood.name_threshold)
+        rows = np.asarray(embeddings, dtype=np.float32)
+        if rows.ndim == 2 and rows.shape[0]:
+            bad = np.flatnonzero(degenerate_rows(rows))
+            if bad.size:
+                raise ValueError(f"embedding(s) {bad[:10].tolist()} are degenerate (NaN / Inf, zero norm or all "
+                                 "values equal): no face gives one; refused")
+        self.people.set_person(name, self.likelihood.scale(rows))
+        self.memory.refresh_names()
+
+    def forget_person(self, name: str) -> bool:
+        """Remove a predefined person (gallery) at run time; the faces named after them lose the name.
+        True if there was one."""
+        if name not in self.people.names():
+            return False
+        self.people.remove_person(name)
+        self.memory.refresh_names()
+        return True
+
+    def forget_face(self, face_id: int) -> bool:
+        """Delete a learned face everywhere (memory, names, store). True if it existed; ValueError for an id out
+        of range."""
+        return self.memory.forget_face(face_id)
+
+    def face_name(self, face_id: int) -> str:
+        """The name linked to a face (predefined match, else a stored name), or ''."""
+        return self.memory.face_name(face_id)
+
+    def flush(self) -> None:
+        """Decide what is pending and write every face with unsaved features to the store (call at shutdown)."""
+        self.finish_frames()
+        self.memory.flush()
+
+    # ------------------------------------------------------------------------------ publish
+    def tracks(self, at_s: float | None = None) -> list[NamedTrackRecord]:
+        """Current tracks with identities (confirmed and lost; tentative if configured), static clutter left
+        out (:class:`~.static_clutter.StaticClutter`)."""
+        out = []
+        snaps = [s for s in self.tracker.snapshots(at_s, include_tentative=self.config.publish_tentative)
+                 if s.state != TrackState.DELETED]
+        clutter = self.clutter.among(snaps, self._face_obs)
+        self.static_clutter_tracks = len(clutter)
+        for snap in snaps:
+            if snap.track_id in clutter:
+                continue
+            fid = self.identity.face_id_of(snap.track_id) or 0
+            out.append(
+                NamedTrackRecord(
+                    track_id=self.public_id(snap.track_id),
+                    face_id=fid,
+                    name=self.face_name(fid) if fid else "",
+                    identity_confidence=self.published_confidence(snap.track_id),
+                    identity_evidence=self.identity.evidence_of(snap.track_id),
+                    face_observations=self._face_obs.get(snap.track_id, 0),
+                    position_xy=snap.position_xy,
+                    velocity_xy=snap.velocity_xy,
+                    covariance=snap.covariance,
+                    height_m=float(snap.height_m),
+                    state=int(snap.state),
+                    first_seen_s=float(self._split[snap.track_id][1] if snap.track_id in self._split
+                                       else snap.created_s),
+                    last_seen_s=float(snap.last_seen_s),
+                    cameras=tuple(sorted(snap.cameras)),
+                )
+            )
+        return out

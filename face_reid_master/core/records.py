@@ -1,0 +1,64 @@
+"""What the master core counts and what it tells its caller about each frame."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["FrameOutcome", "MasterStats"]
+
+
+@dataclass
+class MasterStats:
+    """Counters of everything the core accepted, rejected or decided (logged by the node)."""
+
+    frames_received: int = 0
+    frames_applied: int = 0
+    frames_rejected_unknown_camera: int = 0
+    frames_rejected_stale: int = 0
+    frames_rejected_future: int = 0
+    frames_rejected_bad_stamp: int = 0
+    frames_rejected_tracker_late: int = 0
+    frames_rejected_too_many_people: int = 0
+    frames_rejected_camera_rate: int = 0
+    frames_future_clamped: int = 0  # stamped ahead of the master's clock (within max_stamp_future_s): applied at it
+    clock_jumps_back: int = 0  # the master's own clock went back: the tracker started afresh
+    detections_received: int = 0
+    detections_rejected_position: int = 0
+    embeddings_used: int = 0
+    embeddings_rejected_length: int = 0
+    embeddings_rejected_space: int = 0
+    embeddings_rejected_nonfinite: int = 0
+    embeddings_rejected_norm: int = 0  # lengths no embedder of the space produces
+    embeddings_skipped_quality: int = 0
+    bodies_received: int = 0  # detections with well-formed body fields
+    bodies_rejected_malformed: int = 0  # body fields with NaN / Inf appearance or out-of-range visibility
+    bodies_rejected_space: int = 0  # descriptors of another projection than the body metric's
+    faces_created: int = 0
+    faces_reidentified: int = 0
+    faces_released: int = 0
+    faces_released_swapped: int = 0  # of which: the track was swapped onto someone else (published under a new id)
+    faces_pruned: int = 0
+    faces_evicted: int = 0  # unnamed faces forgotten to keep max_faces (least recently seen first)
+    faces_refused_cap: int = 0  # new faces not learned: max_faces reached and every face named or on a track
+    embeddings_rejected_degenerate: int = 0  # constant rows (all zero, ...): no embedder produces them
+    store_errors: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class FrameOutcome:
+    """What :meth:`MasterCore.process_frame` did with one frame (``reason`` and its short ``code``, e.g.
+    ``stale_stamp``, when rejected: the node counts rejections by code)."""
+
+    accepted: bool
+    reason: str = ""
+    code: str = ""
+    track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> tracker id (public_id)
+    tracks_created: tuple[int, ...] = ()
+    tracks_deleted: tuple[int, ...] = ()
+    identity_events: tuple[Any, ...] = ()
+    notices: tuple[str, ...] = ()  # things the node should log once (e.g. a camera of another embedder space)
