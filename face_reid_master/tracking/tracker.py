@@ -42,6 +42,7 @@ from face_reid_master.tracking.records import (
     TrackState,
     UpdateResult,
 )
+from face_reid_master.tracking.track_table import TrackTable
 
 __all__ = [
     "Detection",
@@ -61,7 +62,6 @@ _PRUNE_MARGIN_S = 1e-6  # history kept slightly beyond max_detection_delay_s
 _DUE_MARGIN_S = 1e-6  # lifecycle checks start this much before a transition is due (rounding of the time tests)
 _TENTATIVE = int(TrackState.TENTATIVE)
 _LOST = int(TrackState.LOST)
-_STATES = {int(s): s for s in TrackState}  # stored state code -> TrackState
 _NO_INDEX = np.zeros(0, dtype=np.intp)
 
 
@@ -86,17 +86,7 @@ class Tracker:
         self._clear_arrays()
 
     def _clear_arrays(self) -> None:
-        self._ids = np.zeros(0, dtype=np.int64)
-        self._state = np.zeros(0, dtype=np.int8)
-        self._created = np.zeros(0)
-        self._last_seen = np.zeros(0)
-        self._hits = np.zeros(0, dtype=np.int64)
-        self._x = np.zeros((0, 4))
-        self._P = np.zeros((0, 4, 4))
-        self._t = np.zeros(0)  # stamp of each track's newest posterior (= newest measurement)
-        self._zmeas = np.zeros((0, 2))  # position of each track's newest measurement
-        self._hist: list[TrackHistory] = []
-        self._looks: list[AppearanceGallery] = []  # body-appearance embeddings per track
+        self._tab = TrackTable()
         self._quiet_until = -math.inf  # no lifecycle transition can fall due before this stamp
 
     # ------------------------------------------------------------------ read-only properties
@@ -115,10 +105,10 @@ class Tracker:
 
     @property
     def num_tracks(self) -> int:
-        return int(self._ids.shape[0])
+        return int(self._tab.ids.shape[0])
 
     def track_ids(self) -> list[int]:
-        return [int(i) for i in self._ids]
+        return [int(i) for i in self._tab.ids]
 
     # ------------------------------------------------------------------ entry points
     def update(self, detections: Sequence[Detection], stamp_s: float, camera_id: str) -> UpdateResult:
@@ -159,7 +149,7 @@ class Tracker:
         matched = self._match(positions, r2, stamp, appearance)
         self._update_matched(matched, positions, r2, heights, stamp, camera_id)
         rows, cols = matched.matches.rows, matched.matches.cols
-        associations = list(zip(self._ids[rows].tolist(), cols.tolist(), strict=True))
+        associations = list(zip(self._tab.ids[rows].tolist(), cols.tolist(), strict=True))
         created, created_cols, suppressed, dropped = self._initiate(matched, positions, r2, heights, stamp, camera_id)
         if appearance is not None:
             self._remember_looks(appearance, rows, cols, created, created_cols)
@@ -204,7 +194,7 @@ class Tracker:
 
     def reset(self) -> tuple[int, ...]:
         """Delete every track and forget the clock; returns the deleted ids (ids are never reused)."""
-        deleted = tuple(int(i) for i in self._ids)
+        deleted = tuple(int(i) for i in self._tab.ids)
         self._stats.tracks_deleted += len(deleted)
         self._clear_arrays()
         self._clock.reset()
@@ -221,41 +211,18 @@ class Tracker:
         ``at_s`` defaults to the clock; a track whose newest posterior is later than ``at_s`` is
         reported at its own stamp (never predicted backwards).
         """
-        n = self._ids.shape[0]
+        n = self._tab.ids.shape[0]
         if n == 0:
             return []
         clock = self._clock.now
         at = clock if at_s is None else check_real("at_s", at_s)
         assert at is not None
-        t_out = np.maximum(self._t, at)
-        x, P = self._model.predict(self._x, self._P, t_out - self._t)
+        t_out = np.maximum(self._tab.t, at)
+        x, P = self._model.predict(self._tab.x, self._tab.P, t_out - self._tab.t)
         x.flags.writeable = False  # fresh arrays: the snapshots hold read-only views of them
         P.flags.writeable = False
         window_start = (clock if clock is not None else at) - self._cfg.camera_window_s - EPS_S
-        out: list[TrackSnapshot] = []
-        for i, (tid, code, t, created, last_seen, hits) in enumerate(zip(
-                self._ids.tolist(), self._state.tolist(), t_out.tolist(), self._created.tolist(),
-                self._last_seen.tolist(), self._hits.tolist(), strict=True)):
-            state = _STATES[code]
-            if not include_tentative and state is TrackState.TENTATIVE:
-                continue
-            hist = self._hist[i]
-            out.append(
-                TrackSnapshot(
-                    track_id=tid,
-                    state=state,
-                    position_xy=x[i, :2],
-                    velocity_xy=x[i, 2:],
-                    covariance=P[i],
-                    stamp_s=t,
-                    created_s=created,
-                    last_seen_s=last_seen,
-                    hits=hits,
-                    cameras=frozenset(c for c, t_cam in hist.cameras.items() if t_cam >= window_start),
-                    height_m=hist.height_m,
-                )
-            )
-        return out
+        return self._tab.snapshots(x, P, t_out, window_start, include_tentative)
 
     # ------------------------------------------------------------------ steps of update_arrays
     def _admit(self, stamp: float, resync_backward: bool = True) -> tuple[FrameStatus, bool, tuple[int, ...]]:
@@ -272,9 +239,9 @@ class Tracker:
     def _expire_before(self, stamp: float) -> tuple[int, ...]:
         """Delete the tracks that time out by ``stamp`` when it is newer than the clock."""
         clock = self._clock.now
-        if clock is None or stamp <= clock or not self._ids.shape[0] or stamp < self._quiet_until:
+        if clock is None or stamp <= clock or not self._tab.ids.shape[0] or stamp < self._quiet_until:
             return ()
-        return self._delete(expired(self._state, self._created, self._last_seen, stamp, self._cfg))
+        return self._delete(expired(self._tab.state, self._tab.created, self._tab.last_seen, stamp, self._cfg))
 
     def _anchors(
         self, stamp: float, late: NDArray[np.bool_]
@@ -285,10 +252,10 @@ class Tracker:
         after ``stamp`` gives its first step.
         """
         if not late.any():
-            return self._x, self._P, self._t, self._zmeas
-        x_a, P_a, t_a, z_a = self._x.copy(), self._P.copy(), self._t.copy(), self._zmeas.copy()
+            return self._tab.x, self._tab.P, self._tab.t, self._tab.zmeas
+        x_a, P_a, t_a, z_a = self._tab.x.copy(), self._tab.P.copy(), self._tab.t.copy(), self._tab.zmeas.copy()
         for i in np.flatnonzero(late).tolist():
-            step = self._hist[i].anchor(stamp)
+            step = self._tab.hist[i].anchor(stamp)
             t_a[i], z_a[i], x_a[i], P_a[i] = step.stamp_s, step.z, step.x, step.P
         return x_a, P_a, t_a, z_a
 
@@ -297,20 +264,20 @@ class Tracker:
         """Predict the tracks that could take a detection to ``stamp`` and associate the detections
         (association.Associator); the others (beyond every gate and reach) are left out of both."""
         m = z.shape[0]
-        if m == 0 or self._ids.shape[0] == 0:
+        if m == 0 or self._tab.ids.shape[0] == 0:
             return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
-        late = self._t > stamp
+        late = self._tab.t > stamp
         x_a, P_a, t_a, z_a = self._anchors(stamp, late)
         cand = self._candidates(x_a, t_a, z_a, z, stamp, reattach=appearance is not None)
         if cand.shape[0] == 0:
             return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
         looks = alike = None
         if appearance is not None:  # every track's distances: pass 3 needs how many tracks look alike
-            looks_all = appearance_distances(self._looks, appearance)
+            looks_all = appearance_distances(self._tab.looks, appearance)
             alike = (looks_all < self._cfg.appearance_match_distance).sum(axis=0)  # NaN compares False
             looks = looks_all[cand]
         x_pred, P_pred = self._model.predict(x_a[cand], P_a[cand], stamp - t_a[cand])
-        local = self._associate(x_pred, P_pred, self._state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike)
+        local = self._associate(x_pred, P_pred, self._tab.state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike)
         rows = local.rows
         return _Matched(Matches(cand[rows], local.cols, local.near), x_pred[rows], P_pred[rows], late)
 
@@ -324,7 +291,7 @@ class Tracker:
         mean = x_a[:, :2] + dt[:, None] * x_a[:, 2:]  # the predicted position, as the Kalman prediction makes it
         radius = max(cfg.max_gate_distance_m, cfg.min_person_separation_m)  # also the cap of pass 2's reach
         reach = cfg.min_person_separation_m + cfg.max_speed_mps * np.maximum(dt, 0.0)
-        reach = np.where(reattach & (self._state == _LOST), reach, np.minimum(reach, radius))
+        reach = np.where(reattach & (self._tab.state == _LOST), reach, np.minimum(reach, radius))
         near_pred = (((z[None, :, :] - mean[:, None, :]) ** 2).sum(axis=2) <= radius * radius).any(axis=1)
         near_last = (((z[None, :, :] - z_a[:, None, :]) ** 2).sum(axis=2) < (reach * reach)[:, None]).any(axis=1)
         return np.flatnonzero(near_pred | near_last)
@@ -335,10 +302,10 @@ class Tracker:
         described = np.isfinite(appearance).all(axis=1)
         pairs = [(i, col) for i, col in zip(rows.tolist(), cols.tolist(), strict=True) if described[col]]
         if created:  # new tracks were appended: their rows are the last ones
-            first = self._ids.shape[0] - len(created)
+            first = self._tab.ids.shape[0] - len(created)
             pairs += [(first + k, col) for k, col in enumerate(created_cols) if described[col]]
         for i, col in pairs:
-            self._looks[i].add(appearance[col])
+            self._tab.looks[i].add(appearance[col])
 
     def _update_matched(
         self,
@@ -362,17 +329,17 @@ class Tracker:
             z_io = z[c_io]
             r2_io = r2[c_io]
             x_new, P_new = self._model.update(x_pred[in_order], P_pred[in_order], z_io, r2_io)
-            self._x[r_io] = x_new
-            self._P[r_io] = P_new
-            self._t[r_io] = stamp
-            self._zmeas[r_io] = z_io
-            hist = self._hist
+            self._tab.x[r_io] = x_new
+            self._tab.P[r_io] = P_new
+            self._tab.t[r_io] = stamp
+            self._tab.zmeas[r_io] = z_io
+            hist = self._tab.hist
             record_updates([hist[i] for i in r_io.tolist()], stamp, z_io, r2_io.tolist(), x_new, P_new, cutoff)
         if r_io.shape[0] < rows.shape[0]:
             r_late, c_late = rows[~in_order], cols[~in_order]
             heads = insert_late(
                 self._model,
-                [self._hist[i] for i in r_late.tolist()],
+                [self._tab.hist[i] for i in r_late.tolist()],
                 stamp,
                 z[c_late],
                 r2[c_late],
@@ -381,15 +348,16 @@ class Tracker:
                 cutoff,
             )
             for i, head in zip(r_late.tolist(), heads, strict=True):
-                self._t[i], self._zmeas[i], self._x[i], self._P[i] = head.stamp_s, head.z, head.x, head.P
-        if (self._state[rows] == _LOST).any():
+                tab = self._tab
+                tab.t[i], tab.zmeas[i], tab.x[i], tab.P[i] = head.stamp_s, head.z, head.x, head.P
+        if (self._tab.state[rows] == _LOST).any():
             self._quiet_until = -math.inf  # recovered at the next tick
-        self._last_seen[rows] = np.maximum(self._last_seen[rows], stamp)
-        self._created[rows] = np.minimum(self._created[rows], stamp)
-        self._hits[rows] += 1
+        self._tab.last_seen[rows] = np.maximum(self._tab.last_seen[rows], stamp)
+        self._tab.created[rows] = np.minimum(self._tab.created[rows], stamp)
+        self._tab.hits[rows] += 1
         self._stats.detections_associated += int(rows.shape[0])
         for i, h in zip(rows.tolist(), heights[cols].tolist(), strict=True):
-            hist = self._hist[i]
+            hist = self._tab.hist[i]
             if hist.cameras.get(camera_id, -math.inf) < stamp:
                 hist.cameras[camera_id] = stamp
             if h == h and stamp >= hist.height_stamp_s:  # finite (not NaN)
@@ -418,7 +386,7 @@ class Tracker:
         )
         suppressed = np.setdiff1d(np.flatnonzero(unmatched), new_cols)
         self._stats.detections_suppressed_near_track += int(suppressed.shape[0])
-        room = max(0, self._cfg.max_tracks - int(self._ids.shape[0]))
+        room = max(0, self._cfg.max_tracks - int(self._tab.ids.shape[0]))
         dropped = new_cols[room:]
         self._stats.detections_dropped_track_limit += int(dropped.shape[0])
         new_cols = new_cols[:room]
@@ -440,26 +408,14 @@ class Tracker:
         x0, P0 = self._model.initial_state(z, r2)
         ids = list(range(self._next_id, self._next_id + k))
         self._next_id += k
-        self._ids = np.concatenate([self._ids, np.array(ids, dtype=np.int64)])
-        self._state = np.concatenate([self._state, np.full(k, _TENTATIVE, dtype=np.int8)])
-        self._created = np.concatenate([self._created, np.full(k, stamp)])
-        self._last_seen = np.concatenate([self._last_seen, np.full(k, stamp)])
-        self._hits = np.concatenate([self._hits, np.ones(k, dtype=np.int64)])
-        self._x = np.concatenate([self._x, x0])
-        self._P = np.concatenate([self._P, P0])
-        self._t = np.concatenate([self._t, np.full(k, stamp)])
-        self._zmeas = np.concatenate([self._zmeas, z])
-        for j, (h, r2_j) in enumerate(zip(heights.tolist(), r2.tolist(), strict=True)):
-            self._looks.append(AppearanceGallery(self._cfg.appearance_gallery_size))
-            self._hist.append(
-                TrackHistory(
-                    steps=[FilterStep(stamp, z[j], r2_j, x0[j], P0[j])],
-                    stamps=[stamp],
-                    cameras={camera_id: stamp},
-                    height_m=h,
-                    height_stamp_s=stamp if math.isfinite(h) else -math.inf,
-                )
-            )
+        self._tab.append(
+            ids=ids, state=np.full(k, _TENTATIVE), created=np.full(k, stamp), last_seen=np.full(k, stamp),
+            hits=np.ones(k), x=x0, P=P0, t=np.full(k, stamp), zmeas=z,
+            looks=[AppearanceGallery(self._cfg.appearance_gallery_size) for _ in range(k)],
+            hist=[TrackHistory(steps=[FilterStep(stamp, z[j], r2_j, x0[j], P0[j])], stamps=[stamp],
+                               cameras={camera_id: stamp}, height_m=h,
+                               height_stamp_s=stamp if math.isfinite(h) else -math.inf)
+                  for j, (h, r2_j) in enumerate(zip(heights.tolist(), r2.tolist(), strict=True))])
         self._stats.tracks_created += k
         self._quiet_until = -math.inf  # tentative tracks: confirmed, merged or expired at any tick
         return ids
@@ -469,10 +425,11 @@ class Tracker:
 
         Skipped while the clock is before ``_quiet_until`` (nothing can fall due: see :meth:`_next_due`)."""
         now = self._clock.now
-        if self._ids.shape[0] == 0 or now is None or now < self._quiet_until:
+        if self._tab.ids.shape[0] == 0 or now is None or now < self._quiet_until:
             return (), (), (), ()
-        tr = transitions(self._state, self._hits, self._created, self._last_seen, self._x, self._t, now, self._cfg)
-        ids = self._ids
+        tab = self._tab
+        tr = transitions(tab.state, tab.hits, tab.created, tab.last_seen, tab.x, tab.t, now, self._cfg)
+        ids = tab.ids
         confirmed_ids = tuple(int(i) for i in ids[tr.confirmed])
         lost_ids = tuple(int(i) for i in ids[tr.lost])
         recovered_ids = tuple(int(i) for i in ids[tr.recovered])
@@ -486,33 +443,22 @@ class Tracker:
         """Earliest stamp at which a transition could fall due without a new detection (a little early): never
         while a track is tentative, else the first confirmed track to become LOST or LOST one to expire.  Later
         detections only postpone these; a LOST track detected or a new track resets it."""
-        state = self._state
+        state = self._tab.state
         if state.shape[0] == 0:
             return math.inf
         if (state == _TENTATIVE).any():
             return -math.inf
         cfg = self._cfg
         wait = np.where(state == _LOST, cfg.lost_after_s + cfg.delete_after_s, cfg.lost_after_s)
-        return float((self._last_seen + wait).min()) - EPS_S - _DUE_MARGIN_S
+        return float((self._tab.last_seen + wait).min()) - EPS_S - _DUE_MARGIN_S
 
     def _delete(self, dead: NDArray[np.bool_]) -> tuple[int, ...]:
         """Remove the ``dead`` tracks; returns their ids."""
         if not dead.any():
             return ()
-        deleted_ids = tuple(int(i) for i in self._ids[dead])
+        deleted_ids = tuple(int(i) for i in self._tab.ids[dead])
         self._stats.tracks_deleted += len(deleted_ids)
-        keep = ~dead
-        self._ids = self._ids[keep]
-        self._state = self._state[keep]
-        self._created = self._created[keep]
-        self._last_seen = self._last_seen[keep]
-        self._hits = self._hits[keep]
-        self._x = self._x[keep]
-        self._P = self._P[keep]
-        self._t = self._t[keep]
-        self._zmeas = self._zmeas[keep]
-        self._hist = [h for h, k in zip(self._hist, keep.tolist(), strict=True) if k]
-        self._looks = [g for g, k in zip(self._looks, keep.tolist(), strict=True) if k]
+        self._tab.keep(~dead)
         return deleted_ids
 
 
