@@ -291,17 +291,7 @@ class IdentityManagerBase:
 
     def _apply_body_decision(self, track: TrackEntry, fid: int, confidence: float, stamp: float) -> IdentityEvent:
         """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
-        face = self._list.entries[fid]
-        self._take_lent(fid, stamp)
-        self._list.make_unavailable([fid])
-        face.track_id = track.track_id
-        face.last_seen_s = max(face.last_seen_s, stamp)
-        self._on_track_identified(track.track_id)
-        track.face_id = fid
-        track.confidence = float(confidence)
-        track.evidence = "body"
-        track.new_face = False
-        self._move_track_bodies(track.track_id, fid)
+        self._give_face(track, fid, confidence, stamp, "body", new=False)
         self.stats.assigned_by_body += 1
         return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
                              evidence="body")
@@ -440,36 +430,41 @@ class IdentityManagerBase:
 
     # ------------------------------------------------------------------------------ internals
     def _apply_decision(self, tid: int, face_or_new: int, confidence: float, stamp: float) -> IdentityEvent:
+        """The classification decided an unassigned track: a new face from its buffered features (0) or a known
+        face, which absorbs them."""
         track = self._tracks[tid]
         assert track.slot is not None, "a track is only classified after observations"
         if face_or_new == 0:
-            fid = self._list.new_id()
-            slot = track.slot  # the track's buffer becomes the new face's feature set
-            self._list.entries[fid] = FaceEntry(fid, slot, None, stamp, stamp, track.n_observations, track_id=tid)
+            fid = self._list.new_id()  # the track's buffer becomes the new face's feature set
+            self._list.entries[fid] = FaceEntry(fid, track.slot, None, stamp, stamp, track.n_observations)
             kind = IdentityEventKind.NEW_FACE
             self.stats.new_faces += 1
         else:
             fid = face_or_new
             face = self._list.entries[fid]
-            self._take_lent(fid, stamp)
-            self._list.make_unavailable([fid])
             self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
             self._bank.free_slot(track.slot)
-            face.track_id = tid
             face.n_observations += track.n_observations
-            face.last_seen_s = max(face.last_seen_s, stamp)
             kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
-        self._on_track_identified(tid)
-        self._list.entries[fid].track_id = tid
-        track.face_id = fid
-        track.confidence = float(confidence)
+        self._give_face(track, fid, confidence, stamp, "face", new=kind == IdentityEventKind.NEW_FACE)
         track.slot = None
         track.votes.clear()
-        track.evidence = "face"
-        track.new_face = kind == IdentityEventKind.NEW_FACE
-        self._move_track_bodies(tid, fid)
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
+
+    def _give_face(self, track: TrackEntry, fid: int, confidence: float, stamp: float, evidence: str,
+                   new: bool) -> None:
+        """The track carries face ``fid`` from now on (a known face leaves face_list, taken from a LOST track that
+        lent it); the bodies it gathered join the face's gallery."""
+        face = self._list.entries[fid]
+        if not new:
+            self._take_lent(fid, stamp)
+            self._list.make_unavailable([fid])
+        face.track_id = track.track_id
+        face.last_seen_s = max(face.last_seen_s, stamp)
+        self._on_track_identified(track.track_id)
+        track.face_id, track.confidence, track.evidence, track.new_face = fid, float(confidence), evidence, new
+        self._move_track_bodies(track.track_id, fid)
 
     def _release_swapped(self, track: TrackEntry, stamp: float, since: float) -> IdentityEvent:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
