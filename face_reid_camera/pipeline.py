@@ -55,8 +55,8 @@ class CameraPipelineConfig:
     max_faces_per_frame: int = param(16, "Faces embedded per frame, nearest first (count).", low=0, high=1000)
     min_face_quality: float = param(0.0, "Faces below this quality (0..1) are not embedded.", low=0.0, high=1.0)
     embed_budget_ms: float = param(
-        40.0, "Embedding time per frame (ms; 0 = embed every face found). Over budget, faces not embedded "
-        "for longest go first, best quality first; the others are reported without an embedding.",
+        40.0, "Embedding time per frame (ms; 0 = every face); over budget, the faces embedded longest ago go "
+        "first.",
         low=0.0, high=10000.0)
     describe_bodies: bool = param(
         True, "Describe each person's body: appearance (projected HSV + SILTP descriptor), depth geometry and "

@@ -1,10 +1,10 @@
-"""Where the suite's data lives: ONNX models, fitted likelihoods and default configuration.
+"""Where the suite's data lives: ONNX models, fitted likelihoods and the demo's photos.
 
 Looked up in this order so that a source checkout, an editable install and a normal
 ``pip install .`` all work without environment set-up:
-1. the ``FACE_REID_MODELS_DIR`` / ``FACE_REID_CONFIG_DIR`` environment variables;
-2. ``models/`` and ``config/`` at the root of a source checkout (next to this package);
-3. ``<prefix>/share/face_reid/{models,config}`` installed by ``pip install .``.
+1. an environment variable (``FACE_REID_MODELS_DIR`` for the models);
+2. the folder at the root of a source checkout (next to this package);
+3. ``<prefix>/share/face_reid/<folder>`` installed by ``pip install .``.
 """
 
 from __future__ import annotations
@@ -29,11 +29,6 @@ def _lookup(kind: str, env_var: str) -> Path:
 def models_dir() -> Path:
     """Directory holding the ONNX models and fitted likelihood parameters."""
     return _lookup("models", "FACE_REID_MODELS_DIR")
-
-
-def config_dir() -> Path:
-    """Directory holding the default YAML configuration files."""
-    return _lookup("config", "FACE_REID_CONFIG_DIR")
 
 
 def model_path(file_name: str) -> Path:

@@ -174,14 +174,13 @@ class PersonDetectorConfig:
         0, "Seed of the floor RANSAC generator (count; -1 = a different random seed every start).",
         low=-1, high=2**31 - 1)
     people_on_pose_floor: bool = param(
-        False, "With a camera pose: also detect people when no floor is seen in the data and only the pose's floor "
-        "is left, and do not check the pose against the data (bool; false: such frames report nobody, since a wrong "
-        "pose would put people in an empty room).")
+        False, "With a camera pose: detect people on the pose's floor when the data shows none, unchecked (false: "
+        "such frames report nobody).")
     pose_check_height_tolerance_m: float = param(
         0.2, "With a camera pose: the floor measured without the pose disagrees with it beyond this camera height "
         "difference (m).", low=0.0, high=10.0, low_open=True)
     pose_check_tilt_tolerance_deg: float = param(
-        8.0, "With a camera pose: ... or beyond this angle between the two floors (deg).",
+        8.0, "With a camera pose: the floor measured without the pose disagrees with it beyond this angle (deg).",
         low=0.0, high=90.0, low_open=True)
     pose_check_every_frames: int = param(
         10, "With a camera pose: while the pose-seeded floor search fails, the floor is measured without the pose "

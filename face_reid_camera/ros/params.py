@@ -47,24 +47,20 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("camera_info_topic", "color/camera_info", "CameraInfo of the depth image (registered to colour)."),
     ParamSpec(
         "color_camera_info_topic", "",
-        "CameraInfo of the colour image when it has its own resolution/intrinsics (e.g. 1920x1080 colour with "
-        "512x424 depth, same optical frame); empty = colour has depth's aspect and scaled intrinsics.",
+        "CameraInfo of the colour image when it has its own resolution and intrinsics ('' = depth's, scaled).",
     ),
     ParamSpec("output_topic", "face_reid/frames", "Where face_reid_msgs/CameraFrame messages are published "
               "(unsecured network: no network_key_path)."),
     ParamSpec("network_key_path", "",
-              "The camera network's key file (face-reid-keys new): frames are then sealed (encrypted and "
-              "authenticated) and published on sealed_output_topic only, and lifecycle transitions are taken only "
-              "through ~/change_state_sealed (face-reid-state; no lifecycle or parameter services) ('' = "
-              "unsecured, in clear).",
+              "The camera network's key file from face-reid-keys ('' = unsecured): frames go out sealed on "
+              "sealed_output_topic only, lifecycle only through face-reid-state.",
               read_only=True),
     ParamSpec("sealed_output_topic", "face_reid/frames_sealed",
               "Where sealed frames (face_reid_msgs/Sealed) are published when network_key_path is set."),
     ParamSpec(
         "image_qos", "auto",
-        "Reliability of the image and CameraInfo subscriptions: auto (best effort until the driver's publishers "
-        "are seen, then reliable when they all are: reliable loses no frame to a busy subscriber), reliable "
-        "(only matches reliable publishers) or best_effort (matches any, may lose frames).",
+        "Reliability of the image subscriptions: auto (reliable once every driver publisher offers it), "
+        "reliable or best_effort.",
         choices=("auto", "reliable", "best_effort"),
     ),
     ParamSpec("sync_slop_s", 0.02, "Max stamp difference between a colour and a depth image of one pair (s).",

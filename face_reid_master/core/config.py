@@ -22,9 +22,9 @@ class MasterConfig:
     method: str = param("bayes", "Face classification: 'bayes' (the paper's table) or 'threshold' (baseline).",
                         choices=("bayes", "threshold"))
     embedding_space: str = param(
-        DLIB_SPACE + "+" + SFACE_SPACE, "Embedder space compared for identity: dlib_resnet_v1, sface_2021dec or "
-        "dlib_resnet_v1+sface_2021dec (cameras must send it, or a joint space containing it; other "
-        "embeddings are not used, logged once per camera).", choices=_SPACE_CHOICES, read_only=True)
+        DLIB_SPACE + "+" + SFACE_SPACE, "Embedder space compared for identity; cameras must send it or a joint "
+        "space containing it (other embeddings are not used, said once per camera).", choices=_SPACE_CHOICES,
+        read_only=True)
     known_camera_ids: tuple[str, ...] = ()  # accepted camera ids (empty: any; the node parameter of that name)
     max_stamp_age_s: float = param(10.0, "Frames older than this vs the master clock are rejected (s).",
                                    low=0.0, high=86400.0)
@@ -60,17 +60,15 @@ class MasterConfig:
                                       low=0.0, high=1e6, low_open=True)
     max_features_per_face: int = param(50, "Embeddings kept per face, a diverse subset (count).", low=1, high=10000)
     max_faces: int = param(
-        3000, "Learned faces kept at most: a new face beyond it evicts the least recently seen unnamed face not on a "
-        "track (named faces never; when none can go, the new face is not learned, counted in faces_refused_cap). "
-        "Bounds memory, disk and start-up time (~0.1 MB of memory per face of 50 features; count).",
+        3000, "Learned faces kept at most (count); a new face evicts the least recently seen unnamed face not on a "
+        "track, named faces never go.",
         low=1, high=1_000_000)
     learn_only_consistent_features: bool = param(
         True, "An identified track's embedding joins its face only if within the decision distance (guards "
         "faces against tracker swaps; false = the paper).")
     release_after_inconsistent: int = param(
-        3, "An identified track whose last this many face embeddings were all beyond the decision distance "
-        "was swapped onto someone else: it loses its face and goes on under a new track id, undecided (count; "
-        "0 = never, the paper; needs learn_only_consistent_features).", low=0, high=1000)
+        3, "A decided track whose last this many face embeddings were beyond the decision distance was swapped: "
+        "it goes on under a new track id, undecided (count; 0 = never).", low=0, high=1000)
     lend_lost_faces: bool = param(
         True, "The face of a track the tracker lost (tracker.lost_after_s) may be given to another track before "
         "the lost one is deleted: the person came back as a new track (false = the paper: held until deleted).")
@@ -103,9 +101,8 @@ class MasterConfig:
     body_min_observations: int = param(
         6, "Body observations compared with a face before a body decision (count).", low=1, high=100000)
     body_alike_face_distance: float = param(
-        0.0, "Two learned faces whose features are closer than this face-embedding distance count as one person "
-        "in a body decision (a second face learned while another track held the first); 0 = half the face "
-        "decision distance.", low=0.0, high=4.0)
+        0.0, "Two learned faces closer than this face-embedding distance count as one person in a body decision "
+        "(0 = half the face decision distance).", low=0.0, high=4.0)
     body_funnel_alpha: float = param(
         1.5, "Funnel: a face whose recent bodies are farther than this times the nearest face's is abandoned "
         "for that observation (> 1).", low=1.0, high=100.0, low_open=True)

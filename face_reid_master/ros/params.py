@@ -31,11 +31,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("camera_topic_regex", "^(/.*)?/face_reid/frames$",
               "Also subscribe to every discovered topic matching this regex ('' = off)."),
     ParamSpec("network_key_path", "",
-              "The camera network's key file (face-reid-keys new): only sealed frames (sealed_topic_regex) and "
-              "sealed admin requests are then accepted, the tracks are published sealed with it on "
-              "<tracks_topic>_sealed (not on tracks_topic), and lifecycle transitions go only through "
-              "~/change_state_sealed (face-reid-state; no lifecycle or parameter services) "
-              "('' = unsecured: frames, requests and tracks in clear, standard services open to the domain).",
+              "The camera network's key file from face-reid-keys ('' = unsecured): only sealed frames and requests "
+              "are accepted, tracks go out sealed, lifecycle only through face-reid-state.",
               read_only=True),
     ParamSpec("sealed_topic_regex", "^(/.*)?/face_reid/frames_sealed$",
               "With a network key: subscribe to every discovered face_reid_msgs/Sealed topic matching this regex."),
@@ -56,23 +53,18 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("markers_topic", "/tracks_named/markers",
               "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off)."),
     ParamSpec("max_publish_rate_hz", 30.0,
-              "Cap on /tracks_named messages per second (0 = one per cycle, i.e. per batch of frames received; "
-              "a capped cycle's state goes out at most 1/rate later).",
+              "Cap on /tracks_named messages per second (Hz; 0 = one per cycle of frames).",
               low=0.0, high=1000.0),
     ParamSpec("cycle_budget_ms", 25.0,
-              "Time one cycle may spend applying frames (ms): frames beyond what it leaves after the cycle's own "
-              "cost (both costs measured) are dropped oldest-first and counted, so an overloaded master keeps its "
-              "latency bounded.",
+              "Time one cycle may spend applying frames (ms); frames beyond it are dropped oldest-first and "
+              "counted, so that an overloaded master keeps its latency bounded.",
               low=1.0, high=10000.0),
     ParamSpec("min_cycle_period_s", 0.005,
-              "A camera message that comes sooner than this after the last cycle began waits out the rest (s; "
-              "0 = a cycle per message): the frames arriving meanwhile join its cycle, so a busy master pays the "
-              "executor's, the drain's and the cycle's fixed costs once for several frames, at up to this much "
-              "latency.", low=0.0, high=0.1),
+              "A camera message arriving sooner than this after the last cycle began waits, so that one cycle "
+              "applies several frames (s; 0 = a cycle per message).", low=0.0, high=0.1),
     ParamSpec("identity_period_s", 0.03,
-              "The face table is updated at most once per this period (s; 0 = every cycle): the frames applied "
-              "in between wait for the next update, so a name can follow its track's position by this much (the "
-              "tick applies what waits when frames stop). Fewer, larger updates cost the master less per frame.",
+              "The face table is updated at most once per this period, so names may follow their tracks' "
+              "positions by this much (s; 0 = every cycle).",
               low=0.0, high=1.0),
     ParamSpec("tick_rate_hz", 5.0, "Timeouts are applied and tracks re-published at this rate without frames (Hz).",
               low=0.1, high=1000.0),
@@ -93,18 +85,16 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("persist_faces", True, "Keep learned faces in the database across restarts (bool)."),
     ParamSpec("db_path", "", "Face database file ('' = $FACE_REID_DB or ~/.local/share/face_reid/faces.db)."),
     ParamSpec("retention_unnamed_s", 2_592_000.0,
-              "Forget unnamed faces not seen for this long (s; 0 = keep forever). 30 days: a visitor who returns "
-              "within a month is still recognised, a one-off passer-by's biometric data is gone a month later "
-              "(data minimisation); named faces are kept.", low=0.0, high=1e9),
+              "Unnamed faces not seen for this long are forgotten (s; 0 = keep forever; named faces are kept).",
+              low=0.0, high=1e9),
     ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
     ParamSpec("body_metric_path", "", "Body metric JSON from face-reid-fit-body ('' = the installed "
               "models/body_metric.json); used when body_appearance_tracking is on."),
     ParamSpec("confidence_map_path", "", "Map from a decision's posterior to the published identity_confidence "
               "(how often such decisions were right; '' = the installed models/identity_confidence.json)."),
     ParamSpec("clock_offset_warning_s", 0.2,
-              "/diagnostics and the log warn when a camera's frames arrive more than this after (or before) their "
-              "capture stamp, its own processing time deducted (s; median of its last 50 frames): clocks not "
-              "synchronised.", low=0.001, high=3600.0),
+              "Warn when a camera's frames arrive more than this after or before their capture stamp, its "
+              "processing time deducted (s; median of its last 50 frames).", low=0.001, high=3600.0),
     ParamSpec("no_input_warning_s", 5.0, "/diagnostics warns when no camera frame arrived for this long (s).",
               low=0.0, high=3600.0, low_open=True),
     ParamSpec("stats_log_period_s", 30.0, "Counters are logged this often (s).", low=0.1, high=86400.0),

@@ -14,44 +14,8 @@ __all__ = ["TrackerConfig"]
 
 @dataclass(frozen=True)
 class TrackerConfig:
-    """Tracker parameters (metres, seconds), the ROS parameters ``tracker.*``; ValueError on bad values.
-
-    ``accel_noise_mps2``: white-acceleration noise std over 1 s (spectral density = its square).
-    ``init_velocity_std_mps``: velocity prior std of a new track.
-    ``gate_probability``: detections outside the chi-square(2 dof) quantile of a track are not
-    associated with it.
-    ``detections_to_confirm`` hits within ``confirm_window_s`` of creation confirm a track; a
-    tentative track not confirmed by then is deleted.
-    ``lost_after_s``: a confirmed track without detection for this long becomes LOST; after
-    ``delete_after_s`` more it is DELETED.
-    ``max_detection_delay_s``: frames up to this much older than the newest accepted stamp are applied
-    (exactly, see the tracker module doc); older ones are rejected.
-    ``max_future_stamp_s``: frames further than this ahead of the newest stamp are rejected...
-    ``clock_resync_frames``: ...unless this many consecutive frames are rejected in the same
-    direction, which is taken as a clock jump (0 disables).
-    ``max_gate_distance_m``: additional Euclidean gate around the predicted position (and cap of the
-    second-pass reach), so that a coasting or LOST track, whose covariance grows to metres, cannot
-    capture someone else (inf = off); a hidden person who reappears further off gets a new track,
-    whose identity the face table restores.
-    ``min_person_separation_m``: two people are assumed never closer than this.  A detection that
-    fails every gate but lies this close to the predicted position of an unmatched track, or within
-    ``min_person_separation_m + max_speed_mps * (time since its last detection)`` of that last
-    detection, is associated with it in a second pass (turns and stops outrun the constant-velocity
-    gate).  A leftover detection this close to any track or to another new detection starts no
-    track (a person's detections that miss their own track's gate would otherwise spawn
-    duplicates), and a tentative track this close to a confirmed one is deleted.
-    ``coast_after_s``: a confirmed track not detected for this long is "coasting": it is offered
-    detections only after the freshly detected tracks have had both association passes.
-    ``camera_window_s``: a track's ``cameras`` are those that detected it within this window.
-    ``max_tracks``: cap on live tracks (bounded latency under clutter); extra detections are dropped.
-    Appearance (used only where a track and a detection both carry a body-appearance embedding, in the
-    learned metric's units: 1 = the median distance between two different people): a pair farther apart
-    than ``appearance_gate`` is clearly two people and never associated, however close in position;
-    ``appearance_weight`` x the distance joins the association cost (``appearance_match_distance`` stands in
-    for an unknown one); a LOST track takes back a detection beyond its position gates, within walking reach
-    of its last detection, when they are nearer than ``appearance_match_distance``. A track keeps its newest
-    ``appearance_gallery_size`` embeddings.
-    """
+    """Tracker parameters, the ROS parameters ``tracker.*``: each declared once with its unit and range
+    (ValueError on a bad value); docs/tuning.md says why some are what they are."""
 
     accel_noise_mps2: float = param(
         1.0, "Kalman white-acceleration noise std over 1 s (m/s^2).",
