@@ -186,13 +186,6 @@ class IdentityManagerBase:
         self.stats.lent_faces_taken += 1
         self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
 
-    def sync_alive_tracks(self, alive_track_ids: Iterable[int], stamp_s: float) -> None:
-        """Mark every known track not in ``alive_track_ids`` as deleted (OpenPTrack's garbage collection)."""
-        alive = {check_int("track_id", t, -(2**63)) for t in alive_track_ids}
-        for tid in list(self._tracks):
-            if tid not in alive:
-                self.track_deleted(tid, stamp_s)
-
     def step(self, stamp_s: float) -> list[IdentityEvent]:
         """Run one update of Algorithm 1: learn the queued observations, classify the unassigned tracks (by face,
         then by body), then handle deaths."""

@@ -139,16 +139,6 @@ def test_late_observations_of_deleted_tracks_are_ignored() -> None:
     assert m.posterior_table()[1] == []
 
 
-def test_sync_alive_tracks_deletes_missing_tracks() -> None:
-    rng = np.random.default_rng(10)
-    m = BayesIdentityManager(min_observations=1)
-    feed_one(m, 1, 0, rng, 0.0)
-    feed_one(m, 2, 1, rng, 0.0)
-    m.sync_alive_tracks([2], 1.0)
-    assert event_kinds(m.step(1.0)) == [(RELEASED, 1, 1)]
-    assert m.live_track_ids() == [2]
-
-
 @pytest.mark.parametrize(
     "emb",
     [
