@@ -75,6 +75,22 @@ class Matches:
     near: NDArray[np.bool_]
 
 
+@dataclass(frozen=True, slots=True)
+class _Costs:
+    """Per (track, detection): squared Mahalanobis and Euclidean distances, closer than the people's separation,
+    inside the metric gate, feasible for pass 1, its cost (negative log-likelihood plus appearance), clearly
+    another person and alike by appearance (None: no appearance known)."""
+
+    d2: FloatArray
+    dist2: FloatArray
+    close: NDArray[np.bool_]
+    in_metric_gate: NDArray[np.bool_]
+    feasible: NDArray[np.bool_]
+    nll: FloatArray
+    other_person: NDArray[np.bool_] | None
+    looks_alike: NDArray[np.bool_] | None
+
+
 class Associator:
     """The association cascade of one :class:`TrackerConfig` (see the module doc)."""
 
@@ -112,20 +128,8 @@ class Associator:
         ``appearance`` (N, M): body-appearance distances (NaN = unknown; None = none known); ``alike`` (M,): how many
         tracks look like each detection (below ``appearance_match_distance``), when these N are not all of them.
         """
-        d2, log_det = mahalanobis_sq(x_pred[:, :2], P_pred[:, :2, :2], z, r2)
-        dist2 = ((z[None, :, :] - x_pred[:, None, :2]) ** 2).sum(axis=2)
-        close = dist2 < self._sep2
-        near = close.any(axis=0)
-        in_metric_gate = dist2 <= self._gate_m2
-        feasible = (d2 <= self._gate) & in_metric_gate
-        nll = d2 + log_det
-        looks_alike = None
-        if appearance is not None:
-            known = np.isfinite(appearance)
-            other_person = known & (appearance > self._app_gate)  # NaN compares False: unknown stays possible
-            feasible &= ~other_person
-            nll = nll + self._app_weight * np.where(known, appearance, self._app_match)
-            looks_alike = known & (appearance < self._app_match)
+        c = self._costs(x_pred, P_pred, z, r2, appearance)
+        d2, dist2, close, in_metric_gate, feasible, nll = c.d2, c.dist2, c.close, c.in_metric_gate, c.feasible, c.nll
         free_c = np.ones(d2.shape[1], dtype=bool)
         rows_l: list[IndexArray] = []
         cols_l: list[IndexArray] = []
@@ -148,25 +152,53 @@ class Associator:
                 continue
             group[r_] = False
             left_r = np.flatnonzero(group)
-            if left_r.shape[0] == 0:
-                continue
-            reach = np.minimum(self._sep + self._max_speed * np.maximum(stamp - t_last[left_r], 0.0), self._max_reach)
-            dist2_last = ((z[None, :, :] - z_last[left_r][:, None, :]) ** 2).sum(axis=2)
-            near_pred = (close[left_r] | (d2[left_r] <= self._wide_gate)) & in_metric_gate[left_r]
-            ok2 = (near_pred | (dist2_last < reach[:, None] ** 2)) & free_c[None, :]
-            if appearance is not None:
-                ok2 &= ~other_person[left_r]
-            if ok2.any():
-                r_, c_ = gnn(np.minimum(dist2[left_r], dist2_last), ok2)
-                rows_l.append(left_r[r_])
-                cols_l.append(c_)
-                free_c[c_] = False
-        if looks_alike is not None and free_c.any():
-            unique = (looks_alike.sum(axis=0) if alike is None else alike) == 1  # no other track looks like it
-            self._reattach(looks_alike, unique, appearance, state, t_last, z_last, z, stamp, free_c, rows_l, cols_l)
+            if left_r.shape[0]:
+                near_pred = (close[left_r] | (d2[left_r] <= self._wide_gate)) & in_metric_gate[left_r]
+                self._second_pass(left_r, near_pred, None if c.other_person is None else ~c.other_person[left_r],
+                                  dist2[left_r], t_last, z_last, z, stamp, free_c, rows_l, cols_l)
+        if c.looks_alike is not None and free_c.any():
+            assert appearance is not None
+            unique = (c.looks_alike.sum(axis=0) if alike is None else alike) == 1  # no other track looks like it
+            self._reattach(c.looks_alike, unique, appearance, state, t_last, z_last, z, stamp, free_c, rows_l, cols_l)
         rows = np.concatenate(rows_l) if rows_l else _EMPTY
         cols = np.concatenate(cols_l) if cols_l else _EMPTY
-        return Matches(rows, cols, near)
+        return Matches(rows, cols, close.any(axis=0))
+
+    def _costs(self, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, r2: FloatArray,
+               appearance: FloatArray | None) -> _Costs:
+        """The gates and costs of every (track, detection) pair (see :class:`_Costs`)."""
+        d2, log_det = mahalanobis_sq(x_pred[:, :2], P_pred[:, :2, :2], z, r2)
+        dist2 = ((z[None, :, :] - x_pred[:, None, :2]) ** 2).sum(axis=2)
+        in_metric_gate = dist2 <= self._gate_m2
+        feasible = (d2 <= self._gate) & in_metric_gate
+        nll = d2 + log_det
+        other_person = looks_alike = None
+        if appearance is not None:
+            known = np.isfinite(appearance)
+            other_person = known & (appearance > self._app_gate)  # NaN compares False: unknown stays possible
+            feasible &= ~other_person
+            nll = nll + self._app_weight * np.where(known, appearance, self._app_match)
+            looks_alike = known & (appearance < self._app_match)
+        return _Costs(d2, dist2, dist2 < self._sep2, in_metric_gate, feasible, nll, other_person, looks_alike)
+
+    def _second_pass(
+        self, left_r: IndexArray, near_pred: NDArray[np.bool_], same_looks: NDArray[np.bool_] | None,
+        dist2: FloatArray, t_last: FloatArray, z_last: FloatArray, z: FloatArray, stamp: float,
+        free_c: NDArray[np.bool_], rows_l: list[IndexArray], cols_l: list[IndexArray],
+    ) -> None:
+        """Pass 2 for a group's tracks ``left_r`` left unmatched: a free detection near the prediction
+        (``near_pred``) or within walking reach of the track's last detection, and not clearly someone else by
+        its looks (``same_looks``; None = unknown), nearest first."""
+        reach = np.minimum(self._sep + self._max_speed * np.maximum(stamp - t_last[left_r], 0.0), self._max_reach)
+        dist2_last = ((z[None, :, :] - z_last[left_r][:, None, :]) ** 2).sum(axis=2)
+        ok2 = (near_pred | (dist2_last < reach[:, None] ** 2)) & free_c[None, :]
+        if same_looks is not None:
+            ok2 &= same_looks
+        if ok2.any():
+            r_, c_ = gnn(np.minimum(dist2, dist2_last), ok2)
+            rows_l.append(left_r[r_])
+            cols_l.append(c_)
+            free_c[c_] = False
 
     def _reattach(
         self, looks_alike: NDArray[np.bool_], unique: NDArray[np.bool_], appearance: FloatArray,
