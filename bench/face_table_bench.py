@@ -38,7 +38,7 @@ TARGET_MS = {(5, 20): 1.0, (20, 200): 2.0, (50, 2000): 10.0}
 def _setup(n_tracks: int, n_faces: int, n_unassigned: int, feats_per_face: int, rng: np.random.Generator):
     centres = rng.normal(0.0, CENTRE_SCALE, (n_faces + n_tracks, DIM)).astype(np.float32)
     mgr = BayesIdentityManager(max_features_per_face=feats_per_face)
-    mgr.import_faces(
+    mgr.faces.import_faces(
         LearnedFace(
             j + 1,
             (centres[j] + rng.normal(0.0, NOISE_SCALE, (feats_per_face, DIM))).astype(np.float32),

@@ -53,7 +53,7 @@ def _scenario(sp: FaceSpace, n_tracks: int, n_faces: int, frames: int, rng: np.r
         return BodyRecord((looks[k] + rng.normal(0.0, 0.02, looks.shape[1])).astype(np.float32), body_space[0], 0.9,
                           geometry)
 
-    core.identity.import_faces(
+    core.identity.faces.import_faces(
         LearnedFace(j + 1, sp.observe(np.repeat(centres[j:j + 1], 50, axis=0), rng) * sp.weights)
         for j in range(n_faces)
     )

@@ -21,7 +21,6 @@ MAX_MODULE_LINES = 600
 NOT_SPLIT_YET = {
     "face_reid_camera.people.detector": 728,
     "face_reid_camera.people.detector.PersonDetector": 421,
-    "face_reid_master.identity.algorithm1.IdentityManagerBase": 482,
 }
 ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
                "visualization_msgs", "diagnostic_msgs", "lifecycle_msgs", "face_reid_msgs", "nav_msgs")

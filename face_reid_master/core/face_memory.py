@@ -52,8 +52,8 @@ class FaceMemory:
         self._last_prune_s = -math.inf
         if store is not None:
             faces = self._cap_loaded(store.load_faces())
-            identity.import_faces(faces)
-            identity.reserve_face_ids(int(store.max_face_id()))
+            identity.faces.import_faces(faces)
+            identity.faces.reserve_ids(int(store.max_face_id()))
             for face in faces:
                 self.refresh_name(face.face_id, face.features)
 
@@ -146,7 +146,7 @@ class FaceMemory:
         for fid in set(self.identity.assigned_tracks().values()):
             if stamp - self._name_checked.get(fid, -math.inf) >= cfg.name_update_interval_s:
                 self._name_checked[fid] = stamp
-                self.refresh_name(fid, self.identity.face_features(fid))
+                self.refresh_name(fid, self.identity.faces.features(fid))
 
     def refresh_name(self, face_id: int, features: NDArray[np.floating]) -> None:
         if not self.people.names():
@@ -155,8 +155,8 @@ class FaceMemory:
         matches = self.people.assignments()
         self._names = {fid: m.name for fid, m in matches.items()}
         for fid, name in self._names.items():
-            if self.identity.face_name(fid) != name:
-                self.identity.set_face_name(fid, name)
+            if self.identity.faces.name(fid) != name:
+                self.identity.faces.set_name(fid, name)
                 self.save([fid])
 
     def save(self, face_ids: list[int]) -> None:
@@ -165,7 +165,7 @@ class FaceMemory:
         for fid in face_ids:
             self._dirty_faces.pop(fid, None)
             with contextlib.suppress(KeyError):
-                faces.append(self.identity.export_face(fid))
+                faces.append(self.identity.faces.export(fid))
         if self.store is None or not faces:
             return
         try:
@@ -198,7 +198,7 @@ class FaceMemory:
     def refresh_names(self) -> None:
         """Re-evaluate every face's predefined name (the predefined people changed)."""
         for fid in self.identity.face_ids():
-            self.refresh_name(fid, self.identity.face_features(fid))
+            self.refresh_name(fid, self.identity.faces.features(fid))
 
     def forget_face(self, face_id: int) -> bool:
         """Delete a learned face everywhere (memory, names, store). True if it existed; ValueError for an id out
@@ -211,4 +211,4 @@ class FaceMemory:
 
     def face_name(self, face_id: int) -> str:
         """The name linked to a face (predefined match, else a stored name), or ''."""
-        return self._names.get(face_id) or self.identity.face_name(face_id) or ""
+        return self._names.get(face_id) or self.identity.faces.name(face_id) or ""

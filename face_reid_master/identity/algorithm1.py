@@ -1,5 +1,10 @@
 """Algorithm 1 of Koide et al. 2017 (III-D): face-ID assignment of people tracks, method-independent.
 
+face_list = learned faces not carried by a live track (assignable); track_list = live tracks. An unassigned
+track accumulates evidence from its observations; once classified it gets a known face (which leaves face_list
+and absorbs the track's features) or a new face id. While assigned, further observations are added to its
+face. When the track dies the face returns to face_list.
+
 Pure core of the master node (no ROS).  The node feeds face embeddings per track
 (:meth:`IdentityManagerBase.add_observations`), track deaths (:meth:`~IdentityManagerBase.track_deleted`)
 and calls :meth:`~IdentityManagerBase.step` once per update; it gets back identity events.  How an
@@ -16,7 +21,6 @@ tracks never need distances to other faces.
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from collections.abc import Iterable
 
 import numpy as np
@@ -28,8 +32,10 @@ from face_reid_master.identity.body_identification import BodyIdentification
 from face_reid_master.identity.entries import Chunk, FaceEntry, TrackEntry, checked_observations, eye_rows, rows_of
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
-from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats, LearnedFace
+from face_reid_master.identity.lent_faces import LentFaces
+from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats
 from face_reid_master.identity.swap_guard import SwapGuard
+from face_reid_master.identity.track_list import TrackList
 
 __all__ = ["IdentityManagerBase"]
 
@@ -40,11 +46,6 @@ F32Array = npt.NDArray[np.float32]
 class IdentityManagerBase:
     """Algorithm 1 of the paper, shared by the Bayesian method and the threshold baseline.
 
-    face_list = learned faces not carried by a live track (assignable); track_list = live tracks.  An
-    unassigned track accumulates evidence from its observations; once classified it gets a known face
-    (which leaves face_list and absorbs the track's features) or a new face id.  While assigned, further
-    observations are added to its face.  When the track dies the face returns to face_list.
-
     ``embedding_dim``: length of the face descriptors.  ``max_features_per_face``: bound of every face's
     (and unidentified track's) feature set, kept diverse
     (:func:`~face_reid_master.identity.feature_bank.select_diverse_subset`).  Eq. 4 is exact
@@ -54,16 +55,13 @@ class IdentityManagerBase:
 
     Our extensions, each off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
     (:mod:`~face_reid_master.identity.swap_guard`), ``body_evidence``
-    (:mod:`~face_reid_master.identity.body_identification`) and ``lend_lost_faces``: the face of a track the
-    tracker lost goes back to face_list while the track is LOST (:meth:`track_lost`), so that the person's
-    new track can take it.
+    (:mod:`~face_reid_master.identity.body_identification`) and ``lend_lost_faces``
+    (:mod:`~face_reid_master.identity.lent_faces`).
 
     Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
-    ``_current_confidence`` and may override the ``_on_*`` notifications; the single-underscore state
-    (``_tracks``, ``_list``: the learned faces and face_list, ``_bank``) is shared with them only.
+    ``_current_confidence`` and may override the ``_on_*`` notifications; they read :attr:`tracks`,
+    :attr:`faces` and the feature bank ``_bank``.
     """
-
-    _DEAD_TRACK_MEMORY = 4096  # ids of deleted tracks remembered to ignore late observations
 
     def __init__(
         self,
@@ -93,14 +91,11 @@ class IdentityManagerBase:
         self._bank = FeatureBank(self.embedding_dim, self.max_features_per_face)
         self.stats = IdentityStats()
         self._swaps = SwapGuard(feature_gate_distance, self.release_after_inconsistent, self._bank, self.stats)
-        self._list = FaceList(self._bank, self.stats, self.exact_search_max_features, self.shortlist_faces,
+        self.faces = FaceList(self._bank, self.stats, self.exact_search_max_features, self.shortlist_faces,
                               self._on_face_available, self._on_faces_unavailable)
-        self._tracks: dict[int, TrackEntry] = {}
-        self._pending_obs: dict[int, list[Chunk]] = {}
-        self._pending_deleted: dict[int, float] = {}
-        self._lent: dict[int, int] = {}  # face id -> the LOST track holding it while it is in face_list
+        self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
+        self._lent = LentFaces(self.faces, self.lend_lost_faces)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
-        self._dead: OrderedDict[int, float] = OrderedDict()
 
     # ------------------------------------------------------------------------------ public inputs
     def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float,
@@ -121,16 +116,11 @@ class IdentityManagerBase:
         """:meth:`add_observations` for input already validated (MasterCore checks each frame once):
         ``emb`` a finite C-contiguous float32 (K >= 1, embedding_dim) array, ``stamp`` finite seconds,
         ``eye_px`` None or (K,) float64, ``source`` a str."""
-        if tid in self._dead or tid in self._pending_deleted:
+        if self.tracks.gone(tid):
             self.stats.observations_ignored_dead_track += emb.shape[0]
             return False
-        self._pending_obs.setdefault(tid, []).append(Chunk(emb, eye_px, stamp, source))
+        self.tracks.queue(tid, Chunk(emb, eye_px, stamp, source))
         self.stats.observations_received += emb.shape[0]
-        track = self._tracks.get(tid)
-        if track is not None:
-            track.last_seen_s = max(track.last_seen_s, stamp)
-        else:
-            self._tracks[tid] = TrackEntry(tid, first_seen_s=stamp, last_seen_s=stamp)
         return True
 
     def add_body_observations(self, track_id: int, embeddings: F32Array, stamp_s: float, source: str = "",
@@ -138,45 +128,29 @@ class IdentityManagerBase:
         """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) and head
         ``heights`` (k, m; None = unknown) seen by camera ``source`` for the next :meth:`step`; ignored
         without body evidence or for a deleted track."""
-        if self._bodies is None or track_id in self._dead or track_id in self._pending_deleted:
+        if self._bodies is None or self.tracks.gone(track_id):
             return
         self._bodies.queue(track_id, embeddings, stamp_s, source, heights)
         self.stats.body_observations += embeddings.shape[0]
-        if track_id not in self._tracks:
-            self._tracks[track_id] = TrackEntry(track_id, first_seen_s=stamp_s, last_seen_s=stamp_s)
+        self.tracks.seen(track_id, stamp_s, latest=False)
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
-        tid = check_int("track_id", track_id, -(2**63))
-        stamp = check_stamp(stamp_s)
-        if tid in self._dead:
-            return
-        self._pending_deleted[tid] = stamp
+        self.tracks.died(check_int("track_id", track_id, -(2**63)), check_stamp(stamp_s))
 
     def track_lost(self, track_id: int) -> None:
-        """The tracker lost the track (no detection for a while): its face goes back to face_list, lent, so
-        that the person's new track can be identified with it; the LOST track keeps it unless another takes
-        it (the person came back as a new track) before it is found again."""
-        track = self._tracks.get(track_id)
-        fid = None if track is None else track.face_id
-        if not self.lend_lost_faces or fid is None or fid in self._lent or fid in self._list.available:
-            return
-        self._list.make_available(fid)
-        self._lent[fid] = track_id
+        """The tracker lost the track (no detection for a while): its face is lent to face_list
+        (:mod:`~face_reid_master.identity.lent_faces`)."""
+        self._lent.lend(self.tracks.entries.get(track_id))
 
     def track_recovered(self, track_id: int) -> None:
         """The LOST track was detected again: it takes its face back from face_list if nobody took it."""
-        track = self._tracks.get(track_id)
-        fid = None if track is None else track.face_id
-        if fid is not None and self._lent.get(fid) == track_id:
-            del self._lent[fid]
-            self._list.make_unavailable([fid])
-            self._list.entries[fid].track_id = track_id
+        self._lent.give_back(self.tracks.entries.get(track_id))
 
     def _take_lent(self, fid: int, stamp: float) -> None:
         """Face ``fid`` goes to another track: a LOST track that lent it is no longer identified."""
-        lender = self._lent.pop(fid, None)
-        track = None if lender is None else self._tracks.get(lender)
+        lender = self._lent.take(fid)
+        track = None if lender is None else self.tracks.entries.get(lender)
         if track is None or track.face_id != fid:
             return
         confidence = track.confidence
@@ -199,25 +173,25 @@ class IdentityManagerBase:
             events.extend(self._body_step(stamp))
         events.extend(self._side_events)
         self._side_events = []
-        for tid in list(self._pending_deleted):
-            ev = self._remove_track(tid, self._pending_deleted[tid])
+        deaths, self.tracks.deaths = self.tracks.deaths, {}
+        for tid, died in deaths.items():
+            ev = self._remove_track(tid, died)
             if ev is not None:
                 events.append(ev)
-        self._pending_deleted.clear()
         return events
 
     def _learn(self, stamp: float, events: list[IdentityEvent]) -> None:
         """The queued observations: an identified track's join its face (those its face accepts; a swap releases
         the track, :class:`SwapGuard`); an unassigned track's join its buffer and go to the classification."""
-        pending, self._pending_obs = self._pending_obs, {}
+        pending = self.tracks.take_pending()
         unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
         singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
         rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
-        near = self._swaps.consistent(rows, {tid: self._list.entries[fid].slot for tid in rows
-                                             if (fid := self._tracks[tid].face_id) is not None})
+        near = self._swaps.consistent(rows, {tid: self.faces.entries[fid].slot for tid in rows
+                                             if (fid := self.tracks.entries[tid].face_id) is not None})
         bank = self._bank
         for tid, chunks in pending.items():
-            track = self._tracks[tid]
+            track = self.tracks.entries[tid]
             track.n_observations += rows[tid].shape[0]
             slot: int | None = None
             obs: F32Array | None = rows[tid]
@@ -249,7 +223,7 @@ class IdentityManagerBase:
         """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
         the rows it learns (None: none), or, when they show a swap, the released track's chunks and rows."""
         assert track.face_id is not None
-        face = self._list.entries[track.face_id]
+        face = self.faces.entries[track.face_id]
         face.n_observations += obs.shape[0]
         face.last_seen_s = max(face.last_seen_s, stamp)
         if keep is not None:
@@ -274,11 +248,11 @@ class IdentityManagerBase:
         once seen, overrules it)."""
         bodies = self._bodies
         assert bodies is not None
-        bodies.observe(self._tracks, list(self._list.entries))
+        bodies.observe(self.tracks.entries, list(self.faces.entries))
         events = []
-        for tid, fid, p in bodies.decide(self._list.available, stamp, self._faces_alike):
-            track = self._tracks.get(tid)
-            if track is not None and track.face_id is None and track.slot is None and fid in self._list.available:
+        for tid, fid, p in bodies.decide(self.faces.available, stamp, self._faces_alike):
+            track = self.tracks.entries.get(tid)
+            if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
                 events.append(self._apply_body_decision(track, fid, p, stamp))
         return events
 
@@ -295,37 +269,34 @@ class IdentityManagerBase:
             self._bodies.move_track_bodies(tid, fid)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
-        """Which of ``others`` are the same person as learned ``face``: features closer than the body evidence's
-        ``alike_face_distance`` (default: half the decision distance); NaN (unknown face): not alike."""
+        """Which of ``others`` are learned ``face``'s person: closer than the body evidence's
+        ``alike_face_distance`` (default: half the decision distance)."""
         assert self.body_evidence is not None
         limit = self.body_evidence.alike_face_distance
-        if limit is None and self.feature_gate_distance is not None:
-            limit = 0.5 * self.feature_gate_distance
-        if limit is None:
-            return [False] * len(others)
-        return (self._list.min_distances(face, others) < limit).tolist()
+        return self.faces.alike(face, others, 0.5 * self.feature_gate_distance
+                                if limit is None and self.feature_gate_distance is not None else limit)
 
     # ------------------------------------------------------------------------------ queries
     def evidence_of(self, track_id: int) -> str:
         """What identified a live track: "face", "body", "both" (a body decision its face then confirmed), or
         "" (unidentified / unknown track)."""
-        track = self._tracks.get(track_id)
+        track = self.tracks.entries.get(track_id)
         return "" if track is None or track.face_id is None else track.evidence
 
     def decided_new(self, track_id: int) -> bool:
         """Whether a live identified track's decision created its face (False otherwise)."""
-        track = self._tracks.get(track_id)
+        track = self.tracks.entries.get(track_id)
         return track is not None and track.face_id is not None and track.new_face
 
     def face_id_of(self, track_id: int) -> int | None:
         """Face id assigned to a live track, or None while unidentified / unknown track."""
-        track = self._tracks.get(track_id)
+        track = self.tracks.entries.get(track_id)
         return None if track is None else track.face_id
 
     def confidence_of(self, track_id: int) -> float:
         """Current max posterior (Bayes) / leading vote fraction of an unassigned track; the decision
         confidence once assigned; 0.0 for an unknown track."""
-        track = self._tracks.get(track_id)
+        track = self.tracks.entries.get(track_id)
         if track is None:
             return 0.0
         if track.face_id is not None:
@@ -338,32 +309,11 @@ class IdentityManagerBase:
 
     def assigned_tracks(self) -> dict[int, int]:
         """Live track id -> face id for all identified tracks."""
-        return {t.track_id: t.face_id for t in self._tracks.values() if t.face_id is not None}
-
-    def live_track_ids(self) -> list[int]:
-        """Tracks that have reported observations and are not deleted."""
-        return list(self._tracks)
+        return {t.track_id: t.face_id for t in self.tracks.entries.values() if t.face_id is not None}
 
     def face_ids(self) -> list[int]:
         """All learned face ids (assigned or in face_list)."""
-        return sorted(self._list.entries)
-
-    def available_face_ids(self) -> list[int]:
-        """face_list: learned faces not carried by a live track, in table-column order."""
-        return list(self._list.available)
-
-    def face_features(self, face_id: int) -> F32Array:
-        """Copy of a learned face's stored features (k, embedding_dim)."""
-        return self._bank.features(self._list.get(face_id).slot).copy()
-
-    def face_name(self, face_id: int) -> str | None:
-        return self._list.get(face_id).name
-
-    def set_face_name(self, face_id: int, name: str | None) -> None:
-        """Attach a (predefined-person) name to a learned face, or clear it with None."""
-        if name is not None and not isinstance(name, str):
-            raise ValueError(f"name must be a str or None, got {name!r}")
-        self._list.get(face_id).name = name
+        return sorted(self.faces.entries)
 
     def forget_face(self, face_id: int) -> bool:
         """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
@@ -375,26 +325,20 @@ class IdentityManagerBase:
         *new* face id after ``min_observations``.  Face ids are never reused within this manager.
         """
         fid = check_int("face_id", face_id, -(2**63))
-        face = self._list.entries.get(fid)
+        face = self.faces.entries.get(fid)
         if face is None:
             return False
-        lender = self._lent.pop(fid, None)
-        if lender is not None and lender in self._tracks and self._tracks[lender].face_id == fid:
-            self._tracks[lender].face_id = None  # a LOST track lent it: it holds nothing now
-            self._tracks[lender].confidence = 0.0
-        if face.track_id is None:
-            self._list.make_unavailable([fid])
-        else:
-            track = self._tracks.get(face.track_id)
-            if track is not None and track.face_id == fid:
-                track.face_id = None
-                track.confidence = 0.0
-                track.n_observations = 0
-                track.votes.clear()
-                track.inconsistent.clear()
-                self._pending_obs.pop(track.track_id, None)
-        self._bank.free_slot(face.slot)
-        del self._list.entries[fid]
+        lent_by = self._lent.take(fid)
+        lender = None if lent_by is None else self.tracks.entries.get(lent_by)
+        if lender is not None and lender.face_id == fid:
+            lender.face_id, lender.confidence = None, 0.0  # a LOST track lent it: it holds nothing now
+        track = None if face.track_id is None else self.tracks.entries.get(face.track_id)
+        if track is not None and track.face_id == fid:
+            track.face_id, track.confidence, track.n_observations = None, 0.0, 0
+            track.votes.clear()
+            track.inconsistent.clear()
+            self.tracks.pending.pop(track.track_id, None)
+        self.faces.forget(fid)
         if self.body_evidence is not None:
             self.body_evidence.forget_face(fid)
         self.stats.faces_forgotten += 1
@@ -403,38 +347,22 @@ class IdentityManagerBase:
     def eviction_order(self, exclude: Iterable[int] = ()) -> list[int]:
         """The unnamed faces of face_list (no live or lost track holds them) not in ``exclude``, least recently
         seen first: what the face cap may evict (named faces never)."""
-        return self._list.eviction_order(set(exclude) | set(self._lent))
-
-    def export_face(self, face_id: int) -> LearnedFace:
-        """Snapshot (copy) of one learned face, e.g. to save it when its track is released; KeyError if unknown."""
-        return self._list.export(face_id)
-
-    def export_faces(self) -> list[LearnedFace]:
-        """Snapshot of all learned faces (copies), for the persistent memory."""
-        return [self._list.export(fid) for fid in sorted(self._list.entries)]
-
-    def reserve_face_ids(self, highest_used_id: int) -> None:
-        """Never hand out face ids <= ``highest_used_id`` (ids of forgotten faces stay retired)."""
-        self._list.reserve_ids(check_int("highest_used_id", highest_used_id, 0))
-
-    def import_faces(self, faces: Iterable[LearnedFace]) -> None:
-        """Add previously exported faces to face_list; ValueError on an id clash or wrong dimension."""
-        self._list.import_faces(faces, self.embedding_dim)
+        return self.faces.eviction_order(set(exclude) | set(self._lent.lender))
 
     # ------------------------------------------------------------------------------ internals
     def _apply_decision(self, tid: int, face_or_new: int, confidence: float, stamp: float) -> IdentityEvent:
         """The classification decided an unassigned track: a new face from its buffered features (0) or a known
         face, which absorbs them."""
-        track = self._tracks[tid]
+        track = self.tracks.entries[tid]
         assert track.slot is not None, "a track is only classified after observations"
         if face_or_new == 0:
-            fid = self._list.new_id()  # the track's buffer becomes the new face's feature set
-            self._list.entries[fid] = FaceEntry(fid, track.slot, None, stamp, stamp, track.n_observations)
+            fid = self.faces.new_id()  # the track's buffer becomes the new face's feature set
+            self.faces.entries[fid] = FaceEntry(fid, track.slot, None, stamp, stamp, track.n_observations)
             kind = IdentityEventKind.NEW_FACE
             self.stats.new_faces += 1
         else:
             fid = face_or_new
-            face = self._list.entries[fid]
+            face = self.faces.entries[fid]
             self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
             self._bank.free_slot(track.slot)
             face.n_observations += track.n_observations
@@ -449,10 +377,10 @@ class IdentityManagerBase:
                    new: bool) -> None:
         """The track carries face ``fid`` from now on (a known face leaves face_list, taken from a LOST track that
         lent it); the bodies it gathered join the face's gallery."""
-        face = self._list.entries[fid]
+        face = self.faces.entries[fid]
         if not new:
             self._take_lent(fid, stamp)
-            self._list.make_unavailable([fid])
+            self.faces.make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track.track_id)
@@ -463,7 +391,7 @@ class IdentityManagerBase:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
-        self._list.make_available(fid)
+        self.faces.make_available(fid)
         track.face_id = None
         track.confidence = 0.0
         track.votes.clear()
@@ -472,13 +400,9 @@ class IdentityManagerBase:
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
-        self._dead[tid] = stamp
-        while len(self._dead) > self._DEAD_TRACK_MEMORY:
-            self._dead.popitem(last=False)
-        self._pending_obs.pop(tid, None)
         if self._bodies is not None:
             self._bodies.forget_track(tid)
-        track = self._tracks.pop(tid, None)
+        track = self.tracks.remove(tid, stamp)
         if track is None:
             return None
         if track.face_id is None:
@@ -486,10 +410,8 @@ class IdentityManagerBase:
                 self._bank.free_slot(track.slot)
             self._on_track_forgotten(tid)
             return None
-        if self._lent.get(track.face_id) == tid:  # already in face_list
-            del self._lent[track.face_id]
-        else:
-            self._list.make_available(track.face_id)
+        if not self._lent.returned(track.face_id, tid):  # a lent face is in face_list already
+            self.faces.make_available(track.face_id)
         self.stats.released += 1
         return IdentityEvent(IdentityEventKind.RELEASED, tid, track.face_id, stamp, track.confidence)
 

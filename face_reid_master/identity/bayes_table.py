@@ -110,7 +110,7 @@ class BayesIdentityManager(IdentityManagerBase):
     # ------------------------------------------------------------------------------ queries
     def posterior_table(self) -> tuple[FloatArray, list[int], list[int]]:
         """(copy of the table, track ids of rows 1..N, face ids of columns 1..M)."""
-        return self._table.copy(), list(self._rows), list(self._list.available)
+        return self._table.copy(), list(self._rows), list(self.faces.available)
 
     @property
     def is_normalised(self) -> bool:
@@ -127,7 +127,7 @@ class BayesIdentityManager(IdentityManagerBase):
             return {}
         p = self._table[row]
         out = {0: float(p[0])}
-        out.update({fid: float(v) for fid, v in zip(self._list.available, p[1:], strict=True)})
+        out.update({fid: float(v) for fid, v in zip(self.faces.available, p[1:], strict=True)})
         return out
 
     def _current_confidence(self, track: TrackEntry) -> float:
@@ -184,13 +184,13 @@ class BayesIdentityManager(IdentityManagerBase):
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
         sizes = np.array([o.shape[0] for o in observations])
         rows = np.array([self._row_of[t] for t in track_ids])
-        m = len(self._list.available)
+        m = len(self.faces.available)
         log_ev = np.empty((len(track_ids), m + 1))
         log_ev[:, 0] = sizes * self._log_c  # column 0: c per observation (ratio form, see module doc)
         lr = np.zeros((obs.shape[0], 0))
         if m:
-            d = self._list.distances(obs)
-            n_feats = self._bank.count[self._list.slots].astype(np.float64)[None, :]  # K of eq. 4
+            d = self.faces.distances(obs)
+            n_feats = self._bank.count[self.faces.slots].astype(np.float64)[None, :]  # K of eq. 4
             model = self.likelihood
             buckets = model.bucket_of(eye_px[0] if len(eye_px) == 1 else np.concatenate(eye_px)) \
                 if model.conditioned else None
@@ -240,7 +240,7 @@ class BayesIdentityManager(IdentityManagerBase):
         decisions = []
         for r in ok:
             col = int(best[r])
-            face = 0 if col == 0 else self._list.available[col - 1]
+            face = 0 if col == 0 else self.faces.available[col - 1]
             decisions.append((self._rows[r], face, float(p[r])))
         return decisions
 

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 import numpy.typing as npt
 
+from face_reid_camera.common.checks import check_int
 from face_reid_master.identity.entries import FaceEntry
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityStats, LearnedFace
@@ -33,6 +34,7 @@ class FaceList:
                  shortlist_faces: int, on_available: Callable[[int], None],
                  on_unavailable: Callable[[list[int]], None]) -> None:
         self.bank = bank
+        self.embedding_dim = bank.dim
         self.stats = stats
         self.exact_search_max_features = exact_search_max_features
         self.shortlist_faces = shortlist_faces
@@ -49,14 +51,35 @@ class FaceList:
             raise KeyError(f"unknown face id {face_id}")
         return face
 
+    def available_ids(self) -> list[int]:
+        """face_list: the learned faces no live track carries, in column order."""
+        return list(self.available)
+
+    def features(self, face_id: int) -> F32Array:
+        """Copy of a learned face's stored features (k, embedding_dim)."""
+        return self.bank.features(self.get(face_id).slot).copy()
+
+    def name(self, face_id: int) -> str | None:
+        return self.get(face_id).name
+
+    def set_name(self, face_id: int, name: str | None) -> None:
+        """Attach a (predefined-person) name to a learned face, or clear it with None."""
+        if name is not None and not isinstance(name, str):
+            raise ValueError(f"name must be a str or None, got {name!r}")
+        self.get(face_id).name = name
+
+    def export_all(self) -> list[LearnedFace]:
+        """Snapshot of all learned faces (copies), for the persistent memory."""
+        return [self.export(fid) for fid in sorted(self.entries)]
+
     def new_id(self) -> int:
         fid = self.next_id
         self.next_id += 1
         return fid
 
     def reserve_ids(self, highest_used_id: int) -> None:
-        """Never give ids <= ``highest_used_id``."""
-        self.next_id = max(self.next_id, highest_used_id + 1)
+        """Never give ids <= ``highest_used_id`` (ids of forgotten faces stay retired)."""
+        self.next_id = max(self.next_id, check_int("highest_used_id", highest_used_id, 0) + 1)
 
     def make_available(self, face_id: int) -> None:
         """The face joins face_list (the last column)."""
@@ -99,6 +122,20 @@ class FaceList:
             out[known] = d.min(axis=0)
         return out
 
+    def alike(self, face_id: int, others: list[int], limit: float | None) -> list[bool]:
+        """Which of ``others`` have features closer than ``limit`` to face ``face_id``'s (None: none; an unknown
+        face: not alike)."""
+        if limit is None:
+            return [False] * len(others)
+        return (self.min_distances(face_id, others) < limit).tolist()
+
+    def forget(self, face_id: int) -> None:
+        """Delete a learned face: out of face_list, its bank slot freed (its id is never given again)."""
+        face = self.entries.pop(face_id)
+        if face.track_id is None:
+            self.make_unavailable([face_id])
+        self.bank.free_slot(face.slot)
+
     def eviction_order(self, exclude: Iterable[int]) -> list[int]:
         """The unnamed faces of face_list not in ``exclude``, least recently seen first."""
         skip = set(exclude)
@@ -111,8 +148,9 @@ class FaceList:
         return LearnedFace(f.face_id, self.bank.features(f.slot).copy(), f.name, f.created_s, f.last_seen_s,
                            f.n_observations)
 
-    def import_faces(self, faces: Iterable[LearnedFace], embedding_dim: int) -> None:
+    def import_faces(self, faces: Iterable[LearnedFace]) -> None:
         """Add exported faces to face_list; ValueError on an id clash or another dimension (nothing added)."""
+        embedding_dim = self.embedding_dim
         batch = list(faces)
         seen: set[int] = set()
         for f in batch:

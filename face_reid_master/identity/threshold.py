@@ -41,7 +41,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
                            eye_px: list[npt.NDArray[np.float64]]) -> None:
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
-        d = self._list.distances(obs)
+        d = self.faces.distances(obs)
         if d.shape[1]:
             j = np.argmin(d, axis=1)
             dmin = d[np.arange(d.shape[0]), j]
@@ -50,17 +50,17 @@ class ThresholdIdentityManager(IdentityManagerBase):
             dmin = np.full(obs.shape[0], np.inf)
         pos = 0
         for tid, o in zip(track_ids, observations, strict=True):
-            votes = self._tracks[tid].votes
+            votes = self.tracks.entries[tid].votes
             for r in range(pos, pos + o.shape[0]):
                 if dmin[r] < self.distance_threshold:
-                    votes.append(Vote(self._list.available[int(j[r])], float(dmin[r])))
+                    votes.append(Vote(self.faces.available[int(j[r])], float(dmin[r])))
                 else:
                     votes.append(Vote(0, float(dmin[r])))
             pos += o.shape[0]
 
     def _tally(self, track: TrackEntry) -> tuple[int, float]:
         """(winner: face id or 0 = new, vote fraction) over votes for faces still in face_list."""
-        available = set(self._list.available)
+        available = set(self.faces.available)
         counts: dict[int, list[float]] = {}
         for vote in track.votes:
             if vote.face_id == 0 or vote.face_id in available:
@@ -83,7 +83,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
     def _decide(self) -> list[tuple[int, int, float]]:
         decisions = []
         taken: set[int] = set()
-        for track in self._tracks.values():
+        for track in self.tracks.entries.values():
             if track.face_id is not None or len(track.votes) < self.n_votes:
                 continue
             track.votes = [v for v in track.votes if v.face_id not in taken]
@@ -96,7 +96,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
     def _make_unavailable(self, face_ids: list[int]) -> None:
         super()._make_unavailable(face_ids)
         gone = set(face_ids)
-        for track in self._tracks.values():
+        for track in self.tracks.entries.values():
             if track.face_id is None and track.votes:
                 track.votes = [v for v in track.votes if v.face_id not in gone]
 

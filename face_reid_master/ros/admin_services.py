@@ -160,7 +160,7 @@ class AdminServices:
 
     def list_faces(self, request: Any, response: Any) -> Any:
         core = self.node.configured_core()
-        for face in core.identity.export_faces():
+        for face in core.identity.faces.export_all():
             response.face_ids.append(face.face_id)
             response.names.append(core.face_name(face.face_id))
             response.num_features.append(int(face.features.shape[0]))

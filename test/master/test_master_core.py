@@ -216,7 +216,7 @@ def test_embeddings_of_another_space_are_not_compared_and_noticed_once_per_camer
     assert len(notices) == 1 and "cam_sface" in notices[0] and "'sface_2021dec'" in notices[0], notices
     (track,) = core.tracks()  # one person, tracked from both cameras
     assert track.face_id != 0 and track.face_observations == 20
-    learned = core.identity.face_features(track.face_id)
+    learned = core.identity.faces.features(track.face_id)
     assert learned.shape[1] == 128  # the dlib half only
     assert np.min(np.linalg.norm(learned[:, None, :] - a[None, :5, :], axis=2), axis=1).max() < 1e-5
 

@@ -41,7 +41,7 @@ def person_obs(p: int, n: int, rng: np.random.Generator) -> np.ndarray:
 def manager_with_faces(n_faces: int, rng: np.random.Generator, **kw: object) -> BayesIdentityManager:
     """A Bayes manager that already learned persons 0..n_faces-1 as faces 1..n_faces (5 features each)."""
     m = BayesIdentityManager(**kw)  # type: ignore[arg-type]
-    m.import_faces([LearnedFace(j + 1, person_obs(j, 5, rng)) for j in range(n_faces)])
+    m.faces.import_faces([LearnedFace(j + 1, person_obs(j, 5, rng)) for j in range(n_faces)])
     return m
 
 

@@ -40,8 +40,8 @@ def test_known_person_is_assigned_after_min_observations() -> None:
     assert event_kinds(events) == [(ASSIGNED, 10, 2)]
     assert events[0].confidence > 0.95 and events[0].stamp_s == 0.2
     assert m.face_id_of(10) == 2 and m.confidence_of(10) == events[0].confidence
-    assert m.available_face_ids() == [1, 3]
-    assert len(m.face_features(2)) == 5 + 3  # the track's observations joined the face
+    assert m.faces.available_ids() == [1, 3]
+    assert len(m.faces.features(2)) == 5 + 3  # the track's observations joined the face
     assert m.posterior_of(10) == {}
 
 
@@ -52,8 +52,8 @@ def test_unknown_person_gets_a_new_face_id() -> None:
     for i in range(3):
         events += feed_one(m, 10, 5, rng, 0.1 * i)
     assert event_kinds(events) == [(NEW, 10, 4)]
-    assert m.face_ids() == [1, 2, 3, 4] and m.available_face_ids() == [1, 2, 3]
-    assert len(m.face_features(4)) == 3
+    assert m.face_ids() == [1, 2, 3, 4] and m.faces.available_ids() == [1, 2, 3]
+    assert len(m.faces.features(4)) == 3
 
 
 def test_first_person_ever_becomes_face_1() -> None:
@@ -73,7 +73,7 @@ def test_track_death_releases_the_face_which_is_assignable_again() -> None:
     m.track_deleted(10, 1.0)
     events = m.step(1.0)
     assert event_kinds(events) == [(RELEASED, 10, 2)]
-    assert m.face_id_of(10) is None and m.available_face_ids() == [1, 3, 2]
+    assert m.face_id_of(10) is None and m.faces.available_ids() == [1, 3, 2]
     events = []
     for i in range(3):
         events += feed_one(m, 11, 1, rng, 2.0 + 0.1 * i)
@@ -98,14 +98,14 @@ def test_assigned_track_keeps_extending_its_face_within_the_bound() -> None:
     rng = np.random.default_rng(6)
     m = manager_with_faces(2, rng, min_observations=1, max_features_per_face=8)
     feed_one(m, 10, 0, rng, 0.0)
-    assert m.face_id_of(10) == 1 and len(m.face_features(1)) == 6
+    assert m.face_id_of(10) == 1 and len(m.faces.features(1)) == 6
     m.add_observations(10, person_obs(0, 2, rng), 0.1)
     m.step(0.1)
-    assert len(m.face_features(1)) == 8
+    assert len(m.faces.features(1)) == 8
     for i in range(10):
         feed_one(m, 10, 0, rng, 0.2 + 0.1 * i)
-    assert len(m.face_features(1)) == 8
-    faces = {f.face_id: f for f in m.export_faces()}
+    assert len(m.faces.features(1)) == 8
+    faces = {f.face_id: f for f in m.faces.export_all()}
     assert faces[1].n_observations == 1 + 2 + 10  # the import said 0 observations
     assert faces[1].last_seen_s == pytest.approx(1.1)
 
@@ -124,7 +124,7 @@ def test_decided_and_deleted_in_the_same_step_gives_new_then_released() -> None:
     m.add_observations(10, person_obs(0, 2, rng), 0.0)
     m.track_deleted(10, 0.0)
     assert event_kinds(m.step(0.0)) == [(NEW, 10, 1), (RELEASED, 10, 1)]
-    assert m.available_face_ids() == [1]
+    assert m.faces.available_ids() == [1]
 
 
 def test_late_observations_of_deleted_tracks_are_ignored() -> None:
@@ -134,7 +134,7 @@ def test_late_observations_of_deleted_tracks_are_ignored() -> None:
     m.track_deleted(10, 0.1)
     assert m.step(0.1) == []
     assert m.add_observations(10, person_obs(0, 1, rng), 0.2) is False
-    assert m.step(0.2) == [] and m.live_track_ids() == []
+    assert m.step(0.2) == [] and list(m.tracks.entries) == []
     assert m.stats.observations_ignored_dead_track == 1
     assert m.posterior_table()[1] == []
 
@@ -154,7 +154,7 @@ def test_bad_embeddings_raise_value_error(emb: np.ndarray) -> None:
     m = BayesIdentityManager()
     with pytest.raises(ValueError):
         m.add_observations(1, emb, 0.0)
-    assert m.live_track_ids() == []
+    assert list(m.tracks.entries) == []
 
 
 @pytest.mark.parametrize("track_id", [1.5, "3", True, None])
@@ -174,22 +174,22 @@ def test_export_import_roundtrip_continues_face_ids() -> None:
     for t in range(2):
         feed_one(m, 1, 0, rng, t)
         feed_one(m, 2, 1, rng, t)
-    m.set_face_name(2, "Ada")
-    exported = m.export_faces()
+    m.faces.set_name(2, "Ada")
+    exported = m.faces.export_all()
     assert [f.face_id for f in exported] == [1, 2] and exported[1].name == "Ada"
     fresh = BayesIdentityManager(min_observations=2)
-    fresh.import_faces(exported)
-    assert fresh.face_ids() == [1, 2] and fresh.face_name(2) == "Ada"
-    np.testing.assert_array_equal(fresh.face_features(1), m.face_features(1))
+    fresh.faces.import_faces(exported)
+    assert fresh.face_ids() == [1, 2] and fresh.faces.name(2) == "Ada"
+    np.testing.assert_array_equal(fresh.faces.features(1), m.faces.features(1))
     events = []
     for t in range(3):
         events += feed_one(fresh, 9, 1, rng, t)  # person 1 again: known
         events += feed_one(fresh, 8, 3, rng, t)  # someone new: id 3
     assert sorted(event_kinds(events)) == sorted([(ASSIGNED, 9, 2), (NEW, 8, 3)])
     with pytest.raises(ValueError, match="already exists"):
-        fresh.import_faces([LearnedFace(1, np.zeros((1, DIM), np.float32))])
+        fresh.faces.import_faces([LearnedFace(1, np.zeros((1, DIM), np.float32))])
     with pytest.raises(ValueError, match="dim"):
-        fresh.import_faces([LearnedFace(7, np.zeros((1, 64), np.float32))])
+        fresh.faces.import_faces([LearnedFace(7, np.zeros((1, 64), np.float32))])
     with pytest.raises(ValueError):
         LearnedFace(0, np.zeros((1, DIM)))
     with pytest.raises(ValueError):
@@ -240,15 +240,15 @@ def test_random_operation_sequences_keep_invariants(ops: list, method: str, seed
         assigned = m.assigned_tracks()
         faces = list(assigned.values())
         assert len(faces) == len(set(faces))  # one face per live track, never shared
-        assert set(m.available_face_ids()) == set(m.face_ids()) - set(faces)
+        assert set(m.faces.available_ids()) == set(m.face_ids()) - set(faces)
         assert m.face_ids() == list(range(1, len(m.face_ids()) + 1))  # stable ids from 1
         for f in m.face_ids():
-            assert 1 <= len(m.face_features(f)) <= 4
-        for tid in m.live_track_ids():
+            assert 1 <= len(m.faces.features(f)) <= 4
+        for tid in list(m.tracks.entries):
             assert 0.0 <= m.confidence_of(tid) <= 1.0
         if isinstance(m, BayesIdentityManager):
             p, rows, cols = m.posterior_table()
-            assert p.shape == (1 + len(rows), 1 + len(cols)) and cols == m.available_face_ids()
+            assert p.shape == (1 + len(rows), 1 + len(cols)) and cols == m.faces.available_ids()
             assert not set(rows) & set(assigned)
             assert p[0, 0] == 0.0 and np.all((p >= 0.0) & (p <= 1.0))
             if m.is_normalised and rows:
@@ -316,17 +316,17 @@ def test_forget_available_face_removes_it_and_its_table_column() -> None:
     feed_one(m, 10, 1, rng, 0.0)  # an unassigned track with evidence for face 2
     assert m.posterior_of(10)[2] > 0.5
     assert m.forget_face(2) is True
-    assert m.face_ids() == [1, 3] and m.available_face_ids() == [1, 3]
+    assert m.face_ids() == [1, 3] and m.faces.available_ids() == [1, 3]
     assert 2 not in m.posterior_of(10) and m.posterior_table()[2] == [1, 3]
-    assert [f.face_id for f in m.export_faces()] == [1, 3]
+    assert [f.face_id for f in m.faces.export_all()] == [1, 3]
     with pytest.raises(KeyError):
-        m.face_features(2)
+        m.faces.features(2)
     assert m.forget_face(2) is False and m.forget_face(99) is False
     assert m.stats.faces_forgotten == 1
     # person 1 is now a stranger: a new id, never the forgotten one, holding only the new observations
     events = feed_one(m, 10, 1, rng, 0.1) + feed_one(m, 10, 1, rng, 0.2)
     assert event_kinds(events) == [(NEW, 10, 4)]
-    assert len(m.face_features(4)) == 3
+    assert len(m.faces.features(4)) == 3
     with pytest.raises(ValueError):
         m.forget_face("2")  # type: ignore[arg-type]
 
@@ -340,18 +340,18 @@ def test_forget_face_of_a_live_track_makes_the_track_unidentified_again() -> Non
     m.add_observations(10, person_obs(1, 2, rng), 0.5)  # queued before the forget: dropped with the face
     assert m.forget_face(2)
     assert m.face_id_of(10) is None and m.assigned_tracks() == {} and m.confidence_of(10) == 0.0
-    assert m.face_ids() == [1, 3] and m.available_face_ids() == [1, 3]
-    assert 10 in m.live_track_ids()
+    assert m.face_ids() == [1, 3] and m.faces.available_ids() == [1, 3]
+    assert 10 in list(m.tracks.entries)
     assert m.step(0.6) == []  # the queued observations were dropped: nothing to classify
     assert m.posterior_of(10) == {}
     events = []
     for i in range(3):  # still in view: learned again, from scratch, under a new id
         events += feed_one(m, 10, 1, rng, 1.0 + 0.1 * i)
     assert event_kinds(events) == [(NEW, 10, 4)]
-    assert len(m.face_features(4)) == 3 and m.export_faces()[-1].n_observations == 3
+    assert len(m.faces.features(4)) == 3 and m.faces.export_all()[-1].n_observations == 3
     m.track_deleted(10, 2.0)
     assert event_kinds(m.step(2.0)) == [(RELEASED, 10, 4)]
-    assert m.available_face_ids() == [1, 3, 4]
+    assert m.faces.available_ids() == [1, 3, 4]
 
 
 def test_forget_face_of_a_track_being_deleted_emits_no_release() -> None:
@@ -362,7 +362,7 @@ def test_forget_face_of_a_track_being_deleted_emits_no_release() -> None:
     assert m.face_id_of(10) == 1
     m.track_deleted(10, 1.0)
     assert m.forget_face(1)
-    assert m.step(1.0) == [] and m.face_ids() == [] and m.live_track_ids() == []
+    assert m.step(1.0) == [] and m.face_ids() == [] and list(m.tracks.entries) == []
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -402,13 +402,13 @@ def test_random_sequences_with_forget_keep_invariants(ops: list, method: str) ->
             m.step(t)
         faces = list(m.assigned_tracks().values())
         assert len(faces) == len(set(faces))
-        assert set(m.available_face_ids()) == set(m.face_ids()) - set(faces)
+        assert set(m.faces.available_ids()) == set(m.face_ids()) - set(faces)
         assert not forgotten & set(m.face_ids())  # a forgotten id never comes back
         for f in m.face_ids():
-            assert 1 <= len(m.face_features(f)) <= 4
+            assert 1 <= len(m.faces.features(f)) <= 4
         if isinstance(m, BayesIdentityManager):
             p, rows, cols = m.posterior_table()
-            assert p.shape == (1 + len(rows), 1 + len(cols)) and cols == m.available_face_ids()
+            assert p.shape == (1 + len(rows), 1 + len(cols)) and cols == m.faces.available_ids()
             assert not set(rows) & set(m.assigned_tracks())
 
 
@@ -417,17 +417,17 @@ def test_export_face_snapshots_one_face() -> None:
     m = BayesIdentityManager(min_observations=2)
     for t in range(2):
         feed_one(m, 1, 0, rng, 10.0 + t)
-    one = m.export_face(1)
-    (all_,) = m.export_faces()
+    one = m.faces.export(1)
+    (all_,) = m.faces.export_all()
     assert (one.face_id, one.name, one.created_s, one.last_seen_s, one.n_observations) == (1, None, 11.0, 11.0, 2)
     assert one.features.tobytes() == all_.features.tobytes() and one.n_observations == all_.n_observations
     one.features[:] = 0.0  # a copy: the manager is unaffected
-    assert np.any(m.face_features(1) != 0.0)
+    assert np.any(m.faces.features(1) != 0.0)
     feed_one(m, 1, 0, rng, 12.0)
-    assert m.export_face(1).n_observations == 3 and m.export_face(1).last_seen_s == 12.0
+    assert m.faces.export(1).n_observations == 3 and m.faces.export(1).last_seen_s == 12.0
     m.forget_face(1)
     with pytest.raises(KeyError):
-        m.export_face(1)
+        m.faces.export(1)
 
 
 @pytest.mark.parametrize("method", ["bayes", "threshold"])
@@ -439,12 +439,12 @@ def test_feature_gate_keeps_a_swapped_persons_features_out_of_the_face(method: s
         rng = np.random.default_rng(11)
         m = make_identity_manager(method, min_observations=1, feature_gate_distance=gate) if method == "bayes" \
             else make_identity_manager(method, n_votes=1, feature_gate_distance=gate)
-        m.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
+        m.faces.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
         feed_one(m, 10, 0, rng, 0.0)
         assert m.face_id_of(10) == 1
         for i in range(6):  # swapped: the track now follows person 1
             feed_one(m, 10, 1, rng, 0.1 * (i + 1))
-        feats = m.face_features(1)
+        feats = m.faces.features(1)
         learned[gate] = feats
         of_person_1 = (np.linalg.norm(feats - CENTRES[1][None, :], axis=1)
                        < np.linalg.norm(feats - CENTRES[0][None, :], axis=1))
@@ -464,7 +464,7 @@ def test_a_swapped_track_gives_its_face_back_and_is_identified_afresh(method: st
     rng = np.random.default_rng(5)
     kw = {"min_observations": 3} if method == "bayes" else {"n_votes": 3}
     m = make_identity_manager(method, feature_gate_distance=0.6, release_after_inconsistent=3, **kw)
-    m.import_faces([LearnedFace(1, person_obs(0, 5, rng)), LearnedFace(2, person_obs(1, 5, rng))])
+    m.faces.import_faces([LearnedFace(1, person_obs(0, 5, rng)), LearnedFace(2, person_obs(1, 5, rng))])
     events = [e for t in range(3) for e in feed_one(m, 10, 0, rng, 0.1 * t)]
     assert event_kinds(events) == [(ASSIGNED, 10, 1)]
     for t, person in ((0.3, 1), (0.4, 1), (0.5, 0), (0.6, 1), (0.7, 1)):  # two odd faces, then the face again
@@ -474,8 +474,8 @@ def test_a_swapped_track_gives_its_face_back_and_is_identified_afresh(method: st
     kinds = event_kinds(events)
     assert kinds[0] == (SWAPPED, 10, 1) and events[0].since_s == pytest.approx(0.6)
     assert kinds[1:] == [(ASSIGNED, 10, 2)]  # the three faces of person 1 decide at once
-    assert m.stats.swaps_released == 1 and m.face_id_of(10) == 2 and 1 in m.available_face_ids()
-    feats = m.face_features(1)
+    assert m.stats.swaps_released == 1 and m.face_id_of(10) == 2 and 1 in m.faces.available_ids()
+    feats = m.faces.features(1)
     assert np.all(np.linalg.norm(feats - CENTRES[0][None, :], axis=1) < 0.5)  # face 1 kept person 0 only
 
 
@@ -486,7 +486,7 @@ def test_release_after_inconsistent_needs_the_gate_and_zero_never_releases() -> 
         make_identity_manager("bayes", feature_gate_distance=0.6, release_after_inconsistent=-1)
     rng = np.random.default_rng(6)
     m = make_identity_manager("bayes", feature_gate_distance=0.6, release_after_inconsistent=0)
-    m.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
+    m.faces.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
     for t in range(3):
         feed_one(m, 10, 0, rng, 0.1 * t)
     for t in range(10):
@@ -501,11 +501,11 @@ def test_a_lost_tracks_face_goes_to_the_persons_new_track() -> None:
     m = manager_with_faces(3, rng, min_observations=3, lend_lost_faces=True)
     for i in range(3):
         feed_one(m, 10, 1, rng, 0.1 * i)
-    assert m.face_id_of(10) == 2 and 2 not in m.available_face_ids()
+    assert m.face_id_of(10) == 2 and 2 not in m.faces.available_ids()
     m.track_lost(10)
-    assert 2 in m.available_face_ids() and m.face_id_of(10) == 2  # lent, still its
+    assert 2 in m.faces.available_ids() and m.face_id_of(10) == 2  # lent, still its
     m.track_recovered(10)
-    assert 2 not in m.available_face_ids() and m.face_id_of(10) == 2
+    assert 2 not in m.faces.available_ids() and m.face_id_of(10) == 2
     m.track_lost(10)
     events = []
     for i in range(3):
@@ -516,7 +516,7 @@ def test_a_lost_tracks_face_goes_to_the_persons_new_track() -> None:
     assert m.face_id_of(10) is None and m.face_id_of(11) == 2
     m.track_deleted(10, 2.0)
     m.step(2.0)
-    assert 2 not in m.available_face_ids() and m.face_id_of(11) == 2
+    assert 2 not in m.faces.available_ids() and m.face_id_of(11) == 2
 
 
 def test_a_lost_track_deleted_while_its_face_is_lent_gives_it_back_once() -> None:
@@ -527,6 +527,6 @@ def test_a_lost_track_deleted_while_its_face_is_lent_gives_it_back_once() -> Non
     m.track_lost(10)
     m.track_deleted(10, 1.0)
     m.step(1.0)
-    assert m.available_face_ids().count(2) == 1 and m.face_id_of(10) is None
+    assert m.faces.available_ids().count(2) == 1 and m.face_id_of(10) is None
     m.track_lost(10)  # late news of a deleted track: nothing happens
-    assert m.available_face_ids().count(2) == 1
+    assert m.faces.available_ids().count(2) == 1

@@ -46,7 +46,7 @@ def _two_by_two(c: float, iterations: int, solver: str = "sinkhorn") -> BayesIde
         sinkhorn_tolerance=1e-13,
         sinkhorn_solver=solver,
     )
-    m.import_faces([LearnedFace(1, np.zeros((1, DIM), np.float32)), LearnedFace(2, unit_vector(0)[None])])
+    m.faces.import_faces([LearnedFace(1, np.zeros((1, DIM), np.float32)), LearnedFace(2, unit_vector(0)[None])])
     m.add_observations(100, np.zeros((1, DIM), np.float32), 0.0)  # d = 0 to face 1, 1 to face 2
     m.add_observations(200, unit_vector(0, 0.5)[None], 0.0)  # d = 0.5 to both faces
     assert m.step(0.0) == []
@@ -117,7 +117,7 @@ def test_ratio_form_equals_the_papers_product_of_eq5_over_faces() -> None:
     m = BayesIdentityManager(
         SIMPLE, min_observations=1000, sinkhorn_max_iterations=5000, sinkhorn_tolerance=1e-13
     )
-    m.import_faces([LearnedFace(j + 1, f) for j, f in enumerate(faces)])
+    m.faces.import_faces([LearnedFace(j + 1, f) for j, f in enumerate(faces)])
     for tid, o in obs.items():
         m.add_observations(tid, o, 0.0)
     m.step(0.0)
@@ -177,7 +177,7 @@ def test_min_of_k_likelihood_prevents_merging_a_stranger_into_a_well_learned_fac
         ("min_of_k", clean_photo_fit.with_k_exponents(0.538, 0.339)),  # opt-in --fit-min-of-k
     ):
         m = BayesIdentityManager(model, min_observations=3)
-        m.import_faces([LearnedFace(1, face)])
+        m.faces.import_faces([LearnedFace(1, face)])
         events = []
         for i in range(3):
             m.add_observations(5, stranger[i : i + 1], float(i))

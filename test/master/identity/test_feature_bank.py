@@ -31,7 +31,7 @@ def test_diverse_subset_beats_fifo_on_a_clustered_set() -> None:
     for i in range(0, len(feats), 3):
         m.add_observations(1, feats[i : i + 3], float(i))
         m.step(float(i))
-    stored = m.face_features(1)
+    stored = m.faces.features(1)
     assert len(stored) == 10 and _min_pairwise(stored) >= _min_pairwise(fifo)
     assert len({int(np.argmin(((views - s) ** 2).sum(1))) for s in stored}) == 5
 
@@ -46,7 +46,7 @@ def test_incremental_insertion_matches_greedy_selection() -> None:
         m.step(float(i))
         allf = np.concatenate([reference, x])
         reference = allf[select_diverse_subset(allf, 6)]
-        got = m.face_features(1)
+        got = m.faces.features(1)
         assert sorted(map(tuple, got.round(5))) == sorted(map(tuple, reference.round(5)))
 
 
@@ -66,7 +66,7 @@ def test_batched_insertion_for_several_identified_tracks_matches_greedy_selectio
     assert sorted(m.assigned_tracks()) == [1, 2, 3, 4]
     for tid, fid in m.assigned_tracks().items():
         expected = history[tid][select_diverse_subset(history[tid], 5)]
-        got = m.face_features(fid)
+        got = m.faces.features(fid)
         assert sorted(map(tuple, got.round(5))) == sorted(map(tuple, expected.round(5)))
 
 
@@ -79,12 +79,12 @@ def test_bank_distances_match_float64_reference_in_exact_and_shortlist_modes() -
     obs = np.concatenate([faces[3][:1], faces[40][:1], rng.normal(0, 0.06, (1, DIM))]).astype(np.float32)
     ref = min_distances_to_faces(obs, faces)
     exact = BayesIdentityManager()
-    exact.import_faces(LearnedFace(i + 1, f) for i, f in enumerate(faces))
+    exact.faces.import_faces(LearnedFace(i + 1, f) for i, f in enumerate(faces))
     # float32 ||a||^2 + ||b||^2 - 2ab: squared distances exact to ~1e-6 (d = 0 reads as ~3e-4)
-    np.testing.assert_allclose(exact._list.distances(obs) ** 2, ref**2, atol=2e-6)
+    np.testing.assert_allclose(exact.faces.distances(obs) ** 2, ref**2, atol=2e-6)
     short = BayesIdentityManager(exact_search_max_features=10, shortlist_faces=8)
-    short.import_faces(LearnedFace(i + 1, f) for i, f in enumerate(faces))
-    d = short._list.distances(obs)
+    short.faces.import_faces(LearnedFace(i + 1, f) for i, f in enumerate(faces))
+    d = short.faces.distances(obs)
     assert short.stats.shortlist_searches == 1
     assert np.all(np.isfinite(d).sum(axis=1) == 8)
     np.testing.assert_allclose(d[np.isfinite(d)] ** 2, ref[np.isfinite(d)] ** 2, atol=2e-6)

@@ -88,10 +88,10 @@ class ScenarioRun:
         for face in step.get("forget") or ():
             assert m.forget_face(int(face)), f"face {face} to forget is not learned"
         if step.get("restart"):
-            saved = m.export_faces()
+            saved = m.faces.export_all()
             self.manager = self._new_manager()
-            self.manager.import_faces(saved)
-            self.manager.reserve_face_ids(max((f.face_id for f in saved), default=0))
+            self.manager.faces.import_faces(saved)
+            self.manager.faces.reserve_ids(max((f.face_id for f in saved), default=0))
         return events
 
 

@@ -14,7 +14,7 @@ from face_reid_master.identity.threshold import ThresholdIdentityManager
 def test_threshold_baseline_decides_by_majority_after_n_votes() -> None:
     rng = np.random.default_rng(13)
     m = ThresholdIdentityManager(distance_threshold=0.6, n_votes=5)
-    m.import_faces([LearnedFace(j + 1, person_obs(j, 5, rng)) for j in range(3)])
+    m.faces.import_faces([LearnedFace(j + 1, person_obs(j, 5, rng)) for j in range(3)])
     far = [person_obs(6, 1, rng), person_obs(7, 1, rng)]  # 2 votes "new"
     near = [person_obs(1, 1, rng) for _ in range(3)]  # 3 votes for face 2
     for i, o in enumerate([near[0], far[0], near[1], far[1]]):
@@ -34,7 +34,7 @@ def test_threshold_baseline_decides_by_majority_after_n_votes() -> None:
 def test_threshold_baseline_tie_goes_to_new_face() -> None:
     rng = np.random.default_rng(14)
     m = make_identity_manager("threshold", distance_threshold=0.6, n_votes=4)
-    m.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
+    m.faces.import_faces([LearnedFace(1, person_obs(0, 5, rng))])
     m.add_observations(3, np.concatenate([person_obs(0, 2, rng), person_obs(4, 2, rng)]), 0.0)
     assert event_kinds(m.step(0.0)) == [(NEW, 3, 2)]
 
@@ -42,7 +42,7 @@ def test_threshold_baseline_tie_goes_to_new_face() -> None:
 def test_threshold_forget_face_drops_votes_for_it() -> None:
     rng = np.random.default_rng(33)
     m = ThresholdIdentityManager(distance_threshold=0.6, n_votes=3)
-    m.import_faces([LearnedFace(j + 1, person_obs(j, 5, rng)) for j in range(3)])
+    m.faces.import_faces([LearnedFace(j + 1, person_obs(j, 5, rng)) for j in range(3)])
     for i in range(2):
         m.add_observations(10, person_obs(1, 1, rng), 0.1 * i)
         assert m.step(0.1 * i) == []

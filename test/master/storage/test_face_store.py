@@ -121,14 +121,14 @@ def test_identity_manager_export_import_through_the_store(db: Path) -> None:
     for t in range(2):
         m.add_observations(1, (centre + rng.normal(0, 0.02, (1, DIM))).astype(np.float32), t)
         m.step(t)
-    m.set_face_name(1, "Eve")
+    m.faces.set_name(1, "Eve")
     with FaceStore(db) as store:
-        store.save_faces(m.export_faces())
+        store.save_faces(m.faces.export_all())
     fresh = BayesIdentityManager(min_observations=2)
     with FaceStore(db) as store:
-        fresh.import_faces(store.load_faces())
-    assert fresh.face_ids() == [1] and fresh.face_name(1) == "Eve"
-    assert fresh.face_features(1).tobytes() == m.face_features(1).tobytes()
+        fresh.faces.import_faces(store.load_faces())
+    assert fresh.face_ids() == [1] and fresh.faces.name(1) == "Eve"
+    assert fresh.faces.features(1).tobytes() == m.faces.features(1).tobytes()
 
 
 def test_bad_input_raises_clear_errors(db: Path) -> None:

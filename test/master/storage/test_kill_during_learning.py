@@ -38,7 +38,7 @@ while True:
                                                                    0.8),)))
     fids = list(core.identity.assigned_tracks().values())
     if fids:
-        print(f"{t:.6f} {fids[0]} {core.identity.export_face(fids[0]).n_observations}", flush=True)
+        print(f"{t:.6f} {fids[0]} {core.identity.faces.export(fids[0]).n_observations}", flush=True)
     time.sleep(0.05)
 """
 
