@@ -45,11 +45,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose, depth_to_points
 from face_reid_camera.common.param_table import param, validate_fields
 from face_reid_camera.people.ground_plane import GroundFit, GroundPlane, fit_ground_plane
+from face_reid_camera.people.heads import OVERHEAD_RANGE_M, FloorGrid, HeadFinder, principal_width
 
 __all__ = [
     "FloorCheck",
@@ -61,20 +61,12 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-# A head needs at least this many lower cells (shoulders) in its ring, and this many cells (its top
-# included) within _HEAD_CAP_RADIUS_M less than head_min_drop_m below its top.
-_MIN_RING_CELLS = 2
-_MIN_CAP_CELLS = 3
-_HEAD_CAP_RADIUS_M = 0.1
 # The head position is averaged over its cap cells less than this below the top (metres).
 _HEAD_CAP_DROP_M = 0.1
 # The support band needs this many voxels to count as evidence (fewer: legs hidden or out of view).
 _MIN_SUPPORT_VOXELS = 3
-# Heads closer than this (horizontally) to the camera are seen from above: no line-of-sight sides.
-_OVERHEAD_RANGE_M = 0.3
 # Points more than this above max_person_height_m are ignored (ceilings, lamps, upper walls).
 _ABOVE_MAX_HEIGHT_MARGIN_M = 0.3
-_EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -267,22 +259,6 @@ class PersonDetectionResult:
     num_cut_by_border: int = 0  # person-shaped clusters whose top is at the image border (depth images only)
 
 
-@dataclass
-class _FloorGrid:
-    """Voxels projected on the floor plane: coordinates, dense height map and its 2-D clusters."""
-
-    u: FloatArray  # (N,) floor coordinates of the voxels (m): p = u axis_u + v axis_v + h' normal
-    v: FloatArray
-    axis_u: FloatArray  # (3,) unit floor axes in the camera frame
-    axis_v: FloatArray
-    flat: NDArray[np.intp]  # (N,) flat grid cell of each voxel
-    shape: tuple[int, int]
-    height_map: FloatArray  # (cells,) highest voxel height per cell, -inf if empty
-    top_voxel: NDArray[np.intp]  # (cells,) index of that highest voxel, -1 if empty
-    labels: NDArray[np.intp]  # (cells,) 2-D cluster label of occupied cells, 0 if empty
-    n_clusters: int
-
-
 def _voxel_centroids(points: FloatArray, voxel_size_m: float) -> FloatArray:
     """Mean point of every occupied voxel (integer keys, one stable argsort, bincount sums)."""
     cells = np.floor(points * (1.0 / voxel_size_m)).astype(np.int64)
@@ -321,18 +297,7 @@ class PersonDetector:
         self._rng = np.random.default_rng(None if self.config.random_seed < 0 else self.config.random_seed)
         self._frames_unseen = 0  # frames in a row whose pose-seeded floor search failed
         self.floor_check: FloorCheck | None = None  # the latest check of the pose against the measured floor
-        # Height-map geometry (cells of voxel_size_m): peak footprint, head ring offsets, gap bridging.
-        cell = self.config.voxel_size_m
-        reach = math.ceil(self.config.head_annulus_outer_m / cell)
-        di, dj = np.mgrid[-reach : reach + 1, -reach : reach + 1]
-        dist = np.hypot(di, dj) * cell
-        in_ring = (dist >= self.config.head_annulus_inner_m) & (dist <= self.config.head_annulus_outer_m)
-        self._ring_di, self._ring_dj = di[in_ring], dj[in_ring]
-        self._ring_radius_cells = reach
-        in_cap = dist <= max(_HEAD_CAP_RADIUS_M, 1.5 * cell)
-        self._cap_di, self._cap_dj = di[in_cap], dj[in_cap]
-        self._peak_footprint = np.hypot(*np.mgrid[-2:3, -2:3]) <= 1.75
-        self._bridge_cells = max(0, round(self.config.cluster_tolerance_m / cell) - 1)
+        self._head_finder = HeadFinder(self.config)  # the height map and the heads on it
 
     @property
     def last_ground_plane(self) -> GroundPlane | None:
@@ -497,14 +462,14 @@ class PersonDetector:
     ) -> tuple[list[PersonCandidate], int, int]:
         """Height map, 2-D clusters, prominent heads, sub-clusters and person filters (see module doc)."""
         cfg = self.config
-        grid = self._floor_grid(obj, obj_h, plane)
-        heads = self._heads(grid, obj_h)
+        grid = self._head_finder.floor_grid(obj, obj_h, plane)
+        heads = self._head_finder.heads(grid, obj_h)
         if heads.size == 0:
             return [], grid.n_clusters, 0
         tops = grid.top_voxel[heads]
         head_l = grid.labels[heads]
         # Head position on the floor: mean of the head cap's top voxels (one voxel is noisy far away).
-        cap = heads[:, None] + (self._cap_di * grid.shape[1] + self._cap_dj)[None, :]
+        cap = heads[:, None] + (self._head_finder.cap_di * grid.shape[1] + self._head_finder.cap_dj)[None, :]
         cap_top = grid.top_voxel[cap]
         in_cap = (grid.labels[cap] == head_l[:, None]) & (
             grid.height_map[cap] > grid.height_map[heads][:, None] - _HEAD_CAP_DROP_M
@@ -534,7 +499,7 @@ class PersonDetector:
             if members.size < cfg.min_cluster_points:
                 continue
             upper = members[obj_h[members] >= height - cfg.upper_body_depth_m]
-            width = self._width(grid.u[upper], grid.v[upper])
+            width = principal_width(grid.u[upper], grid.v[upper])
             if not (cfg.min_person_width_m <= width <= cfg.max_person_width_m):
                 continue
             if self._thin_support(members, obj_h, grid, head_u[k], head_v[k]):
@@ -565,7 +530,7 @@ class PersonDetector:
         v = intrinsics.fy * float(top_cam[1]) / z + intrinsics.cy
         return v >= margin and margin <= u <= intrinsics.width - 1 - margin
 
-    def _thin_support(self, members: NDArray[np.intp], obj_h: FloatArray, grid: _FloorGrid, head_u: float,
+    def _thin_support(self, members: NDArray[np.intp], obj_h: FloatArray, grid: FloorGrid, head_u: float,
                       head_v: float) -> bool:
         """Depth shape check: the person's voxels in the support band (legs) span less than min_support_width_m
         across the line of sight. A band hidden or out of view (too few voxels) is no evidence either way."""
@@ -577,151 +542,7 @@ class PersonDetector:
         if band.size < _MIN_SUPPORT_VOXELS:
             return False
         norm = math.hypot(head_u, head_v)
-        if norm < _OVERHEAD_RANGE_M:  # seen from above: no line of sight across the legs
+        if norm < OVERHEAD_RANGE_M:  # seen from above: no line of sight across the legs
             return False
         lateral = (grid.v[band] * head_u - grid.u[band] * head_v) / norm
         return float(lateral.max() - lateral.min()) < cfg.min_support_width_m
-
-    def _floor_grid(self, obj: FloatArray, obj_h: FloatArray, plane: GroundPlane) -> _FloorGrid:
-        """Height map of the voxels on a padded floor-plane grid and its 8-connected clusters."""
-        cell = self.config.voxel_size_m
-        normal = plane.normal
-        axis_u = np.array([1.0, 0.0, 0.0]) - normal[0] * normal  # camera x projected on the floor
-        if np.linalg.norm(axis_u) < 1e-6:
-            axis_u = np.array([0.0, 0.0, 1.0]) - normal[2] * normal
-        axis_u /= np.linalg.norm(axis_u)
-        axis_v = np.cross(normal, axis_u)
-        u, v = obj @ axis_u, obj @ axis_v  # the camera is at u = v = 0
-
-        pad = self._ring_radius_cells + 1  # ring/cap lookups never leave the grid
-        iu = np.floor(u * (1.0 / cell)).astype(np.intp)
-        iv = np.floor(v * (1.0 / cell)).astype(np.intp)
-        iu -= iu.min() - pad
-        iv -= iv.min() - pad
-        shape = (int(iu.max()) + pad + 1, int(iv.max()) + pad + 1)
-        flat = iu * shape[1] + iv
-        height_map = np.full(shape[0] * shape[1], -np.inf)
-        np.maximum.at(height_map, flat, obj_h)
-        top_voxel = np.full(height_map.size, -1)
-        is_top = obj_h >= height_map[flat]
-        top_voxel[flat[is_top]] = np.flatnonzero(is_top)
-
-        occupied = (height_map > -np.inf).reshape(shape)
-        bridged = occupied  # gaps narrower than cluster_tolerance_m are bridged before labelling
-        if self._bridge_cells > 0:
-            bridged = ndimage.binary_dilation(
-                occupied, structure=_EIGHT_CONNECTED, iterations=self._bridge_cells
-            )
-        labels, n_clusters = ndimage.label(bridged, structure=_EIGHT_CONNECTED)
-        return _FloorGrid(
-            u,
-            v,
-            axis_u,
-            axis_v,
-            flat,
-            shape,
-            height_map,
-            top_voxel,
-            np.where(occupied, labels, 0).ravel(),
-            n_clusters,
-        )
-
-    def _heads(self, grid: _FloorGrid, obj_h: FloatArray) -> NDArray[np.intp]:
-        """Flat indices of the head cells: prominent local maxima, non-maximum suppressed."""
-        cfg = self.config
-        hmap, labels, width = grid.height_map, grid.labels, grid.shape[1]
-        local_max = ndimage.maximum_filter(
-            hmap.reshape(grid.shape), footprint=self._peak_footprint, mode="constant", cval=-np.inf
-        )
-        cand = np.flatnonzero((hmap >= cfg.min_person_height_m) & (hmap >= local_max.ravel()))
-        if cand.size == 0:
-            return cand
-        # A head has a cap: >= 3 cells of its cluster within 0.1 m less than head_min_drop_m lower
-        # (single-cell spikes of far-range depth noise and thin edges have none).
-        cap = cand[:, None] + (self._cap_di * width + self._cap_dj)[None, :]
-        top_h = hmap[cand][:, None]
-        in_cap = (labels[cap] == labels[cand][:, None]) & (hmap[cap] > top_h - cfg.head_min_drop_m)
-        cand = cand[np.count_nonzero(in_cap, axis=1) >= _MIN_CAP_CELLS]
-        if cand.size == 0:
-            return cand
-        # Prominence over the ring of same-cluster cells comparable to the top (not more than
-        # upper_body_depth_m lower, nor more than head_min_drop_m higher, e.g. a wall behind).
-        ring = cand[:, None] + (self._ring_di * width + self._ring_dj)[None, :]
-        ring_h = hmap[ring]
-        top_h = hmap[cand][:, None]
-        comparable = (
-            (labels[ring] == labels[cand][:, None])
-            & (ring_h >= top_h - cfg.upper_body_depth_m)
-            & (ring_h <= top_h + cfg.head_min_drop_m)
-        )
-        low = comparable & (ring_h <= top_h - cfg.head_min_drop_m)  # shoulders
-        n_ring = np.count_nonzero(comparable, axis=1)
-        n_low = np.count_nonzero(low, axis=1)
-        keep = (n_low >= _MIN_RING_CELLS) & (n_ring - n_low <= cfg.max_head_plateau_fraction * n_ring)
-        cand, low = cand[keep], low[keep]
-        if cand.size == 0:
-            return cand
-        # Shoulders flank a head: it needs lower ring cells on both sides of the line of sight, at
-        # least min_shoulder_offset_m off it (rejects a corner of a flat object, or a top edge sloping
-        # into an occlusion shadow). Ring cells nearer to another candidate of the cluster are that
-        # one's (people standing side by side). Heads almost below the camera skip the test.
-        low &= ~self._foreign_ring_cells(cand, labels[cand], width)
-        tops = grid.top_voxel[cand]
-        sight = np.stack([grid.u[tops], grid.v[tops]], axis=1)
-        sight_norm = np.linalg.norm(sight, axis=1, keepdims=True)
-        sight /= np.maximum(sight_norm, 1e-6)
-        lateral = (
-            self._ring_dj[None, :] * sight[:, :1] - self._ring_di[None, :] * sight[:, 1:]
-        ) * cfg.voxel_size_m
-        left = np.any(low & (lateral <= -cfg.min_shoulder_offset_m), axis=1)
-        right = np.any(low & (lateral >= cfg.min_shoulder_offset_m), axis=1)
-        cand = cand[(left & right) | (sight_norm[:, 0] < _OVERHEAD_RANGE_M)]
-        if cand.size < 2:
-            return cand
-        # Non-maximum suppression: no higher head (ties: lower index) of the same cluster within
-        # heads_minimum_distance_m.
-        tops = grid.top_voxel[cand]
-        cu, cv, ch, cl = grid.u[tops], grid.v[tops], obj_h[tops], labels[cand]
-        close = (
-            (cu[:, None] - cu[None, :]) ** 2 + (cv[:, None] - cv[None, :]) ** 2
-        ) < cfg.heads_minimum_distance_m**2
-        index = np.arange(cand.size)
-        higher = (ch[None, :] > ch[:, None]) | (
-            (ch[None, :] == ch[:, None]) & (index[None, :] < index[:, None])
-        )
-        return cand[~np.any(close & (cl[:, None] == cl[None, :]) & higher, axis=1)]
-
-    def _foreign_ring_cells(
-        self, cand: NDArray[np.intp], cand_labels: NDArray[np.intp], width: int
-    ) -> NDArray[np.bool_]:
-        """(candidates, ring) mask of ring cells nearer to another candidate of the same cluster."""
-        foreign = np.zeros((cand.size, self._ring_di.size), dtype=bool)
-        if cand.size < 2:
-            return foreign
-        rows, cols = cand // width, cand % width
-        d_row = rows[None, :] - rows[:, None]
-        d_col = cols[None, :] - cols[:, None]
-        # Competitors: other candidates of the cluster at least heads_minimum_distance_m away (nearer
-        # ones are the same head) and close enough to reach into the ring.
-        dist2 = d_row**2 + d_col**2
-        apart = (self.config.heads_minimum_distance_m / self.config.voxel_size_m) ** 2
-        near = (dist2 >= apart) & (dist2 <= (2 * self._ring_radius_cells) ** 2)
-        near &= cand_labels[None, :] == cand_labels[:, None]
-        first, second = np.nonzero(near)
-        if first.size == 0:
-            return foreign
-        dr, dc = d_row[first, second][:, None], d_col[first, second][:, None]
-        # Ring cell r is nearer to the other candidate (offset d) iff 2 r.d > |d|^2.
-        nearer = 2 * (self._ring_di[None, :] * dr + self._ring_dj[None, :] * dc) > dr**2 + dc**2
-        np.logical_or.at(foreign, first, nearer)
-        return foreign
-
-    @staticmethod
-    def _width(u: FloatArray, v: FloatArray) -> float:
-        """Extent of floor-plane points along their principal axis (metres)."""
-        if u.size < 2:
-            return 0.0
-        du, dv = u - u.mean(), v - v.mean()
-        angle = 0.5 * math.atan2(2.0 * float(du @ dv), float(du @ du) - float(dv @ dv))  # major axis
-        proj = du * math.cos(angle) + dv * math.sin(angle)
-        return float(proj.max() - proj.min())
