@@ -159,82 +159,26 @@ def fit_ground_plane(
     ``assume_finite`` skips the NaN/inf filter for callers that already dropped invalid points.
     """
     pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"points must be (N, 3), got shape {pts.shape}")
-    if iterations < 1 or max_sample_points < 3 or min_inliers < 3:
-        raise ValueError("iterations must be >= 1, max_sample_points >= 3 and min_inliers >= 3")
-    if not (0 < seed_angle_deg < 90 and 0 < max_tilt_deg < 90):
-        raise ValueError("seed_angle_deg and max_tilt_deg must be in (0, 90) degrees")
-    if not (distance_threshold_m > 0 and 0 <= max_below_fraction <= 1 and depth_noise_coefficient_per_m >= 0):
-        raise ValueError(
-            "distance_threshold_m must be > 0, max_below_fraction in [0, 1] "
-            "and depth_noise_coefficient_per_m >= 0"
-        )
-    if seed_normal is not None:
-        up = np.asarray(seed_normal, dtype=np.float64).reshape(3)
-        if not (np.all(np.isfinite(up)) and np.linalg.norm(up) > 1e-9):
-            raise ValueError("seed_normal must be a finite non-zero (3,) vector")
-        up = up / np.linalg.norm(up)
-        cos_limit = math.cos(math.radians(seed_angle_deg))
-    else:
-        up = _CAMERA_UP
-        cos_limit = math.cos(math.radians(max_tilt_deg))
-    if seed_camera_height_m is not None:
-        if seed_normal is None or not math.isfinite(seed_camera_height_m) or not seed_height_tolerance_m > 0:
-            raise ValueError(
-                "seed_camera_height_m needs seed_normal, a finite height and a positive tolerance"
-            )
-        min_height = max(min_camera_height_m, seed_camera_height_m - seed_height_tolerance_m)
-        max_height = seed_camera_height_m + seed_height_tolerance_m
-    else:
-        min_height, max_height = min_camera_height_m, math.inf
+    _check_ransac(pts, iterations, max_sample_points, min_inliers, distance_threshold_m, max_below_fraction,
+                  depth_noise_coefficient_per_m)
+    limits = _PlaneLimits.of(seed_normal, seed_angle_deg, max_tilt_deg, seed_camera_height_m,
+                             seed_height_tolerance_m, min_camera_height_m)
     rng = rng if rng is not None else np.random.default_rng(0)
-    if not assume_finite:
-        # Row filters use np.compress: several times faster than boolean fancy indexing of (N, 3) rows.
+    if not assume_finite:  # np.compress: several times faster than boolean fancy indexing of (N, 3) rows
         pts = np.compress(np.isfinite(pts[:, 0] + pts[:, 1] + pts[:, 2]), pts, axis=0)
     n_points = pts.shape[0]
     if n_points < max(3, min_inliers):
         return None
-
     # Strided (not gathered) subsamples: cheap views, uniform over the raster-ordered input.
     step = max(1, n_points // max_sample_points)
     sample = np.ascontiguousarray(pts[int(rng.integers(0, step)) :: step])  # contiguous: fast matmul
-    m = sample.shape[0]
-    # Local triples -> plane hypotheses: an anchor and two other sample points of its ~0.4 m cell lie
-    # on one surface, so hypotheses are real surfaces' tangent planes (far-apart random triples also
-    # give planes slicing through walls and people, which can win on cluttered floorless frames).
-    a, b, c = _local_triples(sample, 3 * iterations, rng)
-    if a.shape[0] == 0:
-        return None
-    normals = np.cross(b - a, c - a)
-    norms = np.sqrt(np.einsum("ij,ij->i", normals, normals))
-    good = norms > 1e-9
-    normals = normals[good] / norms[good, None]
-    normals *= np.where(normals @ up < 0, -1.0, 1.0)[:, None]
-    offsets = -np.einsum("ij,ij->i", normals, np.compress(good, a, axis=0))
-    plausible = (normals @ up >= cos_limit) & (offsets >= min_height) & (offsets <= max_height)
-    keep = np.flatnonzero(plausible)[:iterations]
-    normals, offsets = normals[keep], offsets[keep]
-    for prior in prior_planes:
-        if prior.normal @ up >= cos_limit and min_height <= prior.offset <= max_height:
-            normals = np.vstack([normals, prior.normal])
-            offsets = np.append(offsets, prior.offset)
+    normals, offsets = _hypotheses(sample, iterations, rng, limits, prior_planes)
     if normals.shape[0] == 0:
         return None
-
-    # Score every hypothesis at once: signed heights of the sample above each plane.
-    # float32 and in-place operations: one (hypotheses x sample) temporary instead of three.
-    heights = normals.astype(np.float32) @ sample.T.astype(np.float32)
-    heights += offsets.astype(np.float32)[:, None]
     below_margin = max(0.1, 2.0 * distance_threshold_m)
-    # "Below the floor" must beat the sensor noise, which grows with depth squared (3 sigma).
-    sample_margin = (below_margin + 3.0 * depth_noise_coefficient_per_m * sample[:, 2] ** 2).astype(
-        np.float32
-    )
-    below = np.count_nonzero(heights < -sample_margin, axis=1)
-    inliers = np.count_nonzero(np.abs(heights, out=heights) <= distance_threshold_m, axis=1)
-    min_sample_inliers = max(3, math.ceil(min_inliers * m / n_points))
-    valid = (inliers >= min_sample_inliers) & (below <= max_below_fraction * m)
+    valid, inliers = _score(normals, offsets, sample, below_margin, distance_threshold_m,
+                            depth_noise_coefficient_per_m, max_below_fraction,
+                            max(3, math.ceil(min_inliers * sample.shape[0] / n_points)))
     if not np.any(valid):
         return None
     # Least-squares refinement of the best hypotheses on the inliers of a larger subsample (twice:
@@ -243,25 +187,126 @@ def fit_ground_plane(
     refine_step = max(1, n_points // (_REFINE_SAMPLE_FACTOR * max_sample_points))
     refine_pts = np.ascontiguousarray(pts[int(rng.integers(0, refine_step)) :: refine_step])
     refine_margin = below_margin + 3.0 * depth_noise_coefficient_per_m * refine_pts[:, 2] ** 2
-    ranked = np.argsort(-np.where(valid, inliers, -1), kind="stable")[
-        : min(_REFINED_HYPOTHESES, int(valid.sum()))
-    ]
+    ranked = np.argsort(-np.where(valid, inliers, -1), kind="stable")[: min(_REFINED_HYPOTHESES, int(valid.sum()))]
     for best in ranked.tolist():
-        normal, offset = normals[best], float(offsets[best])
-        for _ in range(2):
-            mask = np.abs(refine_pts @ normal + offset) <= distance_threshold_m
-            if np.count_nonzero(mask) < 3:
-                break
-            normal, offset = _fit_plane(np.compress(mask, refine_pts, axis=0), up)
-        if normal @ up < cos_limit or not min_height <= offset <= max_height:
-            continue
-        final_heights = refine_pts @ normal + offset
-        scale = n_points / refine_pts.shape[0]
-        count = round(int(np.count_nonzero(np.abs(final_heights) <= distance_threshold_m)) * scale)
-        below_fraction = float(np.count_nonzero(final_heights < -refine_margin)) / refine_pts.shape[0]
-        if count >= min_inliers and below_fraction <= max_below_fraction:
-            return GroundFit(GroundPlane(normal, offset), count, below_fraction)
+        fit = _refined(normals[best], float(offsets[best]), refine_pts, refine_margin, n_points, limits,
+                       distance_threshold_m)
+        if fit is not None and fit.inlier_count >= min_inliers and fit.below_fraction <= max_below_fraction:
+            return fit
     return None
+
+
+def _refined(normal: FloatArray, offset: float, refine_pts: FloatArray, refine_margin: FloatArray, n_points: int,
+             limits: _PlaneLimits, distance_threshold_m: float) -> GroundFit | None:
+    """A hypothesis refitted twice on its inliers among ``refine_pts``, with its support scaled to the
+    ``n_points`` of the cloud (None: too few inliers to refit, or the refit leaves the limits)."""
+    for _ in range(2):
+        mask = np.abs(refine_pts @ normal + offset) <= distance_threshold_m
+        if np.count_nonzero(mask) < 3:
+            break
+        normal, offset = _fit_plane(np.compress(mask, refine_pts, axis=0), limits.up)
+    if not limits.allow(normal, offset):
+        return None
+    final_heights = refine_pts @ normal + offset
+    scale = n_points / refine_pts.shape[0]
+    count = round(int(np.count_nonzero(np.abs(final_heights) <= distance_threshold_m)) * scale)
+    below_fraction = float(np.count_nonzero(final_heights < -refine_margin)) / refine_pts.shape[0]
+    return GroundFit(GroundPlane(normal, offset), count, below_fraction)
+
+
+def _check_ransac(pts: FloatArray, iterations: int, max_sample_points: int, min_inliers: int,
+                  distance_threshold_m: float, max_below_fraction: float, depth_noise_coefficient_per_m: float) -> None:
+    """ValueError naming :func:`fit_ground_plane`'s points or RANSAC arguments out of range."""
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must be (N, 3), got shape {pts.shape}")
+    if iterations < 1 or max_sample_points < 3 or min_inliers < 3:
+        raise ValueError("iterations must be >= 1, max_sample_points >= 3 and min_inliers >= 3")
+    if not (distance_threshold_m > 0 and 0 <= max_below_fraction <= 1 and depth_noise_coefficient_per_m >= 0):
+        raise ValueError(
+            "distance_threshold_m must be > 0, max_below_fraction in [0, 1] "
+            "and depth_noise_coefficient_per_m >= 0"
+        )
+
+
+@dataclass(frozen=True)
+class _PlaneLimits:
+    """Which planes may be the floor: normal within ``cos_limit`` of ``up``, camera height (the plane's offset)
+    within [min_height, max_height]."""
+
+    up: FloatArray
+    cos_limit: float
+    min_height: float
+    max_height: float
+
+    @staticmethod
+    def of(seed_normal: ArrayLike | None, seed_angle_deg: float, max_tilt_deg: float,
+           seed_camera_height_m: float | None, seed_height_tolerance_m: float,
+           min_camera_height_m: float) -> _PlaneLimits:
+        """The limits :func:`fit_ground_plane`'s arguments set (ValueError naming a bad one)."""
+        if not (0 < seed_angle_deg < 90 and 0 < max_tilt_deg < 90):
+            raise ValueError("seed_angle_deg and max_tilt_deg must be in (0, 90) degrees")
+        if seed_normal is not None:
+            up = np.asarray(seed_normal, dtype=np.float64).reshape(3)
+            if not (np.all(np.isfinite(up)) and np.linalg.norm(up) > 1e-9):
+                raise ValueError("seed_normal must be a finite non-zero (3,) vector")
+            up = up / np.linalg.norm(up)
+            cos_limit = math.cos(math.radians(seed_angle_deg))
+        else:
+            up = _CAMERA_UP
+            cos_limit = math.cos(math.radians(max_tilt_deg))
+        if seed_camera_height_m is None:
+            return _PlaneLimits(up, cos_limit, min_camera_height_m, math.inf)
+        if seed_normal is None or not math.isfinite(seed_camera_height_m) or not seed_height_tolerance_m > 0:
+            raise ValueError("seed_camera_height_m needs seed_normal, a finite height and a positive tolerance")
+        return _PlaneLimits(up, cos_limit, max(min_camera_height_m, seed_camera_height_m - seed_height_tolerance_m),
+                            seed_camera_height_m + seed_height_tolerance_m)
+
+    def allow(self, normal: FloatArray, offset: float) -> bool:
+        return bool(normal @ self.up >= self.cos_limit) and self.min_height <= offset <= self.max_height
+
+
+def _hypotheses(sample: FloatArray, iterations: int, rng: np.random.Generator, limits: _PlaneLimits,
+                prior_planes: Sequence[GroundPlane]) -> tuple[FloatArray, FloatArray]:
+    """Plane hypotheses (normals (k, 3), offsets (k,)) within the limits, at most ``iterations`` from local
+    triples of the sample, then the prior planes that are within them."""
+    # Local triples -> plane hypotheses: an anchor and two other sample points of its ~0.4 m cell lie
+    # on one surface, so hypotheses are real surfaces' tangent planes (far-apart random triples also
+    # give planes slicing through walls and people, which can win on cluttered floorless frames).
+    a, b, c = _local_triples(sample, 3 * iterations, rng)
+    if a.shape[0] == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    up = limits.up
+    normals = np.cross(b - a, c - a)
+    norms = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+    good = norms > 1e-9
+    normals = normals[good] / norms[good, None]
+    normals *= np.where(normals @ up < 0, -1.0, 1.0)[:, None]
+    offsets = -np.einsum("ij,ij->i", normals, np.compress(good, a, axis=0))
+    plausible = (normals @ up >= limits.cos_limit) & (offsets >= limits.min_height) & (offsets <= limits.max_height)
+    keep = np.flatnonzero(plausible)[:iterations]
+    normals, offsets = normals[keep], offsets[keep]
+    for prior in prior_planes:
+        if prior.normal @ up >= limits.cos_limit and limits.min_height <= prior.offset <= limits.max_height:
+            normals = np.vstack([normals, prior.normal])
+            offsets = np.append(offsets, prior.offset)
+    return normals, offsets
+
+
+def _score(normals: FloatArray, offsets: FloatArray, sample: FloatArray, below_margin: float,
+           distance_threshold_m: float, depth_noise_coefficient_per_m: float, max_below_fraction: float,
+           min_sample_inliers: int) -> tuple[NDArray[np.bool_], NDArray[np.intp]]:
+    """Every hypothesis at once on the sample: which are valid (enough inliers, few points below) and their
+    inlier counts."""
+    # float32 and in-place operations: one (hypotheses x sample) temporary instead of three.
+    heights = normals.astype(np.float32) @ sample.T.astype(np.float32)
+    heights += offsets.astype(np.float32)[:, None]
+    # "Below the floor" must beat the sensor noise, which grows with depth squared (3 sigma).
+    sample_margin = (below_margin + 3.0 * depth_noise_coefficient_per_m * sample[:, 2] ** 2).astype(
+        np.float32
+    )
+    below = np.count_nonzero(heights < -sample_margin, axis=1)
+    inliers = np.count_nonzero(np.abs(heights, out=heights) <= distance_threshold_m, axis=1)
+    return (inliers >= min_sample_inliers) & (below <= max_below_fraction * sample.shape[0]), inliers
 
 
 def estimate_ground_plane(
