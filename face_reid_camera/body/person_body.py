@@ -115,24 +115,10 @@ def body_grid(
     """
     foot, up, across, along = _axis_frame(plane, np.asarray(top_cam, dtype=np.float64), height_m)
     r = config.radius_m
-    depth_reach = min(r, _BOX_ALONG_M)  # a body is shallow along the line of sight: a narrower crop
-    corners = np.array([foot + a * r * across + b * depth_reach * along + z * up
-                        for a in (-1.0, 1.0) for b in (-1.0, 1.0) for z in (0.0, height_m)])
-    if np.any(corners[:, 2] <= 0.1):
-        return None  # (partly) behind or at the camera
-    uv = color_intr.project(corners)
-    # rows of the full person: the vertical axis projected (head top and foot)
-    axis_uv = color_intr.project(np.stack([foot + height_m * up, foot]))
-    rows_full_px = float(axis_uv[1, 1] - axis_uv[0, 1])
-    if not rows_full_px > 1.0:
+    box = _crop_box(color_intr, foot, up, across, along, height_m, r)
+    if box is None:
         return None
-    x0, x1 = math.floor(uv[:, 0].min()), math.ceil(uv[:, 0].max()) + 1
-    y0 = math.floor(min(uv[:, 1].min(), axis_uv[0, 1]))
-    y1 = math.ceil(max(uv[:, 1].max(), axis_uv[1, 1])) + 1
-    cx0, cx1 = max(0, x0), min(color_intr.width, x1)
-    cy0, cy1 = max(0, y0), min(color_intr.height, y1)
-    if cx1 - cx0 < 2 or cy1 - cy0 < 2:
-        return None
+    cx0, cx1, cy0, cy1, rows_full_px = box
     scale = crop_rows / rows_full_px  # grid rows per colour pixel
     rows = max(2, round((cy1 - cy0) * scale))
     cols = max(2, round((cx1 - cx0) * scale))
@@ -142,18 +128,7 @@ def body_grid(
     # depth at the grid's sample centres (nearest depth pixel; depth registered to colour)
     u = cx0 + (np.arange(cols) + 0.5) * ((cx1 - cx0) / cols) - 0.5
     v = cy0 + (np.arange(rows) + 0.5) * ((cy1 - cy0) / rows) - 0.5
-    sx, sy = depth_intr.width / color_intr.width, depth_intr.height / color_intr.height
-    ud = np.clip(np.rint((u + 0.5) * sx - 0.5), 0, depth_intr.width - 1).astype(np.intp)
-    vd = np.clip(np.rint((v + 0.5) * sy - 0.5), 0, depth_intr.height - 1).astype(np.intp)
-    z = np.asarray(depth_m[vd[:, None], ud[None, :]], dtype=np.float32)
-    valid = (z > 0.0) & (z < _MAX_DEPTH_M)  # NaN and inf fail
-    z = np.where(valid, z, np.float32(0.0))  # no NaN / inf in the arithmetic below (those samples stay out)
-    xn = ((ud - depth_intr.cx) / depth_intr.fx).astype(np.float32)
-    yn = ((vd - depth_intr.cy) / depth_intr.fy).astype(np.float32)
-    # camera-frame points relative to the foot, in the axis frame: float32 broadcasts, no (N, 3) array
-    fx_, fy_, fz_ = (float(c) for c in foot)
-    px, py = xn[None, :] * z - np.float32(fx_), yn[:, None] * z - np.float32(fy_)
-    pz = z - np.float32(fz_)
+    valid, px, py, pz = _grid_points(depth_m, depth_intr, color_intr, u, v, foot)
 
     def along_axis(axis: FloatArray) -> NDArray[np.float32]:
         a0, a1, a2 = (np.float32(c) for c in axis)
@@ -180,6 +155,47 @@ def body_grid(
     edge_points = np.array([foot + (1.0 - e) * height_m * up for e in part_edges])
     edge_rows = (color_intr.project(edge_points)[:, 1] - (cy0 - 0.5)) * scale - 0.5
     return BodyGrid(crop, mask, parts, lateral, along_d, height, edge_rows, float(height_m), rows_full_px, u, v)
+
+
+def _crop_box(color_intr: CameraIntrinsics, foot: FloatArray, up: FloatArray, across: FloatArray,
+              along: FloatArray, height_m: float, r: float) -> tuple[int, int, int, int, float] | None:
+    """The colour pixels (x0, x1, y0, y1, clipped to the image) of a box of radius ``r`` around the person's
+    axis, and the rows their full height spans; None when they do not show (behind the camera, off the image)."""
+    depth_reach = min(r, _BOX_ALONG_M)  # a body is shallow along the line of sight: a narrower crop
+    corners = np.array([foot + a * r * across + b * depth_reach * along + z * up
+                        for a in (-1.0, 1.0) for b in (-1.0, 1.0) for z in (0.0, height_m)])
+    if np.any(corners[:, 2] <= 0.1):
+        return None  # (partly) behind or at the camera
+    uv = color_intr.project(corners)
+    # rows of the full person: the vertical axis projected (head top and foot)
+    axis_uv = color_intr.project(np.stack([foot + height_m * up, foot]))
+    rows_full_px = float(axis_uv[1, 1] - axis_uv[0, 1])
+    if not rows_full_px > 1.0:
+        return None
+    x0, x1 = math.floor(uv[:, 0].min()), math.ceil(uv[:, 0].max()) + 1
+    y0 = math.floor(min(uv[:, 1].min(), axis_uv[0, 1]))
+    y1 = math.ceil(max(uv[:, 1].max(), axis_uv[1, 1])) + 1
+    cx0, cx1 = max(0, x0), min(color_intr.width, x1)
+    cy0, cy1 = max(0, y0), min(color_intr.height, y1)
+    if cx1 - cx0 < 2 or cy1 - cy0 < 2:
+        return None
+    return cx0, cx1, cy0, cy1, rows_full_px
+
+
+def _grid_points(depth_m: NDArray[np.floating], depth_intr: CameraIntrinsics, color_intr: CameraIntrinsics,
+                 u: FloatArray, v: FloatArray, foot: FloatArray) -> tuple[NDArray[np.bool_], ...]:
+    """At the grid's sample centres (colour pixels ``u`` x ``v``): where depth is valid, and the camera-frame
+    point relative to ``foot`` as three (rows, cols) float32 arrays (float32 broadcasts, no (N, 3) array)."""
+    sx, sy = depth_intr.width / color_intr.width, depth_intr.height / color_intr.height
+    ud = np.clip(np.rint((u + 0.5) * sx - 0.5), 0, depth_intr.width - 1).astype(np.intp)
+    vd = np.clip(np.rint((v + 0.5) * sy - 0.5), 0, depth_intr.height - 1).astype(np.intp)
+    z = np.asarray(depth_m[vd[:, None], ud[None, :]], dtype=np.float32)
+    valid = (z > 0.0) & (z < _MAX_DEPTH_M)  # NaN and inf fail
+    z = np.where(valid, z, np.float32(0.0))  # no NaN / inf in the arithmetic below (those samples stay out)
+    xn = ((ud - depth_intr.cx) / depth_intr.fx).astype(np.float32)
+    yn = ((vd - depth_intr.cy) / depth_intr.fy).astype(np.float32)
+    fx_, fy_, fz_ = (float(c) for c in foot)
+    return valid, xn[None, :] * z - np.float32(fx_), yn[:, None] * z - np.float32(fy_), z - np.float32(fz_)
 
 
 def part_visibility(grid: BodyGrid, part_edges: tuple[float, ...]) -> tuple[float, tuple[float, ...]]:
