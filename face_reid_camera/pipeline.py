@@ -243,31 +243,9 @@ class CameraPipeline:
             color_intrinsics = (
                 intrinsics if (w, h) == (intrinsics.width, intrinsics.height) else intrinsics.scaled(w, h)
             )
-        people: list[PersonObservation] = []
-        rois: list[tuple[int, int, int, int] | None] = []
         plane = detection.ground_plane
-        for cand in detection.people:
-            head = np.asarray(cand.head_cam, dtype=np.float64)
-            # The person's position is the head centre dropped onto the floor: unlike the centroid
-            # of the visible surface it does not shift towards whichever camera sees the person.
-            cam = head - float(plane.height_of(head[None, :])[0]) * plane.normal if plane is not None else head
-            cam = self._beyond_near_side(cam, plane)
-            rng = float(np.linalg.norm(cam))
-            std = self.config.position_std_base_m + self.config.position_std_per_m2 * rng * rng
-            roi = head_roi_px(
-                np.asarray(cand.head_cam), color_intrinsics or intrinsics, self.config.head_roi_size_m
-            )
-            rois.append(roi)
-            people.append(
-                PersonObservation(
-                    position_world=self.camera_pose.to_world(cam)[0],
-                    position_camera=cam,
-                    position_std_m=float(std),
-                    height_m=float(cand.height_m),
-                    num_points=int(cand.num_points),
-                    head_roi_xywh=roi,
-                )
-            )
+        people = [self._observation(cand, plane, color_intrinsics or intrinsics) for cand in detection.people]
+        rois = [p.head_roi_xywh for p in people]
         timings = {"people_ms": (t1 - t0) * 1e3, "face_detect_ms": 0.0, "embed_ms": 0.0, "body_ms": 0.0}
         if self.config.detect_faces and color_bgr is not None and people:
             people = self._add_faces(color_bgr, people, rois, timings, stamp)
@@ -284,6 +262,26 @@ class CameraPipeline:
         return FrameResult(
             people, found, timings, detection.ground_plane, detection.ground_plane_source,
             detection.floor_check,
+        )
+
+    def _observation(self, cand: PersonCandidate, plane: GroundPlane | None,
+                     color_intrinsics: CameraIntrinsics) -> PersonObservation:
+        """A detected person: position on the floor (world and camera frame) with its spread, and the head's
+        region in the colour image."""
+        head = np.asarray(cand.head_cam, dtype=np.float64)
+        # The person's position is the head centre dropped onto the floor: unlike the centroid
+        # of the visible surface it does not shift towards whichever camera sees the person.
+        cam = head - float(plane.height_of(head[None, :])[0]) * plane.normal if plane is not None else head
+        cam = self._beyond_near_side(cam, plane)
+        rng = float(np.linalg.norm(cam))
+        std = self.config.position_std_base_m + self.config.position_std_per_m2 * rng * rng
+        return PersonObservation(
+            position_world=self.camera_pose.to_world(cam)[0],
+            position_camera=cam,
+            position_std_m=float(std),
+            height_m=float(cand.height_m),
+            num_points=int(cand.num_points),
+            head_roi_xywh=head_roi_px(np.asarray(cand.head_cam), color_intrinsics, self.config.head_roi_size_m),
         )
 
     def _beyond_near_side(self, cam: NDArray[np.float64], plane: GroundPlane | None) -> NDArray[np.float64]:

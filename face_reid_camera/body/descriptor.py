@@ -195,13 +195,7 @@ def body_descriptor(
             labels = np.where(inside, labels, np.int16(-1))
     else:
         labels = labels_at(height, inside)
-    bins = config.hsv_bins
-    n_bins = bins[0] * bins[1] * bins[2]
-    if config.hsv_soft:
-        index, weights = hsv_soft_bins(bgr, bins)
-        hsv = _labelled_histograms(index, labels, config.parts, n_bins, weights)
-    else:
-        hsv = _labelled_histograms(hsv_bin_index(bgr, bins), labels, config.parts, n_bins)
+    hsv = _hsv_histograms(bgr, labels, config)
 
     gray, inside_g, labels_g = cv2.cvtColor(bgr.astype(np.float32), cv2.COLOR_BGR2GRAY), inside, labels
     if not given and config.siltp_height is not None and config.siltp_height != height:
@@ -225,6 +219,16 @@ def body_descriptor(
 
     visible = 1.0 if inside is None else float(np.count_nonzero(inside)) / inside.size
     return BodyDescriptor(_hellinger_unit(hsv), _hellinger_unit(np.concatenate(siltp)), visible)
+
+
+def _hsv_histograms(bgr: NDArray[np.uint8], labels: NDArray[np.int16], config: BodyDescriptorConfig) -> NDArray:
+    """Per part, the HSV histogram of its pixels (soft or hard binning as configured)."""
+    bins = config.hsv_bins
+    n_bins = bins[0] * bins[1] * bins[2]
+    if config.hsv_soft:
+        index, weights = hsv_soft_bins(bgr, bins)
+        return _labelled_histograms(index, labels, config.parts, n_bins, weights)
+    return _labelled_histograms(hsv_bin_index(bgr, bins), labels, config.parts, n_bins)
 
 
 def _check_part_labels(labels: object, shape: tuple[int, int], config: BodyDescriptorConfig) -> NDArray[np.int16]:

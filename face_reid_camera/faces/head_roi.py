@@ -20,6 +20,23 @@ __all__ = ["head_roi_px"]
 _MIN_DEPTH_M = 1e-3
 
 
+def _in_colour_frame(head: np.ndarray, rotation: ArrayLike | None, translation_m: ArrayLike | None) -> np.ndarray:
+    """A depth-frame point in the colour camera's frame (p_colour = R p_depth + t; None: identity / zero)."""
+    if rotation is not None:
+        rot = np.asarray(rotation, dtype=np.float64)
+        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+            raise ValueError("depth_to_colour_rotation must be a finite 3x3 matrix")
+        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+            raise ValueError("depth_to_colour_rotation must be a proper rotation matrix")
+        head = rot @ head
+    if translation_m is not None:
+        trans = np.asarray(translation_m, dtype=np.float64).reshape(-1)
+        if trans.shape != (3,) or not np.all(np.isfinite(trans)):
+            raise ValueError("depth_to_colour_translation_m must be a finite (3,) vector")
+        head = head + trans
+    return head
+
+
 def head_roi_px(
     head_cam: ArrayLike,
     intrinsics: CameraIntrinsics,
@@ -44,19 +61,7 @@ def head_roi_px(
         isinstance(head_roi_size_m, (int, float)) and math.isfinite(head_roi_size_m) and head_roi_size_m > 0
     ):
         raise ValueError(f"head_roi_size_m must be a positive finite size in metres, got {head_roi_size_m!r}")
-    if depth_to_colour_rotation is not None:
-        rot = np.asarray(depth_to_colour_rotation, dtype=np.float64)
-        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
-            raise ValueError("depth_to_colour_rotation must be a finite 3x3 matrix")
-        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-            raise ValueError("depth_to_colour_rotation must be a proper rotation matrix")
-        head = rot @ head
-    if depth_to_colour_translation_m is not None:
-        trans = np.asarray(depth_to_colour_translation_m, dtype=np.float64).reshape(-1)
-        if trans.shape != (3,) or not np.all(np.isfinite(trans)):
-            raise ValueError("depth_to_colour_translation_m must be a finite (3,) vector")
-        head = head + trans
-
+    head = _in_colour_frame(head, depth_to_colour_rotation, depth_to_colour_translation_m)
     distance = float(np.linalg.norm(head))
     if head[2] <= _MIN_DEPTH_M or distance < 1e-9:
         return None

@@ -61,8 +61,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-# The head position is averaged over its cap cells less than this below the top (metres).
-_HEAD_CAP_DROP_M = 0.1
 # The support band needs this many voxels to count as evidence (fewer: legs hidden or out of view).
 _MIN_SUPPORT_VOXELS = 3
 # Points more than this above max_person_height_m are ignored (ceilings, lamps, upper walls).
@@ -468,15 +466,7 @@ class PersonDetector:
             return [], grid.n_clusters, 0
         tops = grid.top_voxel[heads]
         head_l = grid.labels[heads]
-        # Head position on the floor: mean of the head cap's top voxels (one voxel is noisy far away).
-        cap = heads[:, None] + (self._head_finder.cap_di * grid.shape[1] + self._head_finder.cap_dj)[None, :]
-        cap_top = grid.top_voxel[cap]
-        in_cap = (grid.labels[cap] == head_l[:, None]) & (
-            grid.height_map[cap] > grid.height_map[heads][:, None] - _HEAD_CAP_DROP_M
-        )
-        n_cap = np.count_nonzero(in_cap, axis=1)
-        head_u = np.sum(np.where(in_cap, grid.u[cap_top], 0.0), axis=1) / n_cap
-        head_v = np.sum(np.where(in_cap, grid.v[cap_top], 0.0), axis=1) / n_cap
+        head_u, head_v = self._head_finder.head_positions(grid, heads)
 
         # Sub-clusters: every voxel joins the nearest head of its own cluster within half a max width
         # (brute force over the few heads).

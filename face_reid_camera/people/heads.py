@@ -28,6 +28,8 @@ FloatArray = NDArray[np.float64]
 _MIN_RING_CELLS = 2
 _MIN_CAP_CELLS = 3
 HEAD_CAP_RADIUS_M = 0.1
+# The head position is averaged over its cap cells less than this below the top (metres).
+_HEAD_CAP_DROP_M = 0.1
 # Heads closer than this (horizontally) to the camera are seen from above: no line-of-sight sides.
 OVERHEAD_RANGE_M = 0.3
 _EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
@@ -163,20 +165,33 @@ class HeadFinder:
         left = np.any(low & (lateral <= -cfg.min_shoulder_offset_m), axis=1)
         right = np.any(low & (lateral >= cfg.min_shoulder_offset_m), axis=1)
         cand = cand[(left & right) | (sight_norm[:, 0] < OVERHEAD_RANGE_M)]
-        if cand.size < 2:
-            return cand
-        # Non-maximum suppression: no higher head (ties: lower index) of the same cluster within
-        # heads_minimum_distance_m.
+        return cand if cand.size < 2 else self._suppressed(cand, grid, obj_h)
+
+    def _suppressed(self, cand: NDArray[np.intp], grid: FloorGrid, obj_h: FloatArray) -> NDArray[np.intp]:
+        """Non-maximum suppression: the candidates with no higher head (ties: lower index) of the same cluster
+        within heads_minimum_distance_m."""
         tops = grid.top_voxel[cand]
-        cu, cv, ch, cl = grid.u[tops], grid.v[tops], obj_h[tops], labels[cand]
+        cu, cv, ch, cl = grid.u[tops], grid.v[tops], obj_h[tops], grid.labels[cand]
         close = (
             (cu[:, None] - cu[None, :]) ** 2 + (cv[:, None] - cv[None, :]) ** 2
-        ) < cfg.heads_minimum_distance_m**2
+        ) < self.config.heads_minimum_distance_m**2
         index = np.arange(cand.size)
         higher = (ch[None, :] > ch[:, None]) | (
             (ch[None, :] == ch[:, None]) & (index[None, :] < index[:, None])
         )
         return cand[~np.any(close & (cl[:, None] == cl[None, :]) & higher, axis=1)]
+
+    def head_positions(self, grid: FloorGrid, heads: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+        """Floor coordinates (u, v) of each head: the mean of its cap's top voxels (one voxel is noisy far
+        away)."""
+        cap = heads[:, None] + (self.cap_di * grid.shape[1] + self.cap_dj)[None, :]
+        cap_top = grid.top_voxel[cap]
+        in_cap = (grid.labels[cap] == grid.labels[heads][:, None]) & (
+            grid.height_map[cap] > grid.height_map[heads][:, None] - _HEAD_CAP_DROP_M
+        )
+        n_cap = np.count_nonzero(in_cap, axis=1)
+        return (np.sum(np.where(in_cap, grid.u[cap_top], 0.0), axis=1) / n_cap,
+                np.sum(np.where(in_cap, grid.v[cap_top], 0.0), axis=1) / n_cap)
 
     def _foreign_ring_cells(
         self, cand: NDArray[np.intp], cand_labels: NDArray[np.intp], width: int
