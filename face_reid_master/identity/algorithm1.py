@@ -187,8 +187,7 @@ class IdentityManagerBase:
         unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
         singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
         rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
-        near = self._swaps.consistent(rows, {tid: self.faces.entries[fid].slot for tid in rows
-                                             if (fid := self.tracks.entries[tid].face_id) is not None})
+        near = self._swaps.consistent(rows, lambda tid: self.faces.slot(self.tracks.entries[tid].face_id))
         bank = self._bank
         for tid, chunks in pending.items():
             track = self.tracks.entries[tid]

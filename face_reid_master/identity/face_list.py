@@ -72,6 +72,10 @@ class FaceList:
         """Snapshot of all learned faces (copies), for the persistent memory."""
         return [self.export(fid) for fid in sorted(self.entries)]
 
+    def slot(self, face_id: int | None) -> int | None:
+        """The bank slot of a learned face (None for None: an unidentified track's)."""
+        return None if face_id is None else self.entries[face_id].slot
+
     def new_id(self) -> int:
         fid = self.next_id
         self.next_id += 1

@@ -11,6 +11,7 @@ never released.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from itertools import accumulate
 
 import numpy as np
@@ -38,17 +39,21 @@ class SwapGuard:
         self.bank = bank
         self.stats = stats
 
-    def consistent(self, rows: dict[int, F32Array], face_slots: dict[int, int]) -> dict[int, npt.NDArray[np.bool_]]:
-        """For each identified track's new observations (``face_slots``: track -> its face's bank slot): which lie
-        within ``gate_distance`` of a stored feature of its face (all tracks in one batched product; {} when the
-        gate is off)."""
+    def consistent(self, rows: dict[int, F32Array], face_slot: Callable[[int], int | None]
+                   ) -> dict[int, npt.NDArray[np.bool_]]:
+        """For each identified track's new observations (``face_slot``: track -> its face's bank slot, None when
+        unidentified): which lie within ``gate_distance`` of a stored feature of its face (all tracks in one
+        batched product; {} when the gate is off)."""
         gate = self.gate_distance
-        ident = [tid for tid in rows if tid in face_slots] if gate is not None else []
+        if gate is None:
+            return {}
+        slot_of = {tid: slot for tid in rows if (slot := face_slot(tid)) is not None}
+        ident = list(slot_of)
         if not ident:
             return {}
         obs = np.concatenate([rows[tid] for tid in ident])
         counts = [rows[tid].shape[0] for tid in ident]
-        slots = np.repeat(np.array([face_slots[tid] for tid in ident], np.intp), counts)
+        slots = np.repeat(np.array([slot_of[tid] for tid in ident], np.intp), counts)
         keep = self.bank.own_min_distances(obs, slots) <= gate
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
         ends = list(accumulate(counts))
