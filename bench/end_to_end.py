@@ -119,8 +119,8 @@ def role_publisher(args: argparse.Namespace) -> int:
     qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     sealers = None
     if args.key:  # a secured network: each camera seals its frames with the network key
+        from face_reid_camera.common.ros.sealed import seal_message
         from face_reid_camera.common.sealing import Sealer, load_network_key
-        from face_reid_camera.ros.sealed import seal_message
         from face_reid_msgs.msg import Sealed
 
         key = load_network_key(args.key)
@@ -496,8 +496,8 @@ def _frame_read_cost(frames: int = 300) -> dict[str, float]:
 def _sealing_cost(key: Path, frames: int = 300) -> dict[str, float]:
     """Microseconds to seal a CameraFrame of PEOPLE faces (serialize + AES-GCM) and to open it as the master does
     (AES-GCM + ``frame_from_cdr``), medians over ``frames`` in this process."""
+    from face_reid_camera.common.ros.sealed import open_payload, seal_message
     from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
-    from face_reid_camera.ros.sealed import open_payload, seal_message
     from face_reid_master.ros.frame_cdr import frame_from_cdr
 
     secret = load_network_key(key)
@@ -523,8 +523,8 @@ def _tracks_auth_cost(key: Path, messages: int = 300, tracks: int = 20) -> dict[
     wire plain and sealed."""
     from rclpy.serialization import deserialize_message, serialize_message
 
+    from face_reid_camera.common.ros.sealed import seal_payload
     from face_reid_camera.common.sealing import Sealed, Sealer, load_network_key
-    from face_reid_camera.ros.sealed import seal_payload
     from face_reid_master.records import NamedTrackRecord
     from face_reid_master.ros.track_cdr import tracks_to_cdr
     from face_reid_master.tracks_auth import TRACKS_PURPOSE, TracksVerifier

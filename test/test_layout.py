@@ -4,7 +4,9 @@
 2. runtime code never imports the simulator, the evaluation, the demo, the tools or offline training;
 3. no core module (runtime code outside a ``ros/`` package) imports rclpy or a ROS message package;
 4. no runtime class is longer than 400 lines and no runtime module longer than 600 (a class doing several jobs
-   is split by responsibility).
+   is split by responsibility);
+5. code both packages use lives in ``face_reid_camera.common``: the master's runtime imports of the camera package
+   are that and the camera's face and body models, and ``common`` imports nothing else of the camera package.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ TOOLING = ("face_reid_master.sim", "face_reid_master.evaluation", "face_reid_mas
            "face_reid_master.training", "face_reid_camera.tools")
 MAX_CLASS_LINES = 400
 MAX_MODULE_LINES = 600
+SHARED = ("face_reid_camera.common",)
+CAMERA_MODELS = ("face_reid_camera.faces", "face_reid_camera.body")  # the master embeds gallery photos and bodies
 ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
                "visualization_msgs", "diagnostic_msgs", "lifecycle_msgs", "face_reid_msgs", "nav_msgs")
 
@@ -57,6 +61,10 @@ def violations(root: Path) -> list[str]:
                     found.append(f"{module} imports {name} (rule 2: runtime code never imports tooling)")
                 if core and _within(name, ROS_MODULES):
                     found.append(f"{module} imports {name} (rule 3: core modules are ROS-free)")
+                if _within(name, ("face_reid_camera",)) and not _within(name, SHARED) and (
+                        _within(module, SHARED) or (package == "face_reid_master" and runtime
+                                                    and not _within(name, CAMERA_MODELS))):
+                    found.append(f"{module} imports {name} (rule 5: shared code lives in face_reid_camera.common)")
     return found
 
 
@@ -110,7 +118,11 @@ def test_a_violation_of_each_rule_is_found(tmp_path: Path) -> None:
         "face_reid_camera/__init__.py": "",
         "face_reid_camera/pipeline.py": "import numpy\nfrom face_reid_master.core import MasterCore\n",
         "face_reid_camera/ros/node.py": "import rclpy\n",
+        "face_reid_camera/common/checks.py": "from face_reid_camera.people.heads import HeadFinder\n",
         "face_reid_master/__init__.py": "",
+        "face_reid_master/ros/node.py": "from face_reid_camera.pipeline import CameraPipeline\n"
+                                        "from face_reid_camera.common.ros.sealed import unpack\n"
+                                        "from face_reid_camera.faces.photos import PhotoEmbedder\n",
         "face_reid_master/core.py": "def f():\n    from face_reid_master.sim import simulate\n",
         "face_reid_master/tracking/tracker.py": "from rclpy.node import Node\n",
         "face_reid_master/body/metric_file.py": "from face_reid_master.training.body import xqda\n",
@@ -121,6 +133,10 @@ def test_a_violation_of_each_rule_is_found(tmp_path: Path) -> None:
         (tmp_path / rel).write_text(text)
     found = violations(tmp_path)
     assert found == [
+        "face_reid_camera.common.checks imports face_reid_camera.people.heads "
+        "(rule 5: shared code lives in face_reid_camera.common)",
+        "face_reid_camera.common.checks imports face_reid_camera.people.heads.HeadFinder "
+        "(rule 5: shared code lives in face_reid_camera.common)",
         "face_reid_camera.pipeline imports face_reid_master.core (rule 1: the camera never imports the master)",
         "face_reid_camera.pipeline imports face_reid_master.core.MasterCore "
         "(rule 1: the camera never imports the master)",
@@ -130,6 +146,10 @@ def test_a_violation_of_each_rule_is_found(tmp_path: Path) -> None:
         "(rule 2: runtime code never imports tooling)",
         "face_reid_master.core imports face_reid_master.sim (rule 2: runtime code never imports tooling)",
         "face_reid_master.core imports face_reid_master.sim.simulate (rule 2: runtime code never imports tooling)",
+        "face_reid_master.ros.node imports face_reid_camera.pipeline "
+        "(rule 5: shared code lives in face_reid_camera.common)",
+        "face_reid_master.ros.node imports face_reid_camera.pipeline.CameraPipeline "
+        "(rule 5: shared code lives in face_reid_camera.common)",
         "face_reid_master.tracking.tracker imports rclpy.node (rule 3: core modules are ROS-free)",
         "face_reid_master.tracking.tracker imports rclpy.node.Node (rule 3: core modules are ROS-free)",
     ]

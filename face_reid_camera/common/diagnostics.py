@@ -1,6 +1,6 @@
 """Health of a running node as plain data: rolling timing percentiles, rates, and one report per period.
 
-Pure Python (no rclpy): the nodes fill a :class:`NodeHealth`, ``face_reid_camera.ros.lifecycle``
+Pure Python (no rclpy): the nodes fill a :class:`NodeHealth`, ``face_reid_camera.common.ros.lifecycle``
 turns its :class:`DiagnosticReport` into ``diagnostic_msgs/DiagnosticArray`` on ``/diagnostics``.
 """
 

@@ -18,15 +18,15 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from face_reid_camera.camera_model import CameraIntrinsics
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
+from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
+from face_reid_camera.common.ros.sealed import seal_message
 from face_reid_camera.common.stamps import stamp_to_seconds
 from face_reid_camera.pipeline import CameraPipeline
 from face_reid_camera.ros import params as camera_params
 from face_reid_camera.ros.convert import frame_to_msg, intrinsics_from_camera_info
-from face_reid_camera.ros.floor_map import FloorMapOutput
+from face_reid_camera.ros.floor_map_output import FloorMapOutput
 from face_reid_camera.ros.frame_sync import DROP_MEANINGS, DROP_REASONS, RESET_BACKWARD_S, StampSynchronizer
 from face_reid_camera.ros.image_codec import ImageDecodeError, decode_image, depth_to_metres, to_bgr
-from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import seal_message
 from face_reid_msgs.msg import CameraFrame
 
 USAGE = """usage: face-reid-camera [--ros-args --params-file config/camera.yaml -p name:=value ...]

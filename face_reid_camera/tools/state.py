@@ -17,8 +17,8 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from face_reid_camera.common.ros.service_call import call_service
 from face_reid_camera.common.transitions import QUERY, TRANSITIONS, TransitionError, plan
-from face_reid_camera.ros.service_call import call_service
 
 __all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main"]
 
@@ -43,8 +43,8 @@ def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -
 
 
 def _sealed(node: Any, target: str, transition: str, key_path: str, timeout_s: float) -> tuple[bool, str, str]:
+    from face_reid_camera.common.ros.sealed import seal_request
     from face_reid_camera.common.sealing import Sealer, load_network_key
-    from face_reid_camera.ros.sealed import seal_request
     from face_reid_msgs.srv import ChangeState
 
     sealer = Sealer(load_network_key(key_path), f"{PROG}-{time.time_ns() % 10**9}")

@@ -42,7 +42,7 @@ from face_reid_master.identity.predefined_people import PredefinedPeople
 from face_reid_master.identity.records import IdentityEventKind
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
 from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
-from face_reid_master.tracking.records import FrameStatus, TrackState, UpdateResult
+from face_reid_master.tracking.records import FrameStatus, TrackState
 from face_reid_master.tracking.tracker import Tracker
 
 __all__ = ["MasterCore"]
@@ -110,8 +110,9 @@ class MasterCore:
         self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed (since its last split)
         self._split: dict[int, tuple[int, float]] = {}  # tracker id -> (published id, since s) after a swap
         self._gone: list[int] = []  # tracks deleted since the last identity step (their split ids go after it)
-        # frames applied with defer_identity: their track update, stamp and the tracks given a face observation
-        self._deferred: list[tuple[UpdateResult, float, set[int]]] = []
+        # what the next identity step decides on beyond the identity layer's own queue: the newest stamp applied
+        # since the last step (None: nothing waits) and the tracks given a face observation meanwhile
+        self._undecided: tuple[float, set[int]] | None = None
         self._last_stamp = -math.inf
 
     def _identity_manager(self, model: FaceLikelihood) -> IdentityManagerBase:
@@ -176,7 +177,11 @@ class MasterCore:
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
         touched = self._observe(update.associations, detections, stamp, frame.camera_id)
-        self._deferred.append((update, stamp, touched))
+        self._track_events(update.deleted, stamp, update.lost, update.recovered)
+        if self._undecided is None:
+            self._undecided = (stamp, touched)
+        else:
+            self._undecided = (max(self._undecided[0], stamp), self._undecided[1] | touched)
         events = () if defer_identity else tuple(self.finish_frames())
         notices, self._notices[:] = tuple(self._notices), []
         return FrameOutcome(True, track_of_person={detections.person_index[det]: tid
@@ -213,24 +218,24 @@ class MasterCore:
         return touched
 
     def finish_frames(self) -> list[Any]:
-        """The identity step of the frames applied since the last call (one step at the newest stamp, after
-        their track events in order), then face saving; returns the identity events. A no-op when nothing
-        waits (process_frame without ``defer_identity`` calls it itself)."""
-        if not self._deferred:
+        """The identity step on what the frames applied since the last step queued (their track events were told
+        as each frame was applied; one step at the newest stamp), then face saving; returns the identity events.
+        A no-op when nothing waits (process_frame without ``defer_identity`` calls it itself)."""
+        if self._undecided is None:
             return []
-        deferred, self._deferred = self._deferred, []
-        for update, stamp, _ in deferred[:-1]:
-            self._track_events(update.deleted, stamp, update.lost, update.recovered)
-        last = deferred[-1][0]
-        stamp = max(d[1] for d in deferred)
-        events = self._identity_step(last.deleted, stamp, last.lost, last.recovered)
-        for *_, touched in deferred:
-            for track_id in touched:
-                fid = self.identity.face_id_of(track_id)
-                if fid is not None:
-                    self.memory.learned(fid, stamp)
+        (stamp, touched), self._undecided = self._undecided, None
+        events = self._identity_step((), stamp)
+        for track_id in touched:
+            fid = self.identity.face_id_of(track_id)
+            if fid is not None:
+                self.memory.learned(fid, stamp)
         self.memory.maintain(stamp)
         return events
+
+    @property
+    def identity_pending(self) -> bool:
+        """True while frames applied with ``defer_identity`` wait for :meth:`finish_frames`."""
+        return self._undecided is not None
 
     @property
     def time_s(self) -> float:

@@ -20,8 +20,8 @@ import yaml
 from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import shown
+from face_reid_camera.common.floor_snapshot import FloorOccupancySnapshot
 from face_reid_camera.common.param_table import param, validate_fields
-from face_reid_camera.people.floor_occupancy import FloorOccupancySnapshot
 from face_reid_master.robot.frames import load_yaml_mapping
 
 __all__ = [

@@ -16,8 +16,8 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.embedding_spaces import space_dim
+from face_reid_camera.common.ros.sealed import open_request
 from face_reid_camera.common.sealing import SealError
-from face_reid_camera.ros.sealed import open_request
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
 __all__ = ["AdminServices"]

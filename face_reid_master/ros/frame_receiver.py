@@ -17,8 +17,8 @@ from rclpy.serialization import deserialize_message
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import NodeHealth
+from face_reid_camera.common.ros.sealed import open_payload
 from face_reid_camera.common.sealing import SealError
-from face_reid_camera.ros.sealed import open_payload
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.intake import FrameIntake, PendingFrame
 from face_reid_master.records import CameraFrameRecord

@@ -23,8 +23,8 @@ from std_msgs.msg import String
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
 from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.common.sealing import load_network_key
-from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, STATE_TENTATIVE, NamedTrackRecord
 from face_reid_master.robot.frames import PlanarTransform, load_world_to_map
 from face_reid_master.robot.standoff_goal import (

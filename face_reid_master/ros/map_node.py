@@ -24,9 +24,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
 from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.common.ros.floor_map import FLOOR_MAP_QOS, snapshot_from_msg
+from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.common.stamps import set_stamp
-from face_reid_camera.ros.floor_map import FLOOR_MAP_QOS, snapshot_from_msg
-from face_reid_camera.ros.lifecycle import ManagedNode, run_node
 from face_reid_master.robot.camera_map import CameraMapConfig, CameraMapFusion, OccupancyGridMap, save_nav2_map
 from face_reid_msgs.msg import FloorOccupancy
 

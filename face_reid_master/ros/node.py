@@ -29,9 +29,9 @@ from visualization_msgs.msg import MarkerArray
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
+from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
+from face_reid_camera.common.ros.sealed import seal_payload
 from face_reid_camera.common.stamps import set_stamp
-from face_reid_camera.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.ros.sealed import seal_payload
 from face_reid_master.core import MasterCore
 from face_reid_master.cycle_schedule import CycleSchedule
 from face_reid_master.health import MasterHealthWatch

@@ -19,8 +19,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from face_reid_camera.common.checks import shown
+from face_reid_camera.common.ros.sealed import unpack
 from face_reid_camera.common.sealing import SealError, load_network_key
-from face_reid_camera.ros.sealed import unpack
 from face_reid_master.tracks_auth import NetworkCheck, TracksVerifier, check_network, sealed_topic
 from face_reid_msgs.msg import NamedTrackArray
 from face_reid_msgs.msg import Sealed as SealedMsg

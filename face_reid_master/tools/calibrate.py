@@ -50,8 +50,8 @@ def record(out: Path, seconds: float, topic_regex: str, key_path: str, max_frame
 
     opener = None
     if key_path:
+        from face_reid_camera.common.ros.sealed import open_message
         from face_reid_camera.common.sealing import Opener, SealError, load_network_key
-        from face_reid_camera.ros.sealed import open_message
 
         opener = Opener(load_network_key(key_path))
     regex = re.compile(topic_regex)

@@ -12,7 +12,7 @@ import time
 from typing import Any
 
 from face_reid_camera.common.checks import shown
-from face_reid_camera.ros.service_call import call_service
+from face_reid_camera.common.ros.service_call import call_service
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 
@@ -67,7 +67,7 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
     def sealed(request: Any) -> Any:
         if sealer is None:
             return request
-        from face_reid_camera.ros.sealed import seal_request
+        from face_reid_camera.common.ros.sealed import seal_request
 
         return seal_request(sealer, request)
 

@@ -25,8 +25,8 @@ def main() -> int:
     import rclpy
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+    from face_reid_camera.common.ros.sealed import seal_message, seal_request
     from face_reid_camera.common.sealing import KEY_BYTES, Sealer
-    from face_reid_camera.ros.sealed import seal_message, seal_request
     from face_reid_msgs.msg import CameraFrame, PersonObservation, Sealed
     from face_reid_msgs.srv import AddPerson, ForgetFace
 

@@ -26,8 +26,8 @@ def main() -> int:
     import rclpy
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+    from face_reid_camera.common.ros.sealed import seal_message
     from face_reid_camera.common.sealing import Sealer, load_network_key
-    from face_reid_camera.ros.sealed import seal_message
     from face_reid_master.records import CameraFrameRecord, PersonRecord
     from face_reid_master.ros.convert import frame_record_to_msg
     from face_reid_msgs.msg import CameraFrame, Sealed

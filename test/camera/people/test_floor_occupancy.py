@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.common.floor_snapshot import FloorOccupancySnapshot
 from face_reid_camera.people.floor_occupancy import (
     FloorOccupancyAccumulator,
     FloorOccupancyConfig,
-    FloorOccupancySnapshot,
 )
 from face_reid_master.sim.renderer import SyntheticPerson, clutter_object, render_scene
 

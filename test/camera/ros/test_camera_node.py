@@ -299,8 +299,8 @@ def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
 
 
 def test_with_a_network_key_frames_go_out_sealed_only(ros_context, tmp_path: Path) -> None:
+    from face_reid_camera.common.ros.sealed import open_message
     from face_reid_camera.common.sealing import Opener, load_network_key, write_network_key
-    from face_reid_camera.ros.sealed import open_message
     from face_reid_msgs.msg import CameraFrame, Sealed
 
     key = load_network_key(write_network_key(tmp_path / "network.key"))
@@ -333,7 +333,7 @@ def test_floor_summary_is_published_only_when_asked_for(ros_context) -> None:
     """floor_map_period_s > 0: the real node counts its depth frames into a FloorOccupancy (walls of a rendered room
     in the obstacle band, the open floor free); at the default 0 it has no such publisher."""
     from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
-    from face_reid_camera.ros.floor_map import FLOOR_MAP_QOS, FLOOR_MAP_TOPIC
+    from face_reid_camera.common.ros.floor_map import FLOOR_MAP_QOS, FLOOR_MAP_TOPIC
     from face_reid_master.sim.renderer import render_scene
     from face_reid_msgs.msg import FloorOccupancy
 

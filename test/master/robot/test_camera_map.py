@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from face_reid_camera.people.floor_occupancy import FloorOccupancySnapshot
+from face_reid_camera.common.floor_snapshot import FloorOccupancySnapshot
 from face_reid_master.robot.camera_map import (
     FREE,
     OCCUPIED,

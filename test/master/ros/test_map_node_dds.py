@@ -24,8 +24,9 @@ def test_floor_summary_to_occupancy_grid(ros_context, tmp_path: Path) -> None:
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+    from face_reid_camera.common.ros.floor_map import FLOOR_MAP_QOS, snapshot_from_msg, snapshot_to_msg
     from face_reid_camera.people.floor_occupancy import FloorOccupancyConfig
-    from face_reid_camera.ros.floor_map import FLOOR_MAP_QOS, FloorMapOutput, snapshot_from_msg, snapshot_to_msg
+    from face_reid_camera.ros.floor_map_output import FloorMapOutput
     from face_reid_master.robot.camera_map import FREE, OCCUPIED, load_nav2_map
     from face_reid_master.ros.map_node import MapNode
     from face_reid_master.sim.renderer import render_scene

@@ -323,11 +323,11 @@ def test_the_face_table_is_updated_at_most_once_per_identity_period(ros_context,
         assert node.core.identity.face_ids() == [1]
         node.schedule.identity_done -= 1.0  # the period has passed: the next cycle updates again
         _feed(node, _frame(100.6, emb=_unit(2)))
-        assert node.core._deferred == []
+        assert not node.core.identity_pending
         _feed(node, _frame(100.7, emb=_unit(2)))  # within the period again: waits
-        assert len(node.core._deferred) == 1
+        assert node.core.identity_pending
         assert node.trigger_deactivate() == OK
-        assert node.core._deferred == []
+        assert not node.core.identity_pending
     finally:
         node.destroy_node()
 

@@ -18,8 +18,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
 
+from face_reid_camera.common.ros.sealed import open_message, seal_message, seal_request
 from face_reid_camera.common.sealing import Opener, Sealer, SealError, load_network_key, write_network_key
-from face_reid_camera.ros.sealed import open_message, seal_message, seal_request
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.ros.convert import frame_record_to_msg
 from face_reid_master.ros.node import MasterNode

@@ -135,7 +135,7 @@ def _state_cli(domain_id: int, *args: str, timeout_s: float = 120.0) -> subproce
 
 def _sealed_state(executor: Any, peer: Node, sealer: Sealer | None, fqn: str, transition: str) -> Any:
     """A ChangeState request (sealed with ``sealer``, or plain) to ``fqn``/change_state_sealed; its reply."""
-    from face_reid_camera.ros.sealed import seal_request
+    from face_reid_camera.common.ros.sealed import seal_request
     from face_reid_msgs.srv import ChangeState
 
     client = peer.create_client(ChangeState, f"{fqn}/change_state_sealed")
@@ -205,7 +205,7 @@ def test_a_peer_without_the_key_controls_nothing_and_the_operator_with_it_does(r
         assert sorted(_call(executor, list_faces, ListFaces.Request()).face_ids) == stored
         assert "retention_unnamed_s" not in (tmp_path / "master.log").read_text()
         # a replayed operator request is refused too
-        from face_reid_camera.ros.sealed import seal_request
+        from face_reid_camera.common.ros.sealed import seal_request
         from face_reid_msgs.srv import ChangeState
 
         captured = seal_request(Sealer(key, "operator2"), ChangeState.Request(transition="deactivate"))

@@ -24,8 +24,8 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 
+from face_reid_camera.common.ros.sealed import seal_message, seal_payload
 from face_reid_camera.common.sealing import Sealer, load_network_key, write_network_key
-from face_reid_camera.ros.sealed import seal_message, seal_payload
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.ros.convert import frame_record_to_msg
 from face_reid_master.ros.goto_node import GotoNode

@@ -157,8 +157,8 @@ class ManagedNode(LifecycleNode):
         return str(self._state_machine.current_state[1])
 
     def _on_change_state_sealed(self, request: Any, response: Any) -> Any:
+        from face_reid_camera.common.ros.sealed import open_request
         from face_reid_camera.common.sealing import SealError
-        from face_reid_camera.ros.sealed import open_request
 
         self.control_requests += 1
         try:
