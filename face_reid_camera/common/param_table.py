@@ -210,9 +210,14 @@ def config_from_values(cls: type, values: Mapping[str, Any], prefix: str = "", *
 
 # ------------------------------------------------------------------------------------------- the table
 class ParamTable:
-    """The parameters of one node, in declaration order."""
+    """The parameters of one node, in declaration order.
 
-    def __init__(self, node_name: str, specs: Iterable[ParamSpec], title: str, usage: str) -> None:
+    ``deployment``: the names a site sets (the shipped YAML and ``--help`` show these; empty = all); the others
+    are advanced: declared, validated and documented alike, at their defaults unless set.
+    """
+
+    def __init__(self, node_name: str, specs: Iterable[ParamSpec], title: str, usage: str,
+                 deployment: Sequence[str] = ()) -> None:
         self.node_name = node_name
         self.specs = tuple(specs)
         self.title = title
@@ -222,6 +227,18 @@ class ParamTable:
         if dup:
             raise ValueError(f"duplicate parameter names in {node_name}: {sorted(dup)}")
         self._by_name = {s.name: s for s in self.specs}
+        unknown = [n for n in deployment if n not in self._by_name]
+        if unknown:
+            raise ValueError(f"deployment parameters of {node_name} that are not declared: {unknown}")
+        self._deployment = frozenset(deployment or names)
+
+    def tier(self, name: str) -> str:
+        """'deployment' (a site sets it) or 'advanced' (tuning and internals)."""
+        return "deployment" if name in self._deployment else "advanced"
+
+    @property
+    def deployment_specs(self) -> tuple[ParamSpec, ...]:
+        return tuple(s for s in self.specs if s.name in self._deployment)
 
     def __getitem__(self, name: str) -> ParamSpec:
         return self._by_name[name]
@@ -270,18 +287,21 @@ class ParamTable:
         return self.check_all(raw)
 
     def write_yaml(self, path: str | Path) -> None:
-        """Write every parameter at its default under ``/**`` (applies whatever the node's name and
+        """Write the deployment parameters at their defaults under ``/**`` (applies whatever the node's name and
         namespace), each under a comment with its description and range."""
+        advanced = len(self.specs) - len(self.deployment_specs)
         lines = [
             f"# Defaults of {self.title}.",
             "# Generated from the parameter declarations in the code (a test keeps them equal).",
             "# '/**' applies the file to the node whatever its name or namespace.",
             f"# Use: {self.usage}",
-            "/**:",
-            "  ros__parameters:",
         ]
+        if advanced:
+            lines.append(f"# The {advanced} advanced parameters keep their defaults unless set here: "
+                         "docs/parameters.md, or --help-all.")
+        lines += ["/**:", "  ros__parameters:"]
         nested_open = ""
-        for spec in self.specs:
+        for spec in self.deployment_specs:
             group, _, leaf = spec.name.rpartition(".")
             indent = "    "
             if group:
@@ -294,13 +314,27 @@ class ParamTable:
             lines.append(f"{indent}{leaf}: {json.dumps(spec.default)}")
         Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
 
-    def help_text(self) -> str:
-        """One line per parameter, for --help."""
+    def help_text(self, advanced: bool = False) -> str:
+        """One line per deployment parameter (every parameter with ``advanced``), for --help / --help-all."""
         out = []
-        for s in self.specs:
+        for s in self.specs if advanced else self.deployment_specs:
             notes = s.notes()
             out.append(f"  {s.name} (default {json.dumps(s.default)}{'; ' + notes if notes else ''}): {s.description}")
+        hidden = len(self.specs) - len(self.deployment_specs)
+        if hidden and not advanced:
+            out.append(f"  ... and {hidden} advanced parameters: --help-all, or docs/parameters.md")
         return "\n".join(out)
+
+    def markdown(self) -> str:
+        """This node's section of docs/parameters.md: every parameter with type, default, range, tier."""
+        rows = [f"## {self.node_name}", "", f"{self.title[0].upper()}{self.title[1:]}. Use: `{self.usage}`", "",
+                "| parameter | type | default | range | tier | description |", "|---|---|---|---|---|---|"]
+        for s in sorted(self.specs, key=lambda s: (self.tier(s.name) != "deployment", self.specs.index(s))):
+            rng = "; ".join(t for t in (s.range_text(), "read-only" if s.read_only else "") if t)
+            default = json.dumps(s.default).replace("|", "\\|")
+            rows.append(f"| `{s.name}` | {s.type_text()} | `{default}` | {rng.replace('|', '/')} | {self.tier(s.name)} "
+                        f"| {s.description.replace('|', '/')} |")
+        return "\n".join(rows) + "\n"
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

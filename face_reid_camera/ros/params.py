@@ -92,6 +92,11 @@ TABLE = ParamTable(
      *config_specs(FloorOccupancyConfig, "floor_map_"),
      *config_specs(PersonDetectorConfig, "person."), *config_specs(BodyConfig, "body.")),
     "the face-reid camera node (face-reid-camera / face-reid-replay)", USAGE,
+    deployment=("camera_id", "autostart", "world_frame_id", "camera_frame_id", "camera_pose_xyz_m",
+                "camera_pose_rpy_rad", "color_topic", "depth_topic", "camera_info_topic", "color_camera_info_topic",
+                "image_qos", "sync_slop_s", "output_topic", "network_key_path", "sealed_output_topic", "detect_faces",
+                "describe_bodies", "embedder", "num_threads", "embed_budget_ms", "max_faces_per_frame",
+                "body_projection_path", "floor_map_period_s", "person.max_depth_m", "person.min_person_height_m"),
 )
 
 
@@ -120,8 +125,3 @@ def pipeline_config(params: dict[str, Any]) -> CameraPipelineConfig:
         quality=config_from_values(FaceQualityConfig, params),
         body=config_from_values(BodyConfig, params, "body."),
     )
-
-
-def write_defaults_yaml(path: str | Path) -> None:
-    """Write ``config/camera.yaml`` with every parameter at its default (comments = descriptions)."""
-    TABLE.write_yaml(path)

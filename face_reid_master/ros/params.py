@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 from face_reid_camera.common.param_table import (
@@ -104,6 +103,11 @@ TABLE = ParamTable(
     NODE_NAME, (*_NODE_PARAMS, *config_specs(MasterConfig), *config_specs(TrackerConfig, "tracker."),
                 *config_specs(PeopleOutputConfig)),
     "the face-reid master node (face-reid-master)", USAGE,
+    deployment=("autostart", "world_frame_id", "camera_topics", "camera_topic_regex", "network_key_path",
+                "known_camera_ids", "tracks_topic", "markers_topic", "gallery_path", "admin_services", "photo_root",
+                "persist_faces", "db_path", "retention_unnamed_s", "max_faces", "likelihood_path",
+                "body_metric_path", "confidence_map_path", "embedding_space", "check_stamps_against_clock",
+                "publish_people", "people_topic", "publish_hri", "people_world_to_map_path"),
 )
 
 
@@ -123,8 +127,3 @@ def master_config(params: dict[str, Any]) -> MasterConfig:
         MasterConfig, params, known_camera_ids=clean_list(params["known_camera_ids"]),
         tracker=config_from_values(TrackerConfig, params, "tracker."),
     )
-
-
-def write_defaults_yaml(path: str | Path) -> None:
-    """Write ``config/master.yaml``."""
-    TABLE.write_yaml(path)

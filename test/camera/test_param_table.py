@@ -76,3 +76,18 @@ def test_table_yaml_round_trip_help_and_suggestions(tmp_path: Path) -> None:
     path.write_text("demo_node:\n  ros__parameters:\n    count: 11\n")
     with pytest.raises(ParamError, match=r"'count' must be in \[1, 10\], got 11"):
         table.load_yaml(path)
+
+
+def test_a_tiered_table_shows_its_deployment_parameters_and_points_to_the_rest(tmp_path: Path) -> None:
+    table = ParamTable("demo_node", config_specs(_Config, "x."), "a demo node", "demo",
+                       deployment=["x.rate_hz"])
+    assert table.tier("x.rate_hz") == "deployment" and table.tier("x.count") == "advanced"
+    help_text, every = table.help_text(), table.help_text(advanced=True)
+    assert "x.rate_hz" in help_text and "x.count" not in help_text
+    assert "and 3 advanced parameters: --help-all" in help_text and "x.count" in every
+    path = tmp_path / "demo.yaml"
+    table.write_yaml(path)
+    assert "rate_hz:" in path.read_text() and "count:" not in path.read_text()
+    assert table.load_yaml(path) == table.defaults()  # the advanced ones at their defaults
+    page = table.markdown()
+    assert page.index("`x.rate_hz`") < page.index("`x.count`") and "| advanced |" in page

@@ -325,12 +325,13 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
              argv: list[str] | None = None) -> int:
     """Run a face-reid node until Ctrl-C / shutdown; returns the exit status.
 
-    ``--help`` (without ``--ros-args``) prints ``usage`` and every parameter without starting ROS. A bad
+    ``--help`` (without ``--ros-args``) prints ``usage`` and the deployment parameters without starting ROS
+    (``--help-all``: every parameter). A bad
     parameter, or (with ``autostart``) a failed configure, is one ``FATAL`` line and exit status 2.
     """
     argv = list(sys.argv if argv is None else argv)
-    if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv:
-        print(usage + table.help_text())
+    if any(a in ("-h", "--help", "--help-all") for a in argv[1:]) and "--ros-args" not in argv:
+        print(usage + table.help_text(advanced="--help-all" in argv[1:]))
         return 0
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

@@ -258,13 +258,3 @@ def test_name_on_the_command_line() -> None:
     assert target_from_args(["face-reid-goto", "Alice", "--ros-args", "-p", "x:=1"]) == "Alice"
     assert target_from_args(["face-reid-goto", "Mary", "Ann"]) == "Mary Ann"
     assert target_from_args(["face-reid-goto", "--ros-args", "-p", "target_name:=Bob"]) is None
-
-
-def test_config_goto_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
-    from conftest import REPO_ROOT
-
-    from face_reid_master.ros.goto_node import TABLE
-
-    regenerated = tmp_path / "goto.yaml"
-    TABLE.write_yaml(regenerated)
-    assert regenerated.read_text() == (REPO_ROOT / "config" / "goto.yaml").read_text(), "regenerate config/goto.yaml"

@@ -97,13 +97,3 @@ def test_floor_summary_to_occupancy_grid(ros_context, tmp_path: Path) -> None:
         for n in (camera, probe, mapper):
             executor.remove_node(n)
             n.destroy_node()
-
-
-def test_config_map_yaml_holds_exactly_the_defaults(tmp_path: Path) -> None:
-    from conftest import REPO_ROOT
-
-    from face_reid_master.ros.map_node import TABLE
-
-    regenerated = tmp_path / "map.yaml"
-    TABLE.write_yaml(regenerated)
-    assert regenerated.read_text() == (REPO_ROOT / "config" / "map.yaml").read_text(), "regenerate config/map.yaml"
