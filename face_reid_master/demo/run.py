@@ -256,6 +256,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-db", action="store_true",
                    help="keep the temporary folder (face database, gallery, logs) instead of deleting it")
     p.add_argument("--json", type=Path, default=None, help="also write the summary as JSON to this file")
+    p.add_argument("--floor-plan", type=Path, default=None, metavar="PNG",
+                   help="also draw the run seen from above (room, cameras, tracks by name) into this PNG file")
     p.add_argument("--camera-param", action="append", default=[], type=_ros_setting, metavar="NAME:=VALUE",
                    help="a parameter for every camera node (repeatable), e.g. floor_map_period_s:=2.0")
     p.add_argument("--master-param", action="append", default=[], type=_ros_setting, metavar="NAME:=VALUE",
@@ -347,6 +349,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             out.flush()
             if args.json is not None:
                 args.json.write_text(json.dumps(summary, indent=2))
+            if args.floor_plan is not None:
+                from face_reid_master.demo.floor_plan import draw_floor_plan
+
+                draw_floor_plan(scenario, run.messages, args.floor_plan)
+                out.write(f"floor plan: {args.floor_plan}\n")
     finally:
         if args.keep_db:
             print(f"face-reid-demo: kept {work} (faces.db, gallery/, logs/)", file=out, flush=True)
