@@ -90,8 +90,7 @@ class _Run:
         gallery = self.work / "gallery"
         _make_gallery(self.scenario, gallery)
         master_args = ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={self.work / 'faces.db'}",
-                       "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=10.0",
-                       "-p", f"method:={self.args.method}"]
+                       "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=10.0"]
         if any(p.in_gallery for p in self.scenario.people):
             master_args += ["-p", f"gallery_path:={gallery}"]
         for setting in self.args.master_param:
@@ -247,7 +246,6 @@ def _parser() -> argparse.ArgumentParser:
                    help="how many of them are predefined people with a name (default 2)")
     p.add_argument("--rate-hz", type=float, default=5.0, help="frames per second rendered per camera (default 5)")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"scenario seed (default {DEFAULT_SEED})")
-    p.add_argument("--method", choices=("bayes", "threshold"), default="bayes", help="master face classification")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID for all the demo's processes, 0..232 (default: the environment's "
                         "ROS_DOMAIN_ID, else random in 1..100)")
@@ -334,7 +332,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         if status == 0:
-            summary = summarize(scenario, run.messages, args.method)
+            summary = summarize(scenario, run.messages)
             summary["wall_time_s"] = round(time.monotonic() - started, 1)
             summary["domain_id"] = domain_id
             summary["players"] = {name: {k: v for k, v in ev.items() if k != "event"}

@@ -1,7 +1,7 @@
 """``face-reid-eval``: run the master core on a recorded scenario and print the paper's metrics as JSON.
 
 Example: ``face-reid-eval S --method bayes --plot S/bayes`` after ``face-reid-sim ... --out S``.
-The metrics are defined in ``README.md, "What is counted, exactly"`` (computed by
+The metrics are defined in ``docs/evaluation.md, "What is counted"`` (computed by
 :mod:`face_reid_master.evaluation.metrics` from a run of :mod:`face_reid_master.evaluation.runner`).
 One JSON object goes to stdout (and to ``--out``); progress to stderr. ``--live`` replays the scenario
 through the real master node over DDS instead (:mod:`face_reid_master.evaluation.live`). Exit status: 0 done,
@@ -47,7 +47,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="face-reid-eval",
         description="Evaluate people re-identification on a scenario written by face-reid-sim: tracks "
                     "re-identified successfully / wrongly, re-identification time, recover rate, names of "
-                    "predefined people, IDF1 / MOTA (definitions: README.md, 'What is counted, exactly').",
+                    "predefined people, IDF1 / MOTA (definitions: docs/evaluation.md, 'What is counted').",
     )
     p.add_argument("scenario", type=Path, metavar="SCENARIO_DIR", help="directory written by face-reid-sim")
     p.add_argument("--method", choices=("bayes", "threshold", "both"), default="bayes",
@@ -164,8 +164,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("face-reid-eval: error: --confidence-map raw is offline only (the live master publishes through a map "
               "file)", file=sys.stderr)
         return 2
-    if args.live and args.method == "both":
-        print("face-reid-eval: error: --live runs one method: use --method bayes or threshold", file=sys.stderr)
+    if args.live and args.method != "bayes":
+        print("face-reid-eval: error: --live runs the master node, which uses the Bayesian table: the threshold "
+              "baseline runs offline (without --live)", file=sys.stderr)
         return 2
     if not (math.isfinite(args.tick_period) and args.tick_period > 0):
         print(f"face-reid-eval: error: --tick-period must be > 0 s, got {args.tick_period}", file=sys.stderr)
@@ -217,8 +218,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         lines = "\n".join(f"  - {p}" for p in protocol.problems())
         if not args.allow_fitted:
             print(f"face-reid-eval: error: {args.scenario} is not an honest test of the loaded models:\n{lines}\n"
-                  "evaluate people no fitted model has seen (README, 'Honest evaluation'), or pass --allow-fitted "
-                  "to evaluate anyway (the result is marked \"honest\": false)", file=sys.stderr)
+                  "evaluate people no fitted model has seen (docs/evaluation.md, 'Honest evaluation'), or pass "
+                  "--allow-fitted to evaluate anyway (the result is marked \"honest\": false)", file=sys.stderr)
             return 3
         print(f"face-reid-eval: WARNING: NOT AN HONEST TEST: the loaded models saw this scenario's people:\n{lines}",
               file=sys.stderr)
@@ -359,7 +360,7 @@ def _main_live(args: argparse.Namespace, scenario: Any, gallery: GalleryInfo, co
     previous = signal.signal(signal.SIGTERM, on_term)
     t1 = time.perf_counter()
     try:
-        live = run_live(scenario.frames, day_of_frame, gallery.people, args.method, domain_id, uuid.uuid4().hex[:12],
+        live = run_live(scenario.frames, day_of_frame, gallery.people, domain_id, uuid.uuid4().hex[:12],
                         log=log, likelihood_path=args.likelihood, embedding_space=model.space,
                         body_appearance_tracking=config.body_appearance_tracking,
                         body_metric_path=args.body_metric,

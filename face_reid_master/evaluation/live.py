@@ -1,7 +1,7 @@
 """``face-reid-eval --live``: replay a recorded scenario through the real master node over DDS.
 
 A ``face_reid_master.ros.node`` process (temporary face database, the evaluation's predefined people as an
-``.npz`` gallery, ``method`` as asked) runs on a private ROS domain with discovery on loopback only. This
+``.npz`` gallery, the Bayesian table) runs on a private ROS domain with discovery on loopback only. This
 process publishes the scenario's camera frames as ``face_reid_msgs/CameraFrame`` on
 ``/<camera_id>/face_reid/frames`` in real time (recorded inter-frame timing, stamps = now) and records every
 ``/tracks_named`` message. The metrics are then computed from what the master PUBLISHED
@@ -131,7 +131,7 @@ def _segments_to_scene(segments: Sequence[tuple[float, float]]) -> Any:
 
 
 def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], gallery: Mapping[str, Any],
-             method: str, domain_id: int, run_id: str, *, startup_timeout_s: float = 60.0,
+             domain_id: int, run_id: str, *, startup_timeout_s: float = 60.0,
              log: TextIO | None = None, keep_dir: Path | None = None,
              likelihood_path: Path | None = None, embedding_space: str = "dlib_resnet_v1",
              body_appearance_tracking: bool = True, body_metric_path: Path | None = None,
@@ -155,7 +155,7 @@ def run_live(frames: Sequence[CameraFrameRecord], day_of_frame: Sequence[int], g
     say(f"live: work folder {work} (face database, gallery, master log; deleted at the end)")
     master_args = ["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={work / 'faces.db'}",
                    "-p", "max_publish_rate_hz:=0.0",  # every cycle's state: the evaluation samples them all
-                   "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0", "-p", f"method:={method}",
+                   "-p", "topic_discovery_period_s:=0.5", "-p", "stats_log_period_s:=1.0",
                    "-p", f"embedding_space:={embedding_space}",
                    "-p", f"body_appearance_tracking:={'true' if body_appearance_tracking else 'false'}"]
     if gallery:

@@ -2,7 +2,7 @@
 Table II): per-track re-identification outcomes (success / failure / none), re-identification time, recover
 rate, predefined-people names, tracker- and identity-level IDF1 / MOTA / switches (``motmetrics``).
 
-Every definition is written out in ``README.md, "What is counted, exactly"``; the docstrings only summarise.
+Every definition is written out in ``docs/evaluation.md, "What is counted"``; the docstrings only summarise.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ _MOT_METRICS = ("idf1", "idp", "idr", "mota", "num_switches", "num_fragmentation
 
 @dataclass(frozen=True)
 class TrackOutcome:
-    """The re-identification verdict of one evaluated track (see README.md, "What is counted, exactly")."""
+    """The re-identification verdict of one evaluated track (see docs/evaluation.md, "What is counted")."""
 
     track_id: int
     person: int
@@ -177,7 +177,7 @@ def paired_reid_times(log_a: RunLog, log_b: RunLog, names: tuple[str, str] = ("a
 def mot_metrics(log: RunLog, hypothesis: str = "track") -> dict[str, float | int]:
     """motmetrics over camera frames: GT = true people detected in the frame, hypotheses = the track
     ids (``hypothesis="track"``) or face ids (``"face"``) of the same detections, distance 0 between a
-    detection's true person and its own hypothesis and no match otherwise (README.md, "What is counted, exactly")."""
+    detection's true person and its own hypothesis and no match otherwise (docs/evaluation.md, "What is counted")."""
     import motmetrics as mm
 
     if hypothesis not in ("track", "face"):
@@ -228,7 +228,7 @@ def evaluate_run(
     scenario_summary: Mapping[str, Any] | None = None,
     with_mot: bool = True,
 ) -> dict[str, Any]:
-    """All metrics of one run as a JSON-ready dict (definitions: README.md, "What is counted, exactly").
+    """All metrics of one run as a JSON-ready dict (definitions: docs/evaluation.md, "What is counted").
 
     ``gallery_people``: predefined name -> true person (gt id). ``scenario_summary``: the scenario's
     summary (``losses``, ``visible_segments``, ``per_day`` segments) for the tracker-side comparison.
@@ -384,8 +384,8 @@ def evaluate_run(
 
 
 def _names_per_detection(log: RunLog, gallery_people: Mapping[str, int] | None) -> dict[str, Any]:
-    """Names shown on tracked detections, judged by each detection's own true person (README.md, "What is
-    counted, exactly"): unlike the per-track counts, a track the tracker swapped is right before the swap."""
+    """Names shown on tracked detections, judged by each detection's own true person (docs/evaluation.md,
+    "What is counted"): unlike the per-track counts, a track the tracker swapped is right before the swap."""
     if not gallery_people or not log.det_name.size:
         return {}
     tracked = (log.det_track >= 0) & (log.det_gt >= 0)
@@ -410,7 +410,7 @@ def _names_per_detection(log: RunLog, gallery_people: Mapping[str, int] | None) 
 
 
 def _names(evaluated: Sequence[TrackLog], gallery_people: Mapping[str, int] | None) -> dict[str, Any]:
-    """Predefined-people outcome per track: right / wrong / no name (README.md, "What is counted, exactly")."""
+    """Predefined-people outcome per track: right / wrong / no name (docs/evaluation.md, "What is counted")."""
     if not gallery_people:
         return {"gallery_people": 0}
     person_name = {gt: name for name, gt in gallery_people.items()}

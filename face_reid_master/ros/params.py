@@ -99,8 +99,12 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("stats_log_period_s", 30.0, "Counters are logged this often (s).", low=0.1, high=86400.0),
 )
 
+# The paper's threshold baseline is chosen by the evaluation tools (face-reid-eval --method), not on a node.
+EVALUATION_ONLY = ("method", "threshold_distance", "threshold_votes")
+
 TABLE = ParamTable(
-    NODE_NAME, (*_NODE_PARAMS, *config_specs(MasterConfig), *config_specs(TrackerConfig, "tracker."),
+    NODE_NAME, (*_NODE_PARAMS, *(s for s in config_specs(MasterConfig) if s.name not in EVALUATION_ONLY),
+                *config_specs(TrackerConfig, "tracker."),
                 *config_specs(PeopleOutputConfig)),
     "the face-reid master node (face-reid-master)", USAGE,
     deployment=("autostart", "world_frame_id", "camera_topics", "camera_topic_regex", "network_key_path",

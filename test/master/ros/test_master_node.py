@@ -109,9 +109,9 @@ def test_parameters_are_read_on_configure_and_locked_while_configured(ros_contex
 
     node = _master(ros_context, tmp_path)
     try:
-        assert node.set_parameters([Parameter("method", value="threshold")])[0].successful
-        assert node.trigger_configure() == OK and node.core.config.method == "threshold"
-        result = node.set_parameters([Parameter("method", value="bayes")])[0]
+        assert node.set_parameters([Parameter("min_observations", value=5)])[0].successful
+        assert node.trigger_configure() == OK and node.core.config.min_observations == 5
+        result = node.set_parameters([Parameter("min_observations", value=3)])[0]
         assert not result.successful and "read on configure" in result.reason
         bad = node.set_parameters([Parameter("posterior_threshold", value=2.0)])[0]
         assert not bad.successful  # out of range, refused by the descriptor
@@ -453,7 +453,7 @@ def test_lifecycle_and_parameter_services_answer_and_timers_survive_reactivation
 
 @pytest.mark.parametrize("override,expected", [
     ("posterior_threshold:=1.2", "parameter 'posterior_threshold' must be in [0.5, 0.999), got 1.2"),
-    ("method:=bayse", "parameter 'method' must be one of bayes, threshold; got 'bayse'"),
+    ("embedding_space:=dlib", "parameter 'embedding_space' must be one of"),
     ("tracker.max_tracks:=0", "parameter 'tracker.max_tracks' must be in [1, 100000], got 0"),
 ])
 def test_bad_parameter_is_one_fatal_line(ros_domain_id: int, tmp_path: Path, override: str, expected: str) -> None:
@@ -467,7 +467,8 @@ def test_every_parameter_has_a_range_or_choices_where_one_applies() -> None:
         if spec.kind in ("int", "float", "float_list"):
             assert spec.low is not None and spec.high is not None, spec.name
         assert len(spec.description) > 20, spec.name
-    assert master_params.TABLE["method"].choices == ("bayes", "threshold")
+    assert not set(master_params.EVALUATION_ONLY) & set(master_params.TABLE.names())
+    assert master_params.master_config(master_params.defaults()).method == "bayes"
 
 
 def test_config_yaml_gives_the_defaults() -> None:
