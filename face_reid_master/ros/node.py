@@ -149,6 +149,10 @@ class MasterNode(ManagedNode):
                            self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos))
         self._stamps.reset()
         markers_topic = str(values["markers_topic"])
+        if markers_topic and self._tracks_sealer is not None:  # markers are plain: names and positions in clear
+            self.get_logger().info(f"secured network: no RViz markers on {markers_topic[:200]} (they would carry "
+                                   "names and positions in clear)")
+            markers_topic = ""
         self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
         if self.people_topics is not None:
             self.people_topics.activate()

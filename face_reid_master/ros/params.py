@@ -50,7 +50,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
               "Where face_reid_msgs/NamedTrackArray is published (with a network key: sealed, as "
               "face_reid_msgs/Sealed on <tracks_topic>_sealed instead)."),
     ParamSpec("markers_topic", "/tracks_named/markers",
-              "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off)."),
+              "visualization_msgs/MarkerArray for RViz, sent only while subscribed ('' = off; none with a network key: "
+              "markers are plain)."),
     ParamSpec("max_publish_rate_hz", 30.0,
               "Cap on /tracks_named messages per second (Hz; 0 = one per cycle of frames).",
               low=0.0, high=1000.0),
@@ -86,7 +87,8 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("retention_unnamed_s", 2_592_000.0,
               "Unnamed faces not seen for this long are forgotten (s; 0 = keep forever; named faces are kept).",
               low=0.0, high=1e9),
-    ParamSpec("likelihood_path", "", "Fitted likelihood JSON ('' = the installed models/face_likelihood.json)."),
+    ParamSpec("likelihood_path", "",
+              "Fitted likelihood JSON ('' = the installed models/face_likelihood_<embedding_space>.json)."),
     ParamSpec("body_metric_path", "", "Body metric JSON from face-reid-fit-body ('' = the installed "
               "models/body_metric.json); used when body_appearance_tracking is on."),
     ParamSpec("confidence_map_path", "", "Map from a decision's posterior to the published identity_confidence "

@@ -50,7 +50,12 @@ def write_all(root: Path = REPO) -> list[Path]:
     return [*written, root / PAGE]
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    argparse.ArgumentParser(prog="python -m face_reid_master.tools.parameter_docs",
+                            description="Regenerate config/<node>.yaml and docs/parameters.md from the parameter "
+                                        "declarations.").parse_args(argv)
     for path in write_all():
         print(f"wrote {path}", file=sys.stderr)
     return 0

@@ -60,6 +60,7 @@ def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) 
         executor.add_node(node)
     try:
         assert master.trigger_configure() == OK and master.trigger_activate() == OK
+        assert master.markers_pub is None  # RViz markers would carry names and positions in clear
         sealed_pub = camera.create_publisher(Sealed, "/cam_a/face_reid/frames_sealed", 10)
         plain_pub = stranger.create_publisher(CameraFrame, "/cam_b/face_reid/frames", 10)
         forged_pub = stranger.create_publisher(Sealed, "/cam_c/face_reid/frames_sealed", 10)
