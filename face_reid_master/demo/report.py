@@ -246,6 +246,12 @@ def _who(tr: NamedTrackRecord) -> str:
     return f"{who} (by body)" if tr.identity_evidence == "body" else who
 
 
+def _confidence(tr: NamedTrackRecord, undecided: str = "-") -> str:
+    """A decided track's identity_confidence; ``undecided`` for a track with face id 0 (it claims nobody: no
+    number is shown, whatever a master sent with it)."""
+    return f"{tr.identity_confidence:.2f}" if tr.face_id else undecided
+
+
 _STATES = {0: "tentative", STATE_CONFIRMED: "confirmed", STATE_LOST: "lost"}
 
 
@@ -264,14 +270,14 @@ def format_table(scenario: DemoScenario, msg: TrackMessage | None, elapsed_s: fl
         truth = scenario.people[gt].name if gt >= 0 else "-"
         rows.append((tr, truth))
     if compact:
-        parts = [f"#{tr.track_id} {_who(tr)} ({tr.identity_confidence:.2f}) at ({tr.position_xy[0]:+.1f}, "
+        parts = [f"#{tr.track_id} {_who(tr)} ({_confidence(tr, 'undecided')}) at ({tr.position_xy[0]:+.1f}, "
                  f"{tr.position_xy[1]:+.1f}) [{_STATES.get(tr.state, tr.state)}; truth: {truth}]" for tr, truth in rows]
         return f"{head}: {len(rows)} tracks" + ("; " + "; ".join(parts) if parts else "")
     lines = [f"{head}   {len(rows)} tracks on /tracks_named",
              f"{'track':>5}  {'who':<18} {'conf':>5}  {'x m':>6} {'y m':>6}  {'cameras':<18} {'state':<9}  truth"]
     for tr, truth in rows:
         cams = ",".join(tr.cameras) or "-"
-        lines.append(f"{tr.track_id:>5}  {_who(tr):<18.18} {tr.identity_confidence:>5.2f}  {tr.position_xy[0]:>6.2f} "
+        lines.append(f"{tr.track_id:>5}  {_who(tr):<18.18} {_confidence(tr):>5}  {tr.position_xy[0]:>6.2f} "
                      f"{tr.position_xy[1]:>6.2f}  {cams:<18.18} {_STATES.get(tr.state, str(tr.state)):<9}  {truth}")
     return "\n".join(lines)
 

@@ -325,6 +325,20 @@ def test_a_lost_track_is_shown_inside_the_room(scenario: demo_scenario.DemoScena
     assert " lost " in row and f" {half[0]:.2f} " in row and f" {-half[1]:.2f} " in row and "40.00" not in row
 
 
+def test_an_undecided_track_shows_no_confidence(scenario: demo_scenario.DemoScenario) -> None:
+    """Face id 0 claims nobody: "?" with no number (not "? (1.00)"), whatever confidence came with it."""
+    msg = _perfect_messages(scenario)[100]
+    decided = dataclasses.replace(msg.tracks[0], identity_confidence=0.94)
+    undecided = dataclasses.replace(msg.tracks[0], track_id=99, face_id=0, name="", identity_confidence=1.0)
+    shown = TrackMessage(msg.stamp_s, (decided, undecided))
+    rows = {line.split()[0]: line for line in report.format_table(scenario, shown, 20.0).splitlines()[2:]}
+    assert rows["99"].split()[1:3] == ["?", "-"] and "1.00" not in rows["99"]
+    assert " 0.94 " in rows[str(decided.track_id)]
+    compact = report.format_table(scenario, shown, 20.0, compact=True)
+    assert "#99 ? (undecided) at" in compact and "1.00" not in compact
+    assert "(0.94) at" in compact
+
+
 def test_node_parameters_pass_through_and_bad_ones_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
     from face_reid_master.demo.run import _parser
 
