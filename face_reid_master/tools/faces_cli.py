@@ -73,11 +73,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _iso(stamp_s: float) -> str:
+TIME_HEADER = "(local time)"  # list: how the times are shown (by face-reid-faces --master too)
+
+
+def local_time(stamp_s: float) -> str:
+    """Seconds since the epoch as this machine's local time, ISO 8601 to the second with its UTC offset (how
+    both the store and a running master's list show times); the number itself when no date has it."""
     try:
-        return _dt.datetime.fromtimestamp(stamp_s, _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        return _dt.datetime.fromtimestamp(stamp_s).astimezone().isoformat(timespec="seconds")
     except (OverflowError, OSError, ValueError):
         return f"{stamp_s:.3f}"
+
+
+def name_cell(name: str | None) -> str:
+    """A face's name as the lists show it: "-" for none, quoted and cut when it is long or not printable."""
+    if not name:
+        return "-"
+    return name if name.isprintable() and len(name) <= 24 else shown(name, 20)
 
 
 def _print_list(faces: list[FaceSummary], as_json: bool) -> None:
@@ -98,12 +110,13 @@ def _print_list(faces: list[FaceSummary], as_json: bool) -> None:
             )
         )
         return
-    print(f"{'id':>6}  {'name':<24} {'features':>8} {'observ.':>8}  {'created (UTC)':<20}  {'last seen (UTC)':<20}")
+    created = f"created {TIME_HEADER}"
+    print(f"{'id':>6}  {'name':<24} {'features':>8} {'observ.':>8}  {created:<25}  last seen {TIME_HEADER}")
     for f in faces:
-        name = "-" if f.name is None else f.name if f.name.isprintable() and len(f.name) <= 24 else shown(f.name, 20)
+        name = name_cell(f.name)
         print(
             f"{f.face_id:>6}  {name:<24} {f.n_features:>8} {f.n_observations:>8}  "
-            f"{_iso(f.created_s):<20}  {_iso(f.last_seen_s):<20}"
+            f"{local_time(f.created_s):<25}  {local_time(f.last_seen_s)}"
         )
     print(f"{len(faces)} face(s)")
 

@@ -13,6 +13,7 @@ from typing import Any
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.ros.service_call import call_service
+from face_reid_master.tools.faces_cli import TIME_HEADER, local_time, name_cell
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 
@@ -22,6 +23,16 @@ _HINT = "is the master running, with admin_services: true for add / forget, on t
 
 def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
     return call_service(node, srv_type, name, request, timeout_s, _HINT)
+
+
+def format_remote_list(rows: list[tuple[int, str, int, float]], master: str) -> str:
+    """The ~/list_faces answer as a table: face id, name, stored features, last seen (names and times shown as
+    face-reid-faces shows the store's)."""
+    lines = [f"{'id':>6}  {'name':<24} {'features':>8}  last seen {TIME_HEADER}"]
+    lines += [f"{fid:>6}  {name_cell(name):<24} {n:>8}  {local_time(seen)}"
+              for fid, name, n, seen in rows]
+    lines.append(f"{len(rows)} face(s) on {master}")
+    return "\n".join(lines)
 
 
 def _embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
@@ -75,10 +86,7 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
         if args.command == "list":
             reply = _call(node, ListFaces, f"{master}/list_faces", ListFaces.Request(), args.timeout_s)
             rows = list(zip(reply.face_ids, reply.names, reply.num_features, reply.last_seen_s, strict=False))
-            print(f"{'id':>6}  {'name':<24} {'features':>8}  last seen (s)")
-            for fid, name, n, seen in rows:
-                print(f"{fid:>6}  {shown(name, 20) if name else '-':<24} {n:>8}  {seen:.1f}")
-            print(f"{len(rows)} face(s) on {master}")
+            print(format_remote_list(rows, master))
             return EXIT_OK
         if args.command == "forget":
             request = ForgetFace.Request(face_id=args.face_id or 0, name=args.name or "")

@@ -13,6 +13,8 @@ import stat
 import subprocess
 import sys
 import threading
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -479,12 +481,27 @@ def _cli_store(db: Path) -> None:
         )
 
 
+@contextlib.contextmanager
+def _time_zone(tz: str) -> Iterator[None]:
+    """This process's local time zone is ``tz`` (a POSIX TZ string) inside the block."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("TZ", tz)
+        time.tzset()
+        try:
+            yield
+        finally:
+            patch.undo()
+            time.tzset()
+
+
 def test_cli_list(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _cli_store(db)
-    assert cli_main(["--db", str(db), "list"]) == 0
+    with _time_zone("CET-1"):  # times are shown in local time, with the offset
+        assert cli_main(["--db", str(db), "list"]) == 0
     out = capsys.readouterr().out
     lines = out.splitlines()
-    assert lines[1].split() == ["1", "Ann", "3", "12", "2023-11-14T22:13:20Z", "2023-11-14T22:14:20Z"]
+    assert lines[0].split()[-6:] == ["(local", "time)", "last", "seen", "(local", "time)"]
+    assert lines[1].split() == ["1", "Ann", "3", "12", "2023-11-14T23:13:20+01:00", "2023-11-14T23:14:20+01:00"]
     assert lines[2].split()[:4] == ["2", "-", "5", "40"]
     assert "3 face(s)" in out
     assert cli_main(["--db", str(db), "list", "--json"]) == 0
@@ -499,6 +516,23 @@ def test_cli_list(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
         "last_seen_s": 1_700_000_200.0,
     }
     assert all("vector" not in d and "features" not in d for d in data)
+
+
+def test_a_masters_list_shows_times_as_the_store_list_does(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """face-reid-faces --master prints the ~/list_faces answer (seconds since the epoch) in the same local ISO
+    format as the store's list, not as a number of seconds."""
+    from face_reid_master.tools.faces_remote import format_remote_list
+
+    _cli_store(db)
+    with _time_zone("CET-1"):
+        assert cli_main(["--db", str(db), "list"]) == 0
+        remote = format_remote_list([(1, "Ann", 3, 1_700_000_060.0), (2, "", 5, 1_700_000_200.0)], "/face_reid_master")
+    stored = capsys.readouterr().out.splitlines()
+    lines = remote.splitlines()
+    assert lines[0].endswith("last seen (local time)") and stored[0].endswith("last seen (local time)")
+    assert lines[1].split() == ["1", "Ann", "3", "2023-11-14T23:14:20+01:00"]
+    assert lines[1].split()[-1] == stored[1].split()[-1] and lines[2].split()[-1] == stored[2].split()[-1]
+    assert lines[-1] == "2 face(s) on /face_reid_master"
 
 
 def test_cli_forget_and_rename(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
