@@ -44,6 +44,8 @@ def _frame_line(msg: Any) -> dict[str, Any]:
 
 def record(out: Path, seconds: float, topic_regex: str, key_path: str, max_frames: int) -> int:
     """Write the frames of every camera topic for ``seconds`` (or ``max_frames``) to ``out`` (JSON lines)."""
+    if not out.parent.is_dir():
+        raise ValueError(f"--out: folder {out.parent} not found")
     import rclpy
 
     from face_reid_msgs.msg import CameraFrame, Sealed
@@ -107,7 +109,14 @@ def load_recording(path: Path) -> tuple[list[CameraTrack], dict[str, CameraPose]
     points: dict[str, list[list[float]]] = {}
     poses: dict[str, CameraPose] = {}
     bad = 0
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ValueError(f"recording {path} not found (make one with: face-reid-calibrate record --out "
+                         f"{path})") from None
+    except OSError as exc:
+        raise ValueError(f"recording {path}: cannot read it ({exc.strerror})") from None
+    for n, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
         try:

@@ -48,7 +48,13 @@ def load_network_file(path: str | Path) -> dict[str, Any]:
     """The network file, checked (ValueError naming the place of the first problem)."""
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ValueError(f"network file {path} not found") from None
+    except OSError as exc:
+        raise ValueError(f"network file {path}: cannot read it ({exc.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ValueError(f"{path}: not YAML: {exc}") from exc
     if not isinstance(data, dict) or not isinstance(data.get("hosts"), dict) or not data["hosts"]:

@@ -163,4 +163,11 @@ def test_face_reid_calibrate_solve_says_what_it_could_not_do(tmp_path, capsys) -
     assert "anchor 'Z' saw nobody" in capsys.readouterr().err
     (tmp_path / "empty.jsonl").write_text("")
     assert main(["solve", str(tmp_path / "empty.jsonl"), "--anchor", "A"]) == 2
-    assert main(["solve", str(tmp_path / "missing.jsonl"), "--anchor", "A"]) == 2
+    capsys.readouterr()
+    missing = tmp_path / "missing.jsonl"
+    assert main(["solve", str(missing), "--anchor", "A"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"face-reid-calibrate: recording {missing} not found (make one with: face-reid-calibrate record "
+                   f"--out {missing})\n")  # one line, no "[Errno 2]"
+    assert main(["record", "--out", str(tmp_path / "no_folder" / "walk.jsonl"), "--seconds", "1"]) == 2
+    assert capsys.readouterr().err == f"face-reid-calibrate: --out: folder {tmp_path / 'no_folder'} not found\n"

@@ -67,6 +67,13 @@ def test_dry_run_prints_runnable_commands(capsys: pytest.CaptureFixture[str]) ->
     assert main([str(EXAMPLE), "--host", "nowhere"]) == 2
 
 
+def test_a_missing_network_file_is_named_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([str(tmp_path / "nope.yaml")]) == 2
+    assert capsys.readouterr().err == f"face-reid-up: network file {tmp_path / 'nope.yaml'} not found\n"
+    assert main([str(tmp_path)]) == 2  # a folder
+    assert capsys.readouterr().err.startswith(f"face-reid-up: network file {tmp_path}: cannot read it (")
+
+
 def test_a_crashing_node_is_restarted_with_growing_back_off_and_all_stop(tmp_path: Path) -> None:
     said: list[str] = []
     stop = [False]
