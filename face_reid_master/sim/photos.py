@@ -268,7 +268,13 @@ class PhotoBank:
         return IdentityPhotos(name, tuple(photos), (day1, day2))
 
     def choose(self, count: int, rng: np.random.Generator) -> list[IdentityPhotos]:
-        """``count`` usable identities in a random order (folders are embedded only as needed)."""
+        """``count`` usable identities in a random order (folders are embedded only as needed; too few folders
+        are refused before any is embedded)."""
+        if len(self.identity_files) < count:
+            raise InsufficientFacesError(
+                f"faces folder {self.faces_dir} has {len(self.identity_files)} identity folders with photos, the "
+                f"scenario needs {count}: ask for fewer people or add identity folders"
+            )
         chosen = choose_usable(sorted(self.identity_files), count, rng, self.load_identity)
         for ident in chosen:
             self._say(f"  identity {ident.name}: {len(ident.photos)} usable photos")

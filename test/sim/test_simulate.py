@@ -225,7 +225,13 @@ def test_cli_reports_skipped_photos_and_rejects_unusable_folders(
     assert doc["summary"]["skipped_unreadable"] == [f"{IDENTITIES[0]}/corrupt.jpg"]
     assert doc["summary"]["skipped_no_face"] == [f"{IDENTITIES[1]}/wall.jpg"]
     assert load_scenario(out).summary["frames"] == 5 * 15
-    # more people than usable identities
+    # more people than identity folders: refused before anything is embedded
+    code = main(["--faces", str(bad), "--people", "4", "--out", str(tmp_path / "o2"), "--cache", str(cache)])
+    assert code == 2
+    assert f"faces folder {bad} has 3 identity folders with photos, the scenario needs 4" in capsys.readouterr().err
+    # enough folders, but one has too few photos: more people than usable identities
+    (bad / IDENTITIES[3]).mkdir()
+    shutil.copy(next((faces / IDENTITIES[3]).iterdir()), bad / IDENTITIES[3])
     code = main(["--faces", str(bad), "--people", "4", "--out", str(tmp_path / "o2"), "--cache", str(cache)])
     assert code == 2
     assert "only 3 usable identities" in capsys.readouterr().err
@@ -240,6 +246,16 @@ def test_cli_reports_skipped_photos_and_rejects_unusable_folders(
     assert "num_people" in capsys.readouterr().err
     with pytest.raises(InsufficientFacesError):
         simulate(tmp_path / "empty", SimConfig())
+
+
+def test_too_few_identity_folders_fail_before_any_photo_is_embedded(faces: Path, tmp_path: Path) -> None:
+    few = tmp_path / "few"
+    for ident in IDENTITIES[:2]:
+        shutil.copytree(faces / ident, few / ident)
+    bank = PhotoBank(few, embedder="dlib")
+    with pytest.raises(InsufficientFacesError, match="has 2 identity folders with photos, the scenario needs 3"):
+        bank.choose(3, np.random.default_rng(0))
+    assert bank.embedded_now == 0
 
 
 def test_load_scenario_rejects_broken_directories(feature_dir: Path, tmp_path: Path) -> None:
