@@ -250,9 +250,17 @@ class GotoNode(ManagedNode):
             self.counts["goals"] += 1
         elif decision.kind == DecisionKind.REFUSED and (announce or decision.status_line() != self._last_status):
             self.counts["refusals"] += 1
-        if decision.kind != DecisionKind.UNCHANGED:
+        if decision.kind == DecisionKind.IDLE:
+            self._status(self._waiting_line(), force=announce)
+        elif decision.kind != DecisionKind.UNCHANGED:
             self._status(decision.status_line(), force=announce)
         return decision
+
+    def _waiting_line(self) -> str:
+        """The status without a target: no goals, and where a name is taken from (logged once when it starts so)."""
+        go_to, topic = self.resolve_service_name("~/go_to"), self.resolve_topic_name("~/target")
+        return (f"no target: no goals; waiting for a name on the {go_to} service (face_reid_msgs/srv/GoToPerson) or "
+                f"the {topic} topic (std_msgs/msg/String), or start with face-reid-goto NAME")
 
     def _pose(self, decision: Decision) -> PoseStamped:
         goal = decision.goal

@@ -238,7 +238,7 @@ def test_goto_node_survives_bad_input_and_refuses_hostile_names(ros_context) -> 
             assert len(response.status) < 200 and "\n" not in response.status
         assert node.core.target == "Alice"  # refused names do not change the target
         node._on_target(String(data="  "))
-        assert node._last_status == "no target: no goals"
+        assert node._last_status.startswith("no target: no goals; waiting for a name on the /face_reid_goto/go_to")
         node._on_robot_pose(PoseStamped())  # frame '' is not the map frame
         assert node.rejected["robot_pose"] == 1
         robot = PoseStamped()
@@ -251,6 +251,28 @@ def test_goto_node_survives_bad_input_and_refuses_hostile_names(ros_context) -> 
         assert report.values["rejected_malformed_track"] == "2" and report.values["goals"] == "2"
     finally:
         executor.shutdown()
+        node.destroy_node()
+
+
+def test_without_a_target_it_says_once_what_it_waits_for(ros_context, capfd: pytest.CaptureFixture[str]) -> None:
+    """Started without a name it publishes no goal and logs, once, where a name is taken from."""
+    ctx = ros_context(["--ros-args", "-p", "names_service:=''"])
+    node = GotoNode(None, context=ctx)
+    try:
+        assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+        assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+        waiting = ("no target: no goals; waiting for a name on the /face_reid_goto/go_to service "
+                   "(face_reid_msgs/srv/GoToPerson) or the /face_reid_goto/target topic (std_msgs/msg/String), or "
+                   "start with face-reid-goto NAME")
+        assert node._last_status == waiting
+        msg = NamedTrackArray()
+        msg.header.frame_id = "world"
+        msg.tracks = [_track(1, "Alice", 1.0, 0.0)]
+        node._on_tracks(msg)
+        node._on_tracks(msg)
+        assert node.counts["goals"] == 0 and node._last_status == waiting
+        assert capfd.readouterr().err.count("waiting for a name") == 1
+    finally:
         node.destroy_node()
 
 
