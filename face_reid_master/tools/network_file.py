@@ -28,7 +28,7 @@ from typing import Any
 
 import yaml
 
-__all__ = ["NodeSpec", "load_network_file", "node_specs"]
+__all__ = ["NodeSpec", "load_network_file", "network_key_path", "node_specs"]
 
 _NAMESPACE = re.compile(r"^(/[A-Za-z][A-Za-z0-9_]*)+$")
 _CAMERA_KEYS = {"id", "namespace", "params", "set", "remap"}
@@ -132,6 +132,12 @@ def _ros_args(node: Mapping[str, Any], folder: str, extra: list[str]) -> list[st
     return args
 
 
+def network_key_path(network: Mapping[str, Any]) -> str:
+    """The file every node of a secured network gets as network_key_path ('' for an unsecured network)."""
+    key = network.get("network_key")
+    return _path(str(network["_folder"]), key) if key else ""
+
+
 def node_specs(network: Mapping[str, Any], host: str, roles: tuple[str, ...] = ("camera", "master")) -> list[NodeSpec]:
     """The node processes of ``host`` (only the given roles), in start order: the master first."""
     if host not in network["hosts"]:
@@ -139,7 +145,8 @@ def node_specs(network: Mapping[str, Any], host: str, roles: tuple[str, ...] = (
                          "give --host NAME")
     folder = str(network["_folder"])
     nodes = network["hosts"][host]
-    key = ["-p", f"network_key_path:={_path(folder, network['network_key'])}"] if network.get("network_key") else []
+    key_file = network_key_path(network)
+    key = ["-p", f"network_key_path:={key_file}"] if key_file else []
     env = (("ROS_DOMAIN_ID", str(network["domain_id"])),) if "domain_id" in network else ()
     out = []
     if "master" in nodes and "master" in roles:

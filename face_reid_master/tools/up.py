@@ -24,8 +24,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from face_reid_camera.common.sealing import load_network_key
 from face_reid_master.demo.children import spawn, stop_processes
-from face_reid_master.tools.network_file import NodeSpec, load_network_file, node_specs
+from face_reid_master.tools.network_file import NodeSpec, load_network_file, network_key_path, node_specs
 
 STABLE_S = 60.0  # a node that ran this long gets its back-off reset
 
@@ -101,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         network = load_network_file(args.network)
         roles = ("camera", "master") if args.role == "all" else (args.role,)
         specs = node_specs(network, args.host, roles)
+        if network_key_path(network) and specs and not args.dry_run:
+            load_network_key(network_key_path(network))  # every node would fail on it: say so once, here
     except (OSError, ValueError) as exc:
         print(f"face-reid-up: {exc}", file=sys.stderr)
         return 2

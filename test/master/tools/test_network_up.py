@@ -21,24 +21,72 @@ from face_reid_master.tools.up import main, supervise
 EXAMPLE = REPO_ROOT / "config" / "network" / "network.yaml"
 
 
+def _settings(spec: NodeSpec) -> dict[str, object]:
+    """What a node of the network file starts with: its params files in order, then its -p settings, each
+    checked by the node's own parameter table (an unknown or out-of-range parameter raises)."""
+    import yaml
+
+    from face_reid_camera.ros.params import TABLE as CAMERA
+    from face_reid_master.ros.params import TABLE as MASTER
+
+    table = CAMERA if spec.args[1] == "face_reid_camera.ros.node" else MASTER
+    values = table.defaults()
+    for flag, value in zip(spec.args, spec.args[1:], strict=False):
+        if flag == "--params-file":
+            values.update({k: v for k, v in table.load_yaml(value).items() if v != table.defaults()[k]})
+        elif flag == "-p":
+            name, _, text = value.partition(":=")
+            values[name] = table.check_value(name, yaml.safe_load(text))
+    return values
+
+
 def test_the_example_network_gives_each_host_its_nodes() -> None:
     net = load_network_file(EXAMPLE)
+    key = str(Path("~/.config/face_reid/network.key").expanduser())
     entrance = node_specs(net, "pc-entrance")
     assert [s.name for s in entrance] == ["camera cam1", "camera cam2"]
     args = entrance[0].args
     assert args[:3] == ("-m", "face_reid_camera.ros.node", "--ros-args")
     assert "__ns:=/cam1" in args and "camera_id:=cam1" in args
     files = [args[i + 1] for i, a in enumerate(args) if a == "--params-file"]
-    assert files == [str(REPO_ROOT / "config" / "camera.yaml"), str(REPO_ROOT / "config" / "network" / "cam1.yaml")]
+    config = REPO_ROOT / "config"
+    assert files == [str(config / "camera.yaml"), str(config / "drivers" / "realsense.yaml"),
+                     str(config / "network" / "cam1.yaml")]
     assert all(Path(f).exists() for f in files)
     assert dict(entrance[0].env) == {"ROS_DOMAIN_ID": "7"}
-    hall = node_specs(net, "pc-hall")[0].args
-    assert "embedder:=sface" in hall and "color/image_raw:=/hall_camera/color/image_raw" in hall
+    cam1, cam2 = (_settings(s) for s in entrance)  # the defaults, the driver preset, the pose, in that order
+    assert cam1["color_topic"] == "camera/color/image_raw" and cam1["camera_pose_xyz_m"] == [0.0, 0.0, 2.4]
+    assert cam2["depth_topic"] == "depth_to_rgb/image_raw" and cam2["camera_pose_xyz_m"] == [6.0, 0.0, 2.4]
+    assert cam1["camera_id"] == "cam1" and cam1["network_key_path"] == key == cam2["network_key_path"]
+    (hall,) = node_specs(net, "pc-hall")
+    assert "embedder:=sface" in hall.args and _settings(hall)["embedder"] == "sface"
+    assert "camera/color/image_raw:=/hall_camera/color/image_raw" in hall.args  # the preset's topic, remapped
     (master,) = node_specs(net, "pc-master")
     assert master.args[:2] == ("-m", "face_reid_master.ros.node")
+    assert _settings(master)["network_key_path"] == key  # the whole network is secured with one key
     assert node_specs(net, "pc-master", ("camera",)) == []
     with pytest.raises(ValueError, match="host 'nowhere' is not in the network file"):
         node_specs(net, "nowhere")
+
+
+def test_a_missing_network_key_stops_face_reid_up_before_any_node(tmp_path: Path) -> None:
+    net = tmp_path / "net.yaml"
+    net.write_text("network_key: secret/network.key\nhosts: {here: {master: {}}}\n")
+    up = subprocess.Popen([sys.executable, "-m", "face_reid_master.tools.up", str(net), "--host", "here",
+                           "--log-dir", str(tmp_path / "logs")], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True,
+                          start_new_session=True)
+    try:
+        _, err = up.communicate(timeout=30)
+    finally:
+        if up.poll() is None:  # it started the nodes after all: Ctrl-C stops them
+            os.killpg(up.pid, signal.SIGINT)
+            up.wait(timeout=30)
+    key = tmp_path / "secret" / "network.key"
+    assert up.returncode == 2
+    assert err == f"face-reid-up: network key {key}: No such file or directory (make one with: face-reid-keys " \
+                  f"new {key})\n"
+    assert not (tmp_path / "logs").exists()  # nothing was started
+    assert main([str(net), "--host", "here", "--dry-run"]) == 0  # the commands can be shown without it
 
 
 @pytest.mark.parametrize(("text", "message"), [
