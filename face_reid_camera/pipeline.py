@@ -145,6 +145,7 @@ class FrameResult:
     ground_plane: GroundPlane | None = None
     ground_plane_source: str = "none"
     floor_check: FloorCheck | None = None  # the pose checked against the floor measured without it (this frame)
+    ground_support: float | None = None  # share of the points on the floor estimated in this frame (None: not now)
 
     @property
     def num_faces(self) -> int:
@@ -261,7 +262,7 @@ class CameraPipeline:
             detection.ground_plane_source != "pose" or self.person_detector.config.people_on_pose_floor)
         return FrameResult(
             people, found, timings, detection.ground_plane, detection.ground_plane_source,
-            detection.floor_check,
+            detection.floor_check, detection.ground_support,
         )
 
     def _observation(self, cand: PersonCandidate, plane: GroundPlane | None,

@@ -52,6 +52,7 @@ from face_reid_camera.people.ground_plane import GroundFit, GroundPlane, fit_gro
 from face_reid_camera.people.heads import OVERHEAD_RANGE_M, FloorGrid, HeadFinder, principal_width
 
 __all__ = [
+    "MIN_FLOOR_SUPPORT",
     "FloorCheck",
     "PersonCandidate",
     "PersonDetectionResult",
@@ -60,6 +61,11 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+# A floor measured without the pose is evidence of where the floor is only when at least this share of the frame's
+# points lie on it: a floor in view holds far more (0.79 of the desk frames' points), a plane through the few low
+# points of a view without floor a few percent (0.02 of test/data/rgbd/person.pcd, 1.95 m below at 16.8 deg).
+MIN_FLOOR_SUPPORT = 0.05
 
 # The support band needs this many voxels to count as evidence (fewer: legs hidden or out of view).
 _MIN_SUPPORT_VOXELS = 3
@@ -242,7 +248,8 @@ class PersonDetectionResult:
     ``num_points`` counts the valid input points after striding and range limits, ``num_voxels`` the voxels
     above the floor, ``num_clusters`` their 2-D clusters on the floor plane, ``num_thin_support`` the
     person-shaped ones that stand on a thin pole, ``num_cut_by_border`` those whose top is at the image border.
-    ``timings_ms`` breaks down the latency by stage.
+    ``timings_ms`` breaks down the latency by stage. ``ground_support``: the share of the points on the floor
+    estimated in this frame (None when it was not estimated now); below :data:`MIN_FLOOR_SUPPORT` it is no evidence.
     """
 
     people: list[PersonCandidate]
@@ -255,6 +262,12 @@ class PersonDetectionResult:
     floor_check: FloorCheck | None = None
     num_thin_support: int = 0  # person-shaped clusters rejected by the depth shape check (thin support)
     num_cut_by_border: int = 0  # person-shaped clusters whose top is at the image border (depth images only)
+    ground_support: float | None = None  # share of the points on the floor estimated in this frame
+
+
+def _support(fit: GroundFit, points: FloatArray) -> float:
+    """The share of ``points`` on a fitted floor."""
+    return fit.inlier_count / max(1, points.shape[0])
 
 
 def _voxel_centroids(points: FloatArray, voxel_size_m: float) -> FloatArray:
@@ -359,7 +372,7 @@ class PersonDetector:
             return result
 
         # The floor is fitted on the strided points themselves; only what stands on it is voxelised.
-        plane, source = self._ground_plane(points)
+        plane, source, result.ground_support = self._ground_plane(points)
         result.ground_plane, result.ground_plane_source = plane, source
         result.floor_check = self._check_pose(points, source)
         t2 = time.perf_counter()
@@ -410,7 +423,7 @@ class PersonDetector:
         if (self._frames_unseen - 1) % cfg.pose_check_every_frames:
             return None
         fit = self._fit_floor(points, None, ())
-        if fit is None:
+        if fit is None or _support(fit, points) < MIN_FLOOR_SUPPORT:  # no floor in view to check the pose on
             return None
         floor = fit.plane
         angle = math.degrees(math.acos(max(-1.0, min(1.0, float(floor.normal @ pose_plane.normal)))))
@@ -443,17 +456,18 @@ class PersonDetector:
             assume_finite=True,
         )
 
-    def _ground_plane(self, points: FloatArray) -> tuple[GroundPlane | None, str]:
+    def _ground_plane(self, points: FloatArray) -> tuple[GroundPlane | None, str, float | None]:
+        """This frame's floor, where it came from and, when estimated now, the share of the points on it."""
         priors = [p for p in (self._previous_plane, self._pose_plane) if p is not None]
         fit = self._fit_floor(points, self._pose_plane, priors)
         if fit is not None:
             self._previous_plane = fit.plane
-            return fit.plane, "ransac"
+            return fit.plane, "ransac", _support(fit, points)
         if self._previous_plane is not None:
-            return self._previous_plane, "previous"
+            return self._previous_plane, "previous", None
         if self._pose_plane is not None:
-            return self._pose_plane, "pose"
-        return None, "none"
+            return self._pose_plane, "pose", None
+        return None, "none", None
 
     def _people(
         self, obj: FloatArray, obj_h: FloatArray, plane: GroundPlane

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.errors import ModelLoadError
+from face_reid_camera.people.detector import MIN_FLOOR_SUPPORT
 from face_reid_camera.pipeline import CameraPipeline, FrameResult
 from face_reid_camera.ros import params as camera_params
 from face_reid_camera.tools.bag_frames import BagTopics, bag_frames, is_bag
@@ -115,16 +116,32 @@ def load_frame(path: Path) -> ReplayFrame:
     return ReplayFrame(path.name[: -len("_depth_mm.png")], depth, color)
 
 
-def _floor_summary(result: FrameResult) -> dict[str, object] | None:
-    """Camera height and downward tilt implied by the floor plane (how users check placement)."""
+def _floor_summary(result: FrameResult, seeded: bool) -> dict[str, object] | None:
+    """Camera height and downward tilt implied by the floor plane (how users check placement), the share of the
+    points on it when it was estimated in this frame, and whether it is doubtful (:func:`floor_doubt`)."""
     plane = result.ground_plane
     if plane is None:
         return None
+    support = result.ground_support
     return {
         "source": result.ground_plane_source,
         "camera_height_m": round(float(plane.offset), 3),
         "camera_tilt_down_deg": round(plane.tilt_down_deg, 1),
+        "support": None if support is None else round(support, 3),
+        "doubtful": floor_doubt(result, seeded) is not None,
     }
+
+
+def floor_doubt(result: FrameResult, seeded: bool) -> str | None:
+    """Why a floor found without a camera pose cannot be trusted (too few of the points on it: no floor in view,
+    the pose check's own rule), or None. A floor found near a given pose has the pose check instead."""
+    plane, support = result.ground_plane, result.ground_support
+    if seeded or plane is None or support is None or support >= MIN_FLOOR_SUPPORT:
+        return None
+    return (f"the floor found without a camera pose (camera {plane.offset:.2f} m above it, tilted "
+            f"{plane.tilt_down_deg:.1f} deg down) holds only {100 * support:.0f}% of the points (a floor in view: "
+            f"{100 * MIN_FLOOR_SUPPORT:.0f}% or more): the view shows no floor, so heights and positions are "
+            "guesses; give the camera's pose: --camera-pose X Y Z ROLL PITCH YAW --trust-pose-floor")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -199,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
     frames = errors = people_total = 0
     errors_seen: list[str] = []
     last_check = None
+    doubts: list[str] = []
+    on_pose_floor_only = 0  # frames whose only floor was the given pose's (nobody reported unless trusted)
     try:
         files = list_frame_files(args.inputs)
     except FileNotFoundError as exc:
@@ -225,10 +244,14 @@ def main(argv: list[str] | None = None) -> int:
         frames += 1
         people_total += len(result.people)
         last_check = result.floor_check or last_check
+        doubt = floor_doubt(result, seeded)
+        if doubt is not None:
+            doubts.append(doubt)
+        on_pose_floor_only += int(result.ground_plane_source == "pose" and not result.ground_plane_found)
         line = {
             "frame": frame.name,
             "ground_plane_found": result.ground_plane_found,
-            "floor": _floor_summary(result),
+            "floor": _floor_summary(result, seeded),
             "pose_check": None if result.floor_check is None else {
                 "agrees": result.floor_check.agrees, "pose_camera_height_m": round(result.floor_check.pose_height_m, 3),
                 "floor_camera_height_m": round(result.floor_check.floor_height_m, 3),
@@ -245,6 +268,11 @@ def main(argv: list[str] | None = None) -> int:
           file=sys.stderr)
     if last_check is not None:
         print(f"face-reid-replay: {last_check.describe()}", file=sys.stderr)
+    if on_pose_floor_only and last_check is None:
+        print(f"face-reid-replay: {on_pose_floor_only} of {frames} frames show no floor near the given pose: nobody "
+              "is reported on them (if the view has no floor, add --trust-pose-floor)", file=sys.stderr)
+    if doubts:
+        print(f"face-reid-replay: warning: {len(doubts)} of {frames} frames: {doubts[-1]}", file=sys.stderr)
     if frames == 0:
         print("face-reid-replay: no frame could be read: give folders or files of *_depth_mm.png (16-bit depth in "
               "mm, with *_rgb.png colour) or *.pcd clouds", file=sys.stderr)

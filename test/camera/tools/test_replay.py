@@ -20,23 +20,41 @@ def _lines(out: str) -> list[dict]:
 
 def test_desk_frames_have_no_people_and_a_floor(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(RGBD / "pcl_desk")]) == 0
-    lines = _lines(capsys.readouterr().out)
-    assert len(lines) == 3
+    captured = capsys.readouterr()
+    lines = _lines(captured.out)
+    assert len(lines) == 3 and "warning" not in captured.err  # a floor in view, found without a pose: trusted
     for line in lines:
         assert line["num_people"] == 0 and line["ground_plane_found"]
+        assert line["floor"]["support"] > 0.5 and line["floor"]["doubtful"] is False
         # the Kinect looked down at the floor from ~0.7 m, tilted ~46 degrees
         assert line["floor"]["camera_height_m"] == pytest.approx(0.71, abs=0.05)
         assert line["floor"]["camera_tilt_down_deg"] == pytest.approx(46, abs=4)
 
 
 def test_person_pcd_has_one_person(capsys: pytest.CaptureFixture[str]) -> None:
+    # without a pose: a "floor" through the few low points (1.95 m below, 16.8 deg) is found and said to be a guess
+    assert main([str(RGBD / "person.pcd"), "--no-faces"]) == 0
+    captured = capsys.readouterr()
+    (line,) = _lines(captured.out)
+    assert line["floor"]["support"] < 0.05 and line["floor"]["doubtful"] is True
+    (warning,) = [w for w in captured.err.splitlines() if "warning" in w]
+    assert warning == ("face-reid-replay: warning: 1 of 1 frames: the floor found without a camera pose (camera 1.95 m "
+                       "above it, tilted 16.8 deg down) holds only 2% of the points (a floor in view: 5% or more): the "
+                       "view shows no floor, so heights and positions are guesses; give the camera's pose: "
+                       "--camera-pose X Y Z ROLL PITCH YAW --trust-pose-floor")
     pose = ["--camera-pose", "0", "0", "1.5", "0", "-0.05", "0"]
     assert main([str(RGBD / "person.pcd"), "--no-faces", *pose]) == 0  # no floor in the cloud: nobody ...
-    (line,) = _lines(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    (line,) = _lines(captured.out)
     assert line["num_people"] == 0 and line["ground_plane_found"] is False
+    assert line["pose_check"] is None  # no floor in view to check the pose against
+    assert "no floor near the given pose: nobody is reported on them (if the view has no floor, add " \
+           "--trust-pose-floor)" in captured.err
     assert main([str(RGBD / "person.pcd"), "--no-faces", *pose, "--trust-pose-floor"]) == 0  # ... unless trusted
-    (line,) = _lines(capsys.readouterr().out)
-    assert line["num_people"] == 1
+    captured = capsys.readouterr()
+    (line,) = _lines(captured.out)
+    assert "warning" not in captured.err and "no floor" not in captured.err
+    assert line["num_people"] == 1 and line["floor"]["doubtful"] is False
     (person,) = line["people"]
     assert person["height_m"] == pytest.approx(1.64, abs=0.06)
     assert person["position_world"][0] == pytest.approx(0.8, abs=0.15)  # ~0.8 m in front of the camera
