@@ -18,6 +18,7 @@ import gc
 import re
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +56,14 @@ Parameters (all declared with descriptions and ranges; `ros2 param describe` lis
 """
 
 _MAX_LOG_CHARS = 300  # log lines about a frame are cut to this
+
+
+def _markers_topic(topic: str, secured: bool, log: Callable[[str], None]) -> str:
+    """Where RViz markers go: nowhere on a secured network (markers are plain: names and positions in clear)."""
+    if topic and secured:
+        log(f"secured network: no RViz markers on {topic[:200]} (they would carry names and positions in clear)")
+        return ""
+    return topic
 
 
 class MasterNode(ManagedNode):
@@ -148,11 +157,8 @@ class MasterNode(ManagedNode):
                            if self._tracks_sealer is not None else
                            self.create_publisher(NamedTrackArray, str(values["tracks_topic"]), qos))
         self._stamps.reset()
-        markers_topic = str(values["markers_topic"])
-        if markers_topic and self._tracks_sealer is not None:  # markers are plain: names and positions in clear
-            self.get_logger().info(f"secured network: no RViz markers on {markers_topic[:200]} (they would carry "
-                                   "names and positions in clear)")
-            markers_topic = ""
+        markers_topic = _markers_topic(str(values["markers_topic"]), self._tracks_sealer is not None,
+                                       self.get_logger().info)
         self.markers_pub = self.create_publisher(MarkerArray, markers_topic, 10) if markers_topic else None
         if self.people_topics is not None:
             self.people_topics.activate()

@@ -321,17 +321,24 @@ class ManagedNode(LifecycleNode):
         (self.get_logger().warning if warn else self.get_logger().error)(text)
 
 
+def _printed_help(argv: list[str], usage: str, table: ParamTable) -> bool:
+    """--help / --help-all (before any --ros-args): the usage and the parameters printed."""
+    if any(a in ("-h", "--help", "--help-all") for a in argv[1:]) and "--ros-args" not in argv:
+        print(usage + table.help_text(advanced="--help-all" in argv[1:]))
+        return True
+    return False
+
+
 def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], ManagedNode],
              argv: list[str] | None = None) -> int:
     """Run a face-reid node until Ctrl-C / shutdown; returns the exit status.
 
     ``--help`` (without ``--ros-args``) prints ``usage`` and the deployment parameters without starting ROS
-    (``--help-all``: every parameter). A bad
-    parameter, or (with ``autostart``) a failed configure, is one ``FATAL`` line and exit status 2.
+    (``--help-all``: every parameter). A bad parameter, or (with ``autostart``) a failed configure, is one
+    ``FATAL`` line and exit status 2.
     """
     argv = list(sys.argv if argv is None else argv)
-    if any(a in ("-h", "--help", "--help-all") for a in argv[1:]) and "--ros-args" not in argv:
-        print(usage + table.help_text(advanced="--help-all" in argv[1:]))
+    if _printed_help(argv, usage, table):
         return 0
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

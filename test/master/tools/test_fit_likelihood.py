@@ -238,8 +238,8 @@ SHARED_FACES = Path(os.environ.get("FACE_REID_SHARED_FACES", REPO_ROOT.parent / 
 @pytest.mark.skipif(not os.environ.get("FACE_REID_REGENERATE_LIKELIHOOD") or not SHARED_FACES.is_dir(),
                     reason="needs the shared development faces and FACE_REID_REGENERATE_LIKELIHOOD=1 (~1.5 min)")
 def test_command_regenerates_the_shipped_model(tmp_path: Path) -> None:
-    """The command recorded in models/face_likelihood_dlib_resnet_v1.json, on the shared development faces, reproduces it
-    (the held-out scenario identities passed as --exclude names, as recorded in its metadata)."""
+    """The command recorded in models/face_likelihood_dlib_resnet_v1.json, on the shared development faces,
+    reproduces it (the held-out scenario identities passed as --exclude names, as recorded in its metadata)."""
     shipped = json.loads(model_path(default_likelihood_file("dlib_resnet_v1")).read_text())
     meta = shipped["metadata"]
     out = tmp_path / "face_likelihood.json"
