@@ -8,7 +8,8 @@ ratio total / model is robust to the machine's load. dlib runs 0 / 1 / 3 / 5 fac
 without a new embedding (target <= 0.5 s). Then bodies: 5 people in textured clothes, no faces, frames
 without and with the body description (the shipped projection) alternated in one loop, so both see the
 same load: the frame times and the body cost per person (target <= 1.5 ms). The face scenarios run without
-bodies (their overhead ratio is the face path's). Prints one JSON object.
+bodies (their overhead ratio is the face path's). Prints one JSON object on stdout; progress (one line per
+scenario, with the time elapsed) goes to stderr.
 
 Usage: python bench/camera_pipeline.py [--frames N] [--budget-ms MS] [--bodies-only]
 """
@@ -50,6 +51,14 @@ FACES = REPO / "test" / "data" / "faces"
 IDENTITIES = ["lfw_Tony_Blair", "lfw_Colin_Powell", "lfw_Hugo_Chavez", "lfw_Jacques_Chirac", "lfw_Vladimir_Putin"]
 # Five standing positions in front of a camera at 2.2 m looking along +x (world metres).
 SPOTS = [(2.3, -0.9), (2.7, 0.0), (2.4, 0.9), (3.6, -0.45), (3.7, 0.5)]
+
+
+_START = time.perf_counter()
+
+
+def _progress(message: str) -> None:
+    """One line of progress on stderr (stdout holds only the JSON result)."""
+    print(f"[{time.perf_counter() - _START:5.1f} s] {message}", file=sys.stderr, flush=True)
 
 
 class TimedSession:
@@ -189,9 +198,11 @@ def main() -> int:
     intr = CameraIntrinsics.kinect_default()
     pose = CameraPose.from_xyz_rpy(0.0, 0.0, 2.2, 0.0, 0.3, 0.0)
     if args.bodies_only:
+        _progress(f"bodies: 5 people, {args.frames} frames without and with bodies")
         print(json.dumps({"bodies_5_people": _body_run(intr, pose, args.frames), "threads": 1}))
         return 0
 
+    _progress("loading the detector and the embedders")
     detector = YuNetDetector(num_threads=1)
     det_timer = TimedSession(detector._session)
     detector._session = det_timer  # type: ignore[assignment]
@@ -201,6 +212,7 @@ def main() -> int:
         embedder = load_embedder(choice, num_threads=1)
         emb_timers = _timed(embedder)
         for num_faces in face_counts:
+            _progress(f"embedder {choice}: {num_faces} face(s), {args.frames} frames")
             inputs = _inputs(num_faces, detector, intr, pose)
             pipeline = CameraPipeline(CameraPipelineConfig(embed_budget_ms=0.0, describe_bodies=False), pose, detector,
                                       embedder)
@@ -229,7 +241,9 @@ def main() -> int:
             }
     budget = args.budget_ms if args.budget_ms is not None else CameraPipelineConfig().embed_budget_ms
     sface = load_embedder("sface", num_threads=1)
+    _progress(f"embedding budget: sface, 5 faces at 10 Hz, budget {budget:g} ms, {max(args.frames, 50)} frames")
     results["budget_10hz_sface_faces_5"] = _budget_run(detector, sface, intr, pose, budget, max(args.frames, 50))
+    _progress(f"bodies: 5 people, {args.frames} frames without and with bodies")
     results["bodies_5_people"] = _body_run(intr, pose, args.frames)
     f0, f5, b = results["faces_0"], results["faces_5"], results["budget_10hz_sface_faces_5"]
     results["targets"] = {
@@ -245,6 +259,7 @@ def main() -> int:
     results["targets"] = {k: bool(v) for k, v in results["targets"].items()}
     results["threads"] = 1
     results["frame_size"] = [intr.width, intr.height]
+    _progress("done")
     print(json.dumps(results))
     return 0
 
