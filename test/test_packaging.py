@@ -81,6 +81,7 @@ def test_installed_master_loads_the_installed_likelihood(tmp_path: Path) -> None
     assert got["decision"] == pytest.approx(shipped.decision_distance, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_face_reid_msgs_builds_with_colcon(tmp_path: Path) -> None:
     src = tmp_path / "ws" / "src"
     shutil.copytree(REPO / "face_reid_msgs", src / "face_reid_msgs")

@@ -10,6 +10,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 NODE_BASES = {"Node", "LifecycleNode", "ManagedNode"}
 
@@ -42,6 +44,7 @@ def _node_classes() -> list[tuple[str, ast.ClassDef]]:
     return found
 
 
+@pytest.mark.ros
 def test_node_classes_leave_rclpys_attributes_alone(ros_context) -> None:
     from rclpy.lifecycle import LifecycleNode
 

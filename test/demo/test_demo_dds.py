@@ -24,7 +24,7 @@ from ros_procs import procs
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def _demo_pids(domain_id: int) -> list[int]:

@@ -38,6 +38,7 @@ def test_frame_record_round_trips_through_the_message() -> None:
     assert (first.face_score, first.face_quality) == pytest.approx((0.93, 0.61), abs=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc")
 def test_live_evaluation_matches_offline(ros_domain_id: int, tmp_path: Path, capsys: pytest.CaptureFixture[str]

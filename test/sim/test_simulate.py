@@ -204,6 +204,7 @@ def test_pixel_level_runs_the_real_camera_pipeline(faces: Path, cache: Path, tmp
         assert (a["face_variant"] == -1).all()
 
 
+@pytest.mark.slow
 def test_cli_reports_skipped_photos_and_rejects_unusable_folders(
     faces: Path, cache: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -295,6 +296,7 @@ def test_config_validation() -> None:
     assert SimConfig(num_people=6).num_new_people == 0
 
 
+@pytest.mark.slow
 def test_both_embedders_and_a_larger_colour_image(faces: Path, tmp_path: Path) -> None:
     """--embedder both stores dlib | SFace side by side (each half the photo variant's own embedding, plus
     the simulator's noise) with the eye distance of the face each embedding shows; a colour image of twice

@@ -19,7 +19,7 @@ from ros_procs import procs
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 FACES = FACES_DIR
 

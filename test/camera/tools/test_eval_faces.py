@@ -230,6 +230,7 @@ def fixture_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any
     return json.loads((tmp / "r.json").read_text()), out, tmp
 
 
+@pytest.mark.slow
 def test_report_structure(fixture_run: tuple[dict[str, Any], str, Path]) -> None:
     result, out, _ = fixture_run
     counts = result["counts"]
@@ -253,6 +254,7 @@ def test_report_structure(fixture_run: tuple[dict[str, Any], str, Path]) -> None
     assert "DIR@FPIR 1e-2" in out and "ROC AUC" in out and "enrol failures" in out
 
 
+@pytest.mark.slow
 def test_accuracy_is_high(fixture_run: tuple[dict[str, Any], str, Path]) -> None:
     """Right colour order, alignment and score sign give near-perfect results on these photos.
 
@@ -279,6 +281,7 @@ def test_accuracy_is_high(fixture_run: tuple[dict[str, Any], str, Path]) -> None
     assert twelve["both"]["tar_at_far"]["0.001"] >= twelve["dlib"]["tar_at_far"]["0.001"]
 
 
+@pytest.mark.slow
 def test_cache_gives_the_same_numbers_without_embedding(fixture_run: tuple[dict[str, Any], str, Path]) -> None:
     result, _, tmp = fixture_run
     code, _, err = _run([str(FACES_DIR), "--eye-px", "12", "--embedders", "sface,dlib", "--json", str(tmp / "r2.json"),

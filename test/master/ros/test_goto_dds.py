@@ -35,7 +35,7 @@ from face_reid_master.ros.goto_node import GotoNode, target_from_args
 from face_reid_msgs.msg import NamedTrack, NamedTrackArray
 from face_reid_msgs.srv import GoToPerson
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 WORLD_TO_MAP = PlanarTransform(1.0, -2.0, math.radians(90.0))
 STANDOFF_M = 1.0

@@ -22,6 +22,8 @@ from face_reid_master.storage.face_store import FaceStore
 EMPTY = "''"  # an empty parameter value on the command line
 FUZZ_MESSAGES = 5000  # per hostile process (two of them)
 
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
 
 @pytest.mark.parametrize("secured", [True, False], ids=["secured", "unsecured"])
 def test_fuzzed_master_keeps_the_walker_and_stores_nothing_forged(ros_domain_id: int, tmp_path: Path,

@@ -44,6 +44,7 @@ def _status(got: list[DiagnosticArray]) -> DiagnosticStatus | None:
     return mine[-1] if mine else None
 
 
+@pytest.mark.slow
 def test_store_write_failures_are_an_error_on_diagnostics_then_a_warning(ros_context, tmp_path: Path,
                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
     node = _master(ros_context, tmp_path / "faces.db")

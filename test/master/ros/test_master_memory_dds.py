@@ -14,7 +14,7 @@ from conftest import REPO_ROOT, spin_until
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.msg")
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TOPICS, PER_TOPIC, SIZE = 4, 20, 4 * 1024 * 1024
 

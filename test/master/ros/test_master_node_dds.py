@@ -25,7 +25,7 @@ from ros_procs import procs
 pytest.importorskip("rclpy")
 pytest.importorskip("face_reid_msgs.srv")
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 FACES = FACES_DIR
 IDS = {"tony": "lfw_Tony_Blair", "colin": "lfw_Colin_Powell"}

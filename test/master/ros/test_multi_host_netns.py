@@ -22,9 +22,9 @@ pytest.importorskip("face_reid_msgs.msg")
 
 from face_reid_master.demo.children import child_env
 
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.skipif(
     not (hasattr(os, "geteuid") and os.geteuid() == 0 and shutil.which("ip")),
-    reason="network namespaces need root and iproute2")
+    reason="network namespaces need root and iproute2")]
 
 
 def _ip(*args: str) -> None:

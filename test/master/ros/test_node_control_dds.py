@@ -36,7 +36,7 @@ from rclpy.node import Node
 
 from face_reid_camera.common.sealing import Sealer, load_network_key, write_network_key
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 MASTER, CAMERA = "/face_reid_master", "/cam_a/face_reid_camera"
 LIFECYCLE_SERVICES = ("change_state", "get_state", "get_available_states", "get_available_transitions",

@@ -27,7 +27,7 @@ pytest.importorskip("face_reid_msgs.srv")
 
 from face_reid_master.demo.children import spawn
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 INTERFACES = REPO_ROOT / "test" / "data" / "interfaces"
 BUILD_SECONDS: list[float] = []  # how long the colcon build took (reported in the assertion messages)

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from face_reid_master.storage.face_store import FaceStore
 
@@ -43,6 +44,7 @@ while True:
 """
 
 
+@pytest.mark.slow
 def test_kill_9_loses_at_most_one_second_of_learning_and_never_reuses_a_face_id(tmp_path: Path) -> None:
     db = tmp_path / "faces.db"
     rng = np.random.default_rng(12)

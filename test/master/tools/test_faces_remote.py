@@ -22,6 +22,7 @@ from face_reid_camera.common.sealing import write_network_key
 from face_reid_master.ros.node import MasterNode
 
 
+@pytest.mark.slow
 def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_context, tmp_path: Path) -> None:
     key = write_network_key(tmp_path / "network.key")
     ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",

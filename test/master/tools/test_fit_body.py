@@ -56,6 +56,7 @@ def crops_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _crops(tmp_path_factory.mktemp("bodies") / "crops")
 
 
+@pytest.mark.slow
 def test_fit_writes_the_projection_metric_and_plot_that_rank_each_person_first(
         crops_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setenv("SOURCE_DATE_EPOCH", EPOCH)
@@ -103,6 +104,7 @@ def _scenario(path: Path, identities: list[dict]) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_kept_projection_and_scenario_clothes_refit_only_the_metric(crops_dir: Path, tmp_path: Path) -> None:
     first = tmp_path / "first"
     assert main([str(crops_dir), "--out-dir", str(first), "--pca-dims", "hsv=6,siltp=5", "--quiet"]) == 0

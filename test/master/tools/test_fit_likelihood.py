@@ -177,6 +177,7 @@ def test_camera_view_draws_take_one_usable_view_per_photo() -> None:
         camera_view_draws({"a": views}, 0, rng)
 
 
+@pytest.mark.slow
 def test_camera_views_widen_same_person_distances(subset_dir: Path, tmp_path: Path) -> None:
     """--camera-views fits on degraded views (faces as small / dim as a Kinect sees them): same-person
     distances grow, so N_p moves right of the clean-photo fit; --exclude leaves identities out."""

@@ -122,6 +122,7 @@ def test_a_missing_network_file_is_named_in_one_line(tmp_path: Path, capsys: pyt
     assert capsys.readouterr().err.startswith(f"face-reid-up: network file {tmp_path}: cannot read it (")
 
 
+@pytest.mark.slow
 def test_a_crashing_node_is_restarted_with_growing_back_off_and_all_stop(tmp_path: Path) -> None:
     said: list[str] = []
     stop = [False]
@@ -143,6 +144,7 @@ def test_a_crashing_node_is_restarted_with_growing_back_off_and_all_stop(tmp_pat
         os.kill(pids[0], 0)  # stopped with the supervisor
 
 
+@pytest.mark.ros
 def test_face_reid_up_runs_this_hosts_master_and_camera_and_stops_on_ctrl_c(ros_domain_id: int,
                                                                             tmp_path: Path) -> None:
     net = tmp_path / "net.yaml"
