@@ -86,6 +86,7 @@ def test_there_are_runnable_commands_in_the_readme() -> None:
     assert any(name.startswith("README.md") for name, _ in _runnable_blocks())
 
 
+@pytest.mark.slow  # runs the tools (~20 s for all the pages' commands)
 @pytest.mark.parametrize(("name", "script"), _runnable_blocks(), ids=[n for n, _ in _runnable_blocks()])
 def test_every_runnable_command_works(name: str, script: str, tmp_path: Path) -> None:
     if not (REPO / ".venv" / "bin" / "python").exists():
