@@ -17,8 +17,8 @@ pytestmark = pytest.mark.ros
 EXAMPLE = REPO_ROOT / "examples" / "who_is_where.py"
 
 
-def test_the_readme_shows_the_example_verbatim() -> None:
-    assert f"```python\n{EXAMPLE.read_text()}```" in (REPO_ROOT / "README.md").read_text()
+def test_the_robots_page_shows_the_example_verbatim() -> None:
+    assert f"```python\n{EXAMPLE.read_text()}```" in (REPO_ROOT / "docs" / "robots.md").read_text()
 
 
 def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_domain_id: int) -> None:

@@ -257,16 +257,16 @@ def test_namespaced_camera_takes_its_id_and_pose_from_a_params_file(ros_context,
 
 def test_shipped_yaml_applies_to_any_node_name(ros_context, tmp_path: Path) -> None:
     shipped = (REPO / "config" / "camera.yaml").read_text()
-    assert "\n    head_roi_size_m: 0.3\n" in shipped
+    assert "\n    embed_budget_ms: 40.0\n" in shipped
     edited = tmp_path / "camera.yaml"  # the shipped file with one value changed: is the file applied at all?
-    edited.write_text(shipped.replace("\n    head_roi_size_m: 0.3\n", "\n    head_roi_size_m: 0.35\n"))
+    edited.write_text(shipped.replace("\n    embed_budget_ms: 40.0\n", "\n    embed_budget_ms: 35.0\n"))
     ctx = ros_context(["--ros-args", "-r", "__ns:=/cam_x", "-r", "__node:=other_name", "--params-file",
                        str(edited), "-p", "camera_id:=cam_x"])
     node = CameraNode(context=ctx)
     try:
         assert node.get_fully_qualified_name() == "/cam_x/other_name"
         assert node.unknown_parameters == []
-        expected = {**camera_params.defaults(), "camera_id": "cam_x", "head_roi_size_m": 0.35}
+        expected = {**camera_params.defaults(), "camera_id": "cam_x", "embed_budget_ms": 35.0}
         assert node.parameter_values() == expected
     finally:
         node.destroy_node()

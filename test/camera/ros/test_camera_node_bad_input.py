@@ -34,13 +34,16 @@ def test_node_refuses_to_start_without_a_usable_model(
     assert "Traceback" not in result.stderr
 
 
-def test_help_lists_every_parameter() -> None:
+def test_help_lists_the_deployment_parameters_and_help_all_every_one() -> None:
     from face_reid_camera.ros import params
 
-    result = subprocess.run(
-        [sys.executable, "-m", "face_reid_camera.ros.node", "--help"], cwd=procs.REPO, capture_output=True, text=True,
-        timeout=60, env=procs.ros_env(0),
-    )
-    assert result.returncode == 0
+    def shown(flag: str) -> str:
+        result = subprocess.run([sys.executable, "-m", "face_reid_camera.ros.node", flag], cwd=procs.REPO,
+                                capture_output=True, text=True, timeout=60, env=procs.ros_env(0))
+        assert result.returncode == 0
+        return result.stdout
+
+    short, every = shown("--help"), shown("--help-all")
     for spec in params.TABLE.specs:
-        assert spec.name in result.stdout
+        assert f"  {spec.name} (default" in every
+        assert (f"  {spec.name} (default" in short) == (params.TABLE.tier(spec.name) == "deployment"), spec.name
