@@ -286,7 +286,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     """The end-of-run summary as plain text."""
     lines = [
         f"Summary: {summary['duration_s']:.0f} s, {summary['cameras']} cameras, {len(summary['people'])} people "
-        f"(seed {summary['seed']}), master method {summary['method']}, {summary['messages']} /tracks_named messages",
+        f"(seed {summary['seed']}), {summary['messages']} /tracks_named messages",
         f"{'person':<24} {'tracks':>6}  {'re-id ok/wrong/pending':>22}  {'names right/wrong/none':>22}  "
         f"{'mean re-id s':>12}  re-identified by",
     ]
