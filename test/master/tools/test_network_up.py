@@ -12,9 +12,11 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import REPO_ROOT
 
+from face_reid_camera.common.embedding_spaces import embedder_space, extract_space, space_dim
 from face_reid_master.tools.network_file import NodeSpec, load_network_file, node_specs
 from face_reid_master.tools.up import main, supervise
 
@@ -59,12 +61,16 @@ def test_the_example_network_gives_each_host_its_nodes() -> None:
     assert cam2["depth_topic"] == "depth_to_rgb/image_raw" and cam2["camera_pose_xyz_m"] == [6.0, 0.0, 2.4]
     assert cam1["camera_id"] == "cam1" and cam1["network_key_path"] == key == cam2["network_key_path"]
     (hall,) = node_specs(net, "pc-hall")
-    assert "embedder:=sface" in hall.args and _settings(hall)["embedder"] == "sface"
+    assert "embed_budget_ms:=60.0" in hall.args and _settings(hall)["embed_budget_ms"] == 60.0
     assert "camera/color/image_raw:=/hall_camera/color/image_raw" in hall.args  # the preset's topic, remapped
     (master,) = node_specs(net, "pc-master")
     assert master.args[:2] == ("-m", "face_reid_master.ros.node")
     assert _settings(master)["network_key_path"] == key  # the whole network is secured with one key
     assert node_specs(net, "pc-master", ("camera",)) == []
+    want = _settings(master)["embedding_space"]  # every camera sends what the master compares
+    for camera in (*entrance, hall):
+        sent = embedder_space(_settings(camera)["embedder"])
+        assert extract_space(np.zeros(space_dim(sent), np.float32), sent, want) is not None, sent
     with pytest.raises(ValueError, match="host 'nowhere' is not in the network file"):
         node_specs(net, "nowhere")
 
