@@ -8,8 +8,9 @@ line per frame: camera id, stamp, the camera's configured pose, the people's flo
 with the anchor camera's pose kept, the x, y, yaw of every other camera whose view overlaps the anchor's or
 another solved camera's (face_reid_master/training/walk_calibration.py), prints the correction and the RMS
 residual per camera and writes ``<out-dir>/<camera>.yaml`` (a params file with camera_id, camera_pose_xyz_m and
-camera_pose_rpy_rad; height, roll and pitch are copied from the pose the camera was configured with). Each camera's height, roll and
-pitch must be right first (the camera node measures the floor; ``face-reid-replay`` prints it).
+camera_pose_rpy_rad; height, roll and pitch are copied from the pose the camera was configured with). Each
+camera's height, roll and pitch must be right first (the camera node measures the floor; ``face-reid-replay``
+prints it).
 
 Exit status: 0 all cameras solved, 1 some could not be linked to the anchor, 2 bad input.
 """
