@@ -128,12 +128,6 @@ class BodyMetricModel:
         """Where each projection block lies in a wire vector."""
         return {n: slice(a, b) for n, a, b in self.blocks}
 
-    def check_space(self, space: str) -> None:
-        """ValueError unless wire vectors of ``space`` are what this metric was fitted for."""
-        if space != self.space:
-            raise ValueError(f"the body metric was fitted for projection space {self.space!r}, not {space!r}: "
-                             "refit it with face-reid-fit-body --projection <the cameras' projection file>")
-
 
 def _matrix(a: npt.NDArray[np.float64]) -> list[list[float]]:
     return [[float(f"{v:.{_DIGITS}g}") for v in row] for row in np.asarray(a, dtype=np.float64)]

@@ -230,10 +230,6 @@ class LikelihoodModel:
         """Copy with another paper constant c."""
         return dataclasses.replace(self, new_person_scale_c=c)
 
-    def with_k_exponents(self, positive: float, negative: float) -> LikelihoodModel:
-        """Copy with other min-of-K exponents (0, 0 = the paper's pair likelihoods)."""
-        return dataclasses.replace(self, k_exponent_positive=positive, k_exponent_negative=negative)
-
 
 def fit_skewnormal(distances: npt.ArrayLike) -> SkewNormal:
     """Maximum-likelihood skew-normal fit (scipy.stats.skewnorm.fit) of a 1-D sample of distances."""

@@ -13,7 +13,7 @@ the links as faces keep learning is cheap.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -228,12 +228,3 @@ class PredefinedPeople:
             return float(nn.min())
         k = min(self.k_smallest, len(nn))
         return float(np.partition(nn, k - 1)[:k].mean())
-
-
-def build_gallery(items: Iterable[tuple[str, npt.ArrayLike]]) -> dict[str, npt.NDArray[np.float32]]:
-    """Group (name, embedding (dim,) or (k, dim)) pairs into {name: (k, dim) float32}."""
-    out: dict[str, list[npt.NDArray[np.float32]]] = {}
-    for name, emb in items:
-        arr = np.asarray(emb, dtype=np.float32)
-        out.setdefault(name, []).append(arr.reshape(1, -1) if arr.ndim == 1 else arr)
-    return {name: np.concatenate(chunks) for name, chunks in out.items()}

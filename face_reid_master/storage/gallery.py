@@ -11,13 +11,12 @@ import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.embedding_spaces import EMBEDDER_CHOICES, embedder_space, space_dim
-from face_reid_master.identity.predefined_people import PredefinedPeople
 
 if TYPE_CHECKING:
     from face_reid_camera.faces.photos import PhotoEmbedder
@@ -69,10 +68,6 @@ class GalleryResult:
             raise ValueError("a gallery needs at least one person")
         checked = {validate_person_name(n): _validate_embeddings(n, e) for n, e in self.people.items()}
         self.people = dict(sorted(checked.items()))
-
-    def to_predefined_people(self, **kwargs: Any) -> PredefinedPeople:
-        """A :class:`PredefinedPeople` of these people; ``kwargs`` are its options (``name_threshold``, ...)."""
-        return PredefinedPeople(self.people, **kwargs)
 
 
 def save_gallery_npz(people: Mapping[str, npt.ArrayLike], path: str | Path) -> None:

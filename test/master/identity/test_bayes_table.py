@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from fractions import Fraction
 
@@ -174,7 +175,8 @@ def test_min_of_k_likelihood_prevents_merging_a_stranger_into_a_well_learned_fac
     outcomes = {}
     for name, model in (
         ("paper", clean_photo_fit),
-        ("min_of_k", clean_photo_fit.with_k_exponents(0.538, 0.339)),  # opt-in --fit-min-of-k
+        ("min_of_k", dataclasses.replace(clean_photo_fit, k_exponent_positive=0.538,
+                                         k_exponent_negative=0.339)),  # opt-in --fit-min-of-k
     ):
         m = BayesIdentityManager(model, min_observations=3)
         m.faces.import_faces([LearnedFace(1, face)])

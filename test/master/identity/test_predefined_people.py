@@ -12,7 +12,6 @@ from face_reid_master.identity.predefined_people import (
     NameMatch,
     PredefinedPeople,
     assign_one_to_one,
-    build_gallery,
     face_to_person_distance,
 )
 
@@ -136,11 +135,6 @@ def test_bad_gallery_and_face_inputs_raise() -> None:
         people.update_face(1, np.zeros((0, 4)))
     with pytest.raises(ValueError):
         people.update_face("1", np.zeros((1, 4)))  # type: ignore[arg-type]
-
-
-def test_build_gallery_groups_by_name() -> None:
-    g = build_gallery([("a", np.ones(4)), ("b", np.zeros((2, 4))), ("a", np.zeros(4))])
-    assert g["a"].shape == (2, 4) and g["b"].shape == (2, 4) and g["a"].dtype == np.float32
 
 
 # ------------------------------------------------------------------------------------------------ real faces

@@ -69,7 +69,7 @@ def test_folder_gallery_names_embeddings_and_skipped(gallery_dir: Path, gallery:
 def test_gallery_names_faces_learned_from_other_photos(
     gallery: GalleryResult, learned: dict[str, np.ndarray]
 ) -> None:
-    people = gallery.to_predefined_people(min_face_features=5)
+    people = PredefinedPeople(gallery.people, min_face_features=5)
     assert isinstance(people, PredefinedPeople) and people.names() == sorted(GALLERY)
     face_ids = {identity: i for i, identity in enumerate(learned)}
     for identity, feats in learned.items():
@@ -77,8 +77,8 @@ def test_gallery_names_faces_learned_from_other_photos(
     names = {m.face_id: m.name for m in people.assignments().values()}
     assert names == {face_ids[identity]: name for name, identity in GALLERY.items()}
     assert face_ids["lfw_Hugo_Chavez"] not in names  # a stranger stays unnamed
-    # options reach PredefinedPeople: a tiny threshold names nobody
-    strict = gallery.to_predefined_people(name_threshold=0.05, min_face_features=1)
+    # a tiny threshold names nobody
+    strict = PredefinedPeople(gallery.people, name_threshold=0.05, min_face_features=1)
     strict.update_face(0, learned["lfw_Tony_Blair"])
     assert strict.assignments() == {}
 

@@ -65,7 +65,7 @@ def test_fit_writes_the_projection_metric_and_plot_that_rank_each_person_first(
     assert "32 float32 values per person (hsv 16, siltp 16)" in capsys.readouterr().out
     projection = load_body_projection(out / FILES[0])
     metric = load_body_metric(out / FILES[1])
-    metric.check_space(projection.space)
+    assert metric.space == projection.space
     assert metric.length == projection.length == 32 and (out / FILES[2]).stat().st_size > 10_000
     for meta in (projection.metadata, metric.metadata):
         assert (meta["n_identities"], meta["n_crops"]) == (12, 72)
@@ -120,7 +120,7 @@ def test_a_kept_projection_and_scenario_clothes_refit_only_the_metric(crops_dir:
                  "--exclude-scenario", str(scenario), "--exclude-scenario", str(plain), "--quiet"]) == 0
     assert not (refit / FILES[0]).exists()  # the cameras' projection is kept, not rewritten
     metric = load_body_metric(refit / FILES[1])
-    metric.check_space(projection.space)
+    assert metric.space == projection.space
     meta = metric.metadata
     assert meta["excluded"]["scenario_crop_identities"] == ["market1501_0007", "pkureid_001"]
     assert meta["n_identities"] == 10 and not {"pkureid_001", "market1501_0007"} & set(meta["identities"])
