@@ -112,7 +112,8 @@ class MasterCore:
         self._gone: list[int] = []  # tracks deleted since the last identity step (their split ids go after it)
         # what the next identity step decides on beyond the identity layer's own queue: the newest stamp applied
         # since the last step (None: nothing waits) and the tracks given a face observation meanwhile
-        self._undecided: tuple[float, set[int]] | None = None
+        self._undecided_stamp: float | None = None
+        self._touched: set[int] = set()
         self._last_stamp = -math.inf
 
     def _identity_manager(self, model: FaceLikelihood) -> IdentityManagerBase:
@@ -176,12 +177,9 @@ class MasterCore:
         self.stats.detections_rejected_position += len(update.rejected_detections)
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
-        touched = self._observe(update.associations, detections, stamp, frame.camera_id)
+        self._observe(update.associations, detections, stamp, frame.camera_id)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
-        if self._undecided is None:
-            self._undecided = (stamp, touched)
-        else:
-            self._undecided = (max(self._undecided[0], stamp), self._undecided[1] | touched)
+        self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)
         events = () if defer_identity else tuple(self.finish_frames())
         notices, self._notices[:] = tuple(self._notices), []
         return FrameOutcome(True, track_of_person={detections.person_index[det]: tid
@@ -196,9 +194,9 @@ class MasterCore:
         self._last_stamp = -math.inf
 
     def _observe(self, associations: list[tuple[int, int]], detections: Detections, stamp: float,
-                 camera_id: str) -> set[int]:
-        """The associated detections' faces and bodies as identity evidence; the tracks a face was added to."""
-        touched: set[int] = set()
+                 camera_id: str) -> None:
+        """The associated detections' faces and bodies as identity evidence (the tracks a face was added to are
+        remembered for face saving after the identity step)."""
         for track_id, det in associations:
             face = detections.faces.get(det)
             if face is None:
@@ -206,7 +204,7 @@ class MasterCore:
             emb, eye_px = face
             if self.identity.add_validated_observations(track_id, emb[None, :], stamp, eye_px, camera_id):
                 self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
-                touched.add(track_id)
+                self._touched.add(track_id)
                 self.stats.embeddings_used += 1
         appearance = detections.appearance
         if appearance is not None and self.identity.body_evidence is not None:
@@ -215,15 +213,15 @@ class MasterCore:
                 if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
                     self.identity.add_body_observations(track_id, row[None, :], stamp, camera_id,
                                                         detections.heights[det: det + 1])
-        return touched
 
     def finish_frames(self) -> list[Any]:
         """The identity step on what the frames applied since the last step queued (their track events were told
         as each frame was applied; one step at the newest stamp), then face saving; returns the identity events.
         A no-op when nothing waits (process_frame without ``defer_identity`` calls it itself)."""
-        if self._undecided is None:
+        if self._undecided_stamp is None:
             return []
-        (stamp, touched), self._undecided = self._undecided, None
+        stamp, touched = self._undecided_stamp, self._touched
+        self._undecided_stamp, self._touched = None, set()
         events = self._identity_step((), stamp)
         for track_id in touched:
             fid = self.identity.face_id_of(track_id)
@@ -235,7 +233,7 @@ class MasterCore:
     @property
     def identity_pending(self) -> bool:
         """True while frames applied with ``defer_identity`` wait for :meth:`finish_frames`."""
-        return self._undecided is not None
+        return self._undecided_stamp is not None
 
     @property
     def time_s(self) -> float:

@@ -8,25 +8,22 @@ from pathlib import Path
 
 import numpy as np
 
+from face_reid_master.demo.report import label as track_label
 from face_reid_master.demo.scenario import DemoScenario
 from face_reid_master.evaluation.published_tracks import TrackMessage
-from face_reid_master.records import STATE_CONFIRMED, NamedTrackRecord
+from face_reid_master.records import STATE_CONFIRMED
 
 UNDECIDED = "undecided"
 
 
-def who(track: NamedTrackRecord) -> str:
-    """What the master said of a track: its name, its face, or that it had not decided."""
-    return track.name or (f"face {track.face_id}" if track.face_id else UNDECIDED)
-
-
 def published_points(messages: Sequence[TrackMessage]) -> dict[str, np.ndarray]:
-    """who -> (N, 2) positions of the confirmed tracks published under that label."""
+    """label -> (N, 2) positions of the confirmed tracks published under that label."""
     points: dict[str, list[tuple[float, float]]] = {}
     for msg in messages:
         for tr in msg.tracks:
             if tr.state == STATE_CONFIRMED:
-                points.setdefault(who(tr), []).append((float(tr.position_xy[0]), float(tr.position_xy[1])))
+                xy = (float(tr.position_xy[0]), float(tr.position_xy[1]))
+                points.setdefault(track_label(tr, UNDECIDED), []).append(xy)
     return {label: np.array(xy, dtype=np.float64) for label, xy in points.items()}
 
 

@@ -241,8 +241,13 @@ def summarize(scenario: DemoScenario, messages: Sequence[TrackMessage], method: 
     }
 
 
+def label(tr: NamedTrackRecord, undecided: str = "?") -> str:
+    """Who the master said a track is: its name, its face, or ``undecided``."""
+    return tr.name or (f"face {tr.face_id}" if tr.face_id else undecided)
+
+
 def _who(tr: NamedTrackRecord) -> str:
-    who = tr.name or (f"face {tr.face_id}" if tr.face_id else "?")
+    who = label(tr)
     return f"{who} (by body)" if tr.identity_evidence == "body" else who
 
 
