@@ -25,11 +25,20 @@ class HealthVerdict:
     values: dict[str, object] = field(default_factory=dict)
 
 
+def _plain(reason: str) -> str:
+    """A store error as said on /diagnostics: ``disk full`` plainly when it is one."""
+    reason = reason or "unknown reason"
+    if "full" in reason.lower() or "no space" in reason.lower():
+        return f"disk full ({reason})"
+    return reason
+
+
 class MasterHealthWatch:
     """Turns the master's counters into errors and warnings (see the module docstring).
 
     - the face store: its most recent write failed -> ERROR with the reason (``disk full`` said plainly);
       failures followed by a successful write -> WARN for ``recovered_warn_s`` after the last failure;
+    - new face ids: the last reservation in the store failed (new people get no face id) -> ERROR with the reason;
     - faces lost at open (ids the store's ledger saved but the database lacks, a corrupt file moved aside)
       -> WARN for the rest of the run;
     - frames dropped for overload above ``overload_fraction`` of the frames received in the last ``window_s``
@@ -64,10 +73,14 @@ class MasterHealthWatch:
 
     def verdict(self, now_s: float, *, frames_in: int = 0, frames_dropped_overload: int = 0,
                 store_write_failures: int = 0, store_last_write_ok: bool | None = None, store_last_error: str = "",
-                other_publishers: Sequence[str] = (), output_topic: str = "/tracks_named") -> HealthVerdict:
+                faces_refused_no_id: int = 0, face_id_error: str = "", other_publishers: Sequence[str] = (),
+                output_topic: str = "/tracks_named") -> HealthVerdict:
         """Errors, warnings and values now (call about once a second with the totals since start)."""
         out = HealthVerdict()
         self._store(now_s, store_write_failures, store_last_write_ok, store_last_error, out)
+        if face_id_error:
+            out.errors.append(f"new people get no face id ({faces_refused_no_id} refused so far): face ids cannot "
+                              f"be reserved in the face store: {_plain(face_id_error)}")
         out.warnings += self._lost_at_open
         self._overload(now_s, frames_in, frames_dropped_overload, out)
         out.values["other_output_publishers"] = len(other_publishers)
@@ -84,9 +97,7 @@ class MasterHealthWatch:
         out.values["store_write_failures"] = failures
         if not failures:
             return
-        reason = last_error or "unknown reason"
-        if "full" in reason.lower() or "no space" in reason.lower():
-            reason = f"disk full ({reason})"
+        reason = _plain(last_error)
         if last_ok is False:
             out.errors.append(f"face store writes fail ({failures} so far): {reason}: learned faces are not saved")
         elif self._last_failure_s is not None and now_s - self._last_failure_s <= self.recovered_warn_s:

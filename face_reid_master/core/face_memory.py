@@ -1,8 +1,12 @@
 """What the master remembers of faces beyond the identity layer: the store, the face cap, retention and names.
 
 Faces are written to the store (any object with ``save_faces`` / ``load_faces`` / ``forget`` /
-``prune_unnamed`` / ``max_face_id``, e.g. :class:`~face_reid_master.storage.face_store.FaceStore`) when an
-identity decision changes them and, for features learned since, at most every ``save_interval_s``. At most
+``prune_unnamed`` / ``max_face_id`` / ``reserve_face_ids``, e.g.
+:class:`~face_reid_master.storage.face_store.FaceStore`) when an identity decision changes them and, for features
+learned since, at most every ``save_interval_s``. A new face's id is reserved durably in the store before it is
+published (``id_block`` ids at a time): when the store cannot write, the new face is not learned (its track stays
+undecided, counted in ``faces_refused_no_id``, the reason in :attr:`FaceMemory.id_error`), so no id a restart
+could give again is ever published. At most
 ``max_faces`` are kept (the least recently seen unnamed face not on a track goes first); unnamed faces older
 than the store's retention are pruned; each face's predefined name is re-evaluated every
 ``name_update_interval_s``. Store failures are counted, never raised: identities keep working in memory.
@@ -21,9 +25,12 @@ from face_reid_master.core.config import MasterConfig
 from face_reid_master.core.records import MasterStats
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.predefined_people import PredefinedPeople
-from face_reid_master.identity.records import LearnedFace, check_face_id
+from face_reid_master.identity.records import MAX_FACE_ID, LearnedFace, check_face_id
 
-__all__ = ["FaceMemory"]
+__all__ = ["ID_BLOCK", "FaceMemory"]
+
+ID_BLOCK = 16  # new face ids reserved in the store at once: one durable write per 16 new faces, not per face
+_MAX_ERROR_CHARS = 300
 
 
 def _power_of_ten(n: int) -> bool:
@@ -50,10 +57,14 @@ class FaceMemory:
         self._name_checked: dict[int, float] = {}  # face id -> last name evaluation (s)
         self._names: dict[int, str] = {}  # face id -> name from the predefined people
         self._last_prune_s = -math.inf
+        self.id_block = ID_BLOCK
+        self._ids_durable_upto = 0  # new face ids up to this one are reserved in the store (every restart skips them)
+        self.id_error = ""  # why the last id reservation failed ("" = the last one succeeded, or none was needed)
         if store is not None:
             faces = self._cap_loaded(store.load_faces())
             identity.faces.import_faces(faces)
-            identity.faces.reserve_ids(int(store.max_face_id()))
+            self._ids_durable_upto = int(store.max_face_id())
+            identity.faces.reserve_ids(self._ids_durable_upto)
             for face in faces:
                 self.refresh_name(face.face_id, face.features)
 
@@ -68,8 +79,12 @@ class FaceMemory:
         self._dirty_faces.setdefault(face_id, stamp)
 
     def room_for(self, new_face: int) -> bool:
-        """Face cap: a new face within max_faces evicts the least recently seen unnamed face not on a track;
-        False (the new face is forgotten at once, counted) when there is none."""
+        """Whether a new face may be learned (else it is forgotten at once, counted, and its track stays
+        undecided): its id must be durable in the store (:meth:`_id_durable`), and within max_faces it evicts the
+        least recently seen unnamed face not on a track (False when there is none)."""
+        if not self._id_durable(new_face):
+            self.identity.forget_face(new_face)
+            return False
         excess = len(self.identity.face_ids()) - self.config.max_faces
         if excess <= 0:
             return True
@@ -84,6 +99,26 @@ class FaceMemory:
                                 f"track: a new face was not learned ({self.stats.faces_refused_cap} so far, "
                                 "faces_refused_cap)")
         return False
+
+    def _id_durable(self, face_id: int) -> bool:
+        """Whether new face ``face_id`` is reserved in the store (reserving the next ``id_block`` ids when it is
+        not yet); False, said and counted, when the store cannot write them (disk full, read-only)."""
+        if self.store is None or face_id <= self._ids_durable_upto:
+            return True
+        upto = min(face_id + self.id_block - 1, MAX_FACE_ID)
+        try:
+            self.store.reserve_face_ids(upto)
+        except Exception as exc:  # the face waits; identities keep working in memory
+            self.stats.faces_refused_no_id += 1
+            self.id_error = f"{type(exc).__name__}: {str(exc)[:_MAX_ERROR_CHARS]}"
+            if _power_of_ten(self.stats.faces_refused_no_id):
+                self.notices.append(f"a new face was not learned: its id cannot be reserved in the face store "
+                                    f"({self.id_error}); new people stay undecided until the store can write "
+                                    f"({self.stats.faces_refused_no_id} so far, faces_refused_no_id)")
+            return False
+        self._ids_durable_upto = upto
+        self.id_error = ""
+        return True
 
     def _evict(self, face_ids: list[int]) -> None:
         """Forget unnamed faces for the cap (memory, names, store), counted; logged at 1, 10, 100, ... evictions."""

@@ -272,7 +272,7 @@ class MasterCore:
         kept = []
         for ev in self.identity.step(stamp):
             if ev.kind == IdentityEventKind.NEW_FACE and not self.memory.room_for(ev.face_id):
-                continue  # not learned (max_faces): the track stays unidentified
+                continue  # not learned (its id not durable, or max_faces): the track stays unidentified
             public = self.public_id(ev.track_id)
             kept.append(ev if public == ev.track_id else dataclasses.replace(ev, track_id=public))
             if ev.kind == IdentityEventKind.NEW_FACE:

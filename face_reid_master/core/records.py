@@ -42,6 +42,7 @@ class MasterStats:
     faces_pruned: int = 0
     faces_evicted: int = 0  # unnamed faces forgotten to keep max_faces (least recently seen first)
     faces_refused_cap: int = 0  # new faces not learned: max_faces reached and every face named or on a track
+    faces_refused_no_id: int = 0  # new faces not learned: their id could not be reserved in the store (writes fail)
     embeddings_rejected_degenerate: int = 0  # constant rows (all zero, ...): no embedder produces them
     store_errors: int = 0
 

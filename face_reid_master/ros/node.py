@@ -464,7 +464,8 @@ class MasterNode(ManagedNode):
             now_s, frames_in=health.frames_in, frames_dropped_overload=self.frames_dropped_overload,
             store_write_failures=getattr(store, "write_failures", core.stats.store_errors),
             store_last_write_ok=getattr(store, "last_write_ok", None),
-            store_last_error=getattr(store, "last_error", ""), other_publishers=others,
+            store_last_error=getattr(store, "last_error", ""), faces_refused_no_id=core.stats.faces_refused_no_id,
+            face_id_error=core.memory.id_error, other_publishers=others,
             output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
 
 

@@ -404,9 +404,20 @@ class FaceStore:
         return [int(r[0]) for r in self._db.execute("SELECT face_id FROM faces ORDER BY face_id")]
 
     def max_face_id(self) -> int:
-        """Largest face id ever saved in this store (also after it was forgotten, or lost: the ledger); 0 if
-        none."""
+        """Largest face id ever saved or reserved in this store (also after it was forgotten, or lost: the
+        ledger); 0 if none. New faces get ids above it."""
         return max(self._meta_max_face_id(), self._ledger.max_id)
+
+    def reserve_face_ids(self, upto: int) -> None:
+        """Face ids up to ``upto`` may be handed out: durable on return in the database (one transaction) and in
+        the id ledger, so that after any restart (even with one of them lost) new faces get ids above; raises
+        :class:`FaceStoreError` (e.g. disk full, read-only) and then the caller must not hand them out."""
+        upto = _check_face_id(upto)
+        if self.read_only:
+            raise FaceStoreError(f"face store {self.path} is open read-only: no face id can be reserved")
+        with self._transaction() as conn:
+            self._bump_max_face_id(conn, upto)
+        self._ledger.reserve(upto)
 
     def _meta_max_face_id(self) -> int:
         row = self._db.execute("SELECT value FROM meta WHERE key = 'max_face_id'").fetchone()

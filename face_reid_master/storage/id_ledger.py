@@ -1,8 +1,10 @@
 """The face store's id ledger: a sidecar ``<db>.ids`` listing the face ids saved (ids only, no biometric data).
 
 With it, faces the database lost (a damaged or deleted ``-wal``, a replaced file) are reported at start, and a
-face id is never given twice, even when the database lost its last writes. Replaced atomically (temporary
-file, fsync, rename, directory fsync), mode 0600; a damaged or unreadable ledger is said and started afresh.
+face id is never given twice, even when the database lost its last writes: ``max`` is the highest id saved *or
+reserved* (:meth:`IdLedger.reserve`: the master hands out no id before it is durable here). Replaced atomically
+(temporary file, fsync, rename, directory fsync), mode 0600; a damaged or unreadable ledger is said and started
+afresh.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import stat
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -25,7 +28,8 @@ _MAX_BYTES = 10_000_000
 
 
 class IdLedger:
-    """The face ids saved and the highest id ever given, as the sidecar of database ``db_path`` keeps them."""
+    """The face ids saved and the highest id ever given or reserved, as the sidecar of database ``db_path`` keeps
+    them."""
 
     def __init__(self, db_path: Path) -> None:
         self.db_path = db_path
@@ -36,12 +40,18 @@ class IdLedger:
     def read(self) -> tuple[int, set[int]]:
         """The highest id and the ids the file holds ((0, {}) when there is none or it cannot be read: said)."""
         try:
-            fd = os.open(self.path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+            # O_NONBLOCK: a FIFO put in its place must not hang the open (it is refused just below)
+            fd = os.open(self.path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
         except FileNotFoundError:
             return 0, set()
         except OSError as exc:
             _LOG.error("face store %s: cannot read the id ledger %s (%s): lost faces cannot be detected",
                        self.db_path, self.path, exc)
+            return 0, set()
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            _LOG.error("face store %s: the id ledger %s is not a regular file: lost faces cannot be detected",
+                       self.db_path, self.path)
             return 0, set()
         with os.fdopen(fd, "r", encoding="ascii", errors="replace") as f:
             lines = f.read(_MAX_BYTES).splitlines()
@@ -78,6 +88,18 @@ class IdLedger:
             self.ids |= new
             self.max_id = max(self.max_id, *new)
             self.write()
+
+    def reserve(self, upto: int) -> None:
+        """Ids up to ``upto`` may be handed out: durable in the file on return (FaceStoreError, nothing reserved,
+        when it cannot be written)."""
+        if upto <= self.max_id:
+            return
+        before, self.max_id = self.max_id, upto
+        try:
+            self.write()
+        except FaceStoreError:
+            self.max_id = before
+            raise
 
     def remove(self, face_ids: Iterable[int]) -> None:
         """Faces were deleted (their ids stay given: the highest id is kept)."""
