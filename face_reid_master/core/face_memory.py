@@ -60,6 +60,7 @@ class FaceMemory:
         self.id_block = ID_BLOCK
         self._ids_durable_upto = 0  # new face ids up to this one are reserved in the store (every restart skips them)
         self.id_error = ""  # why the last id reservation failed ("" = the last one succeeded, or none was needed)
+        self._last_id_retry_s = -math.inf
         if store is not None:
             faces = self._cap_loaded(store.load_faces())
             identity.faces.import_faces(faces)
@@ -103,18 +104,23 @@ class FaceMemory:
     def _id_durable(self, face_id: int) -> bool:
         """Whether new face ``face_id`` is reserved in the store (reserving the next ``id_block`` ids when it is
         not yet); False, said and counted, when the store cannot write them (disk full, read-only)."""
-        if self.store is None or face_id <= self._ids_durable_upto:
+        if self.store is None or face_id <= self._ids_durable_upto or self._reserve(face_id):
             return True
-        upto = min(face_id + self.id_block - 1, MAX_FACE_ID)
+        self.stats.faces_refused_no_id += 1
+        if _power_of_ten(self.stats.faces_refused_no_id):
+            self.notices.append(f"a new face was not learned: its id cannot be reserved in the face store "
+                                f"({self.id_error}); new people stay undecided until the store can write "
+                                f"({self.stats.faces_refused_no_id} so far, faces_refused_no_id)")
+        return False
+
+    def _reserve(self, first: int) -> bool:
+        """Reserve ids ``first`` .. ``first + id_block - 1`` in the store; False (the reason in :attr:`id_error`)
+        when it cannot write them."""
+        upto = min(first + self.id_block - 1, MAX_FACE_ID)
         try:
             self.store.reserve_face_ids(upto)
-        except Exception as exc:  # the face waits; identities keep working in memory
-            self.stats.faces_refused_no_id += 1
+        except Exception as exc:  # new faces wait; identities keep working in memory
             self.id_error = f"{type(exc).__name__}: {str(exc)[:_MAX_ERROR_CHARS]}"
-            if _power_of_ten(self.stats.faces_refused_no_id):
-                self.notices.append(f"a new face was not learned: its id cannot be reserved in the face store "
-                                    f"({self.id_error}); new people stay undecided until the store can write "
-                                    f"({self.stats.faces_refused_no_id} so far, faces_refused_no_id)")
             return False
         self._ids_durable_upto = upto
         self.id_error = ""
@@ -170,7 +176,8 @@ class FaceMemory:
         return [f for f in faces if f.face_id not in gone]
 
     def maintain(self, stamp: float) -> None:
-        """What is due at ``stamp``: retention, saving the faces that learned, re-evaluating live faces' names."""
+        """What is due at ``stamp``: retention, saving the faces that learned, re-evaluating live faces' names,
+        retrying a failed id reservation."""
         cfg = self.config
         if self.store is not None and stamp - self._last_prune_s >= cfg.prune_interval_s:
             self._last_prune_s = stamp
@@ -178,6 +185,9 @@ class FaceMemory:
         due = [fid for fid, since in self._dirty_faces.items() if stamp - since >= cfg.save_interval_s]
         if due:
             self.save(due)
+        if self.id_error and stamp - self._last_id_retry_s >= cfg.save_interval_s:
+            self._last_id_retry_s = stamp  # the store may write again: the error clears without waiting for a face
+            self._reserve(max(self.identity.faces.next_id, self._ids_durable_upto + 1))
         for fid in set(self.identity.assigned_tracks().values()):
             if stamp - self._name_checked.get(fid, -math.inf) >= cfg.name_update_interval_s:
                 self._name_checked[fid] = stamp
