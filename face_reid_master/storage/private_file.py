@@ -47,7 +47,10 @@ def open_locked(path: Path, read_only: bool) -> int:
     """Create (0600) or open the file (never through a symlink, only our own), fix broader permissions, take
     the process lock (exclusive; shared when read-only); its file descriptor."""
     flags = os.O_RDONLY if read_only else os.O_RDWR | os.O_CREAT
-    flags |= os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
+    # O_NONBLOCK: opening a FIFO (or a device) put there would wait for a writer forever; refused just below
+    flags |= os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    for suffix in SIDECARS:  # SQLite opens these itself: a FIFO there would hang it
+        _check_regular(Path(str(path) + suffix))
     try:
         fd = os.open(path, flags, FILE_MODE)
     except OSError as exc:
@@ -58,7 +61,7 @@ def open_locked(path: Path, read_only: bool) -> int:
     try:
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise FaceStoreError(f"face store {path} is not a regular file")
+            raise FaceStoreError(f"face store {path} is not a regular file ({_kind(info.st_mode)})")
         if info.st_uid != os.geteuid():
             raise FaceStoreError(f"face store {path} belongs to user id {info.st_uid}, not to this user "
                                  f"({os.geteuid()}): refused")
@@ -72,6 +75,25 @@ def open_locked(path: Path, read_only: bool) -> int:
         os.close(fd)
         raise
     return fd
+
+
+def _kind(mode: int) -> str:
+    """What a file that is not a regular one is, in a word (for the error)."""
+    for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISDIR, "a directory"), (stat.S_ISLNK, "a symbolic link"),
+                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device")):
+        if test(mode):
+            return kind
+    return "not a file"
+
+
+def _check_regular(path: Path) -> None:
+    """FaceStoreError when ``path`` exists and is not a regular file (a missing one is fine)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    if not stat.S_ISREG(mode):
+        raise FaceStoreError(f"face store file {path} is not a regular file ({_kind(mode)}): refused")
 
 
 def _restrict(fd: int, path: Path, mode: int, read_only: bool) -> None:

@@ -563,6 +563,28 @@ def test_cli_errors(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert cli_main(["--help"]) == 0
 
 
+@pytest.mark.parametrize(("fifo", "code", "said"), [
+    ("faces.db", 4, "face store {dir}/faces.db is not a regular file (a FIFO)"),
+    ("faces.db-wal", 4, "face store file {dir}/faces.db-wal is not a regular file (a FIFO): refused"),
+    ("faces.db.ids", 0, "the id ledger {dir}/faces.db.ids is not a regular file"),
+])
+def test_a_fifo_in_place_of_a_store_file_is_refused_not_waited_on(db: Path, fifo: str, code: int, said: str) -> None:
+    db.parent.mkdir(mode=0o700)
+    if fifo != "faces.db":
+        FaceStore(db).close()
+    for stale in (db, Path(f"{db}-wal"), Path(f"{db}.ids")):
+        if stale.name == fifo:
+            stale.unlink(missing_ok=True)
+    os.mkfifo(db.parent / fifo, 0o600)
+    try:  # before: the open waited for a writer of the FIFO forever
+        done = subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--db", str(db), "list"],
+                              cwd=REPO_ROOT, capture_output=True, text=True, timeout=30)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"face-reid-faces list hung on a FIFO as {fifo}")
+    assert done.returncode == code, done.stderr
+    assert said.format(dir=db.parent) in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
+
+
 def test_an_invalid_stored_face_is_skipped_not_fatal(db: Path, caplog: pytest.LogCaptureFixture) -> None:
     with FaceStore(db) as store:
         store.save_faces([LearnedFace(1, _feats(1, 2)), LearnedFace(2, _feats(2, 2))])
