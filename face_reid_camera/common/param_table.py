@@ -27,14 +27,37 @@ __all__ = [
     "ParamSpec",
     "ParamTable",
     "ParamValue",
+    "YamlAliasError",
     "config_from_values",
     "config_specs",
+    "load_yaml_without_aliases",
     "param",
     "validate_fields",
 ]
 
 ParamValue = bool | int | float | str | list[float] | list[str]
 _META_KEY = "face_reid_param"
+
+
+class YamlAliasError(yaml.YAMLError):
+    """A YAML file uses an alias (``*name``): refused, see :func:`load_yaml_without_aliases`."""
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """YAML's safe loader refusing aliases (``*name``): a few hundred bytes of nested ones ("billion laughs")
+    expand to gigabytes for whoever walks the result, and no params or network file needs them."""
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise YamlAliasError(f"line {event.start_mark.line + 1}: YAML aliases (*{event.anchor}) are not allowed "
+                                 "(nested ones expand to gigabytes): write the value out")
+        return super().compose_node(parent, index)
+
+
+def load_yaml_without_aliases(stream: Any) -> Any:
+    """``yaml.safe_load`` that refuses aliases (a yaml.YAMLError naming the line): for files people write."""
+    return yaml.load(stream, Loader=_NoAliasLoader)
 
 
 class ParamError(ValueError):
@@ -272,7 +295,10 @@ class ParamTable:
     def load_yaml(self, path: str | Path) -> dict[str, ParamValue]:
         """Read a ROS 2 params file (section ``/**`` or the node's name, ``ros__parameters``) over the defaults."""
         with open(path, encoding="utf-8") as fh:
-            doc = yaml.safe_load(fh) or {}
+            try:
+                doc = load_yaml_without_aliases(fh) or {}
+            except yaml.YAMLError as exc:
+                raise ParamError(f"{path}: {exc}") from None
         if not isinstance(doc, dict):
             raise ParamError(f"{path}: a params file is a mapping of node names to sections")
         raw: dict[str, Any] = {}

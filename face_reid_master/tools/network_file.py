@@ -1,7 +1,8 @@
 """The network file of ``face-reid-up``: which nodes run on which host, with their params, and the commands.
 
     domain_id: 7                      # optional: ROS_DOMAIN_ID of every node (default: the environment's)
-    network_key: ~/.config/face_reid/network.key   # optional: network_key_path of every node (secured)
+    network_key: ~/.config/face_reid/network.key   # optional: network_key_path of every node (secured; a
+                                                   # node's own network_key_path in `set` is then an error)
     hosts:
       pc-kitchen:                     # a host name (or any name given to face-reid-up --host)
         cameras:
@@ -14,7 +15,8 @@
           params: [config/master.yaml]
           set: {admin_services: true}
 
-Relative paths are relative to the network file's folder. Pure Python (yaml), no rclpy.
+Relative paths are relative to the network file's folder. YAML aliases (``*name``) are refused (a few bytes of
+nested ones expand to gigabytes). Pure Python (yaml), no rclpy.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+
+from face_reid_camera.common.param_table import YamlAliasError, load_yaml_without_aliases
 
 __all__ = ["NodeSpec", "load_network_file", "network_key_path", "node_specs"]
 
@@ -54,9 +58,11 @@ def load_network_file(path: str | Path) -> dict[str, Any]:
     except OSError as exc:
         raise ValueError(f"network file {path}: cannot read it ({exc.strerror})") from None
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml_without_aliases(text)  # a few bytes of nested aliases would expand to gigabytes
+    except YamlAliasError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not YAML: {exc}") from exc
+        raise ValueError(f"{path}: not YAML: {exc}") from None
     if not isinstance(data, dict) or not isinstance(data.get("hosts"), dict) or not data["hosts"]:
         raise ValueError(f"{path}: needs a 'hosts' mapping (host name -> its cameras and/or master)")
     unknown = set(data) - {"hosts", "domain_id", "network_key"}
@@ -83,8 +89,27 @@ def load_network_file(path: str | Path) -> dict[str, Any]:
             masters += 1
     if masters > 1:
         raise ValueError(f"{path}: {masters} masters; a network has one")
+    if data.get("network_key"):
+        _check_no_own_key(data["hosts"], str(path))
     data["_folder"] = str(path.resolve().parent)
     return data
+
+
+def _check_no_own_key(hosts: Mapping[str, Any], path: str) -> None:
+    """A secured network gives every node its key: a node's own ``network_key_path`` in ``set`` would be overridden
+    silently (and an empty one would mean an unsecured node in a secured network): ValueError naming the node."""
+    for host, nodes in hosts.items():
+        named = [(f"camera {c['id']} (hosts.{host}.cameras[{k}])", c) for k, c in enumerate(nodes.get("cameras") or [])]
+        if "master" in nodes:
+            named.append((f"the master (hosts.{host}.master)", nodes["master"] or {}))
+        for who, node in named:
+            if "network_key_path" not in (node.get("set") or {}):
+                continue
+            if not node["set"]["network_key_path"]:
+                raise ValueError(f"{path}: {who}: set network_key_path is empty, but the network is secured "
+                                 "(network_key): a secured network cannot have an unsecured node; remove it")
+            raise ValueError(f"{path}: {who}: set network_key_path, but network_key gives every node the network's "
+                             "key (one key per network); remove it")
 
 
 def _check_node(node: Any, where: str, keys: set[str]) -> None:

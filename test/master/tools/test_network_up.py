@@ -190,3 +190,67 @@ hosts:
     for pid in (int(p) for p in re.findall(r"\(pid (\d+)", err)):
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+_BOMB = "".join(f"        {c}: &{c} [{', '.join([f'*{p}'] * 9) if p else ', '.join(['lol'] * 9)}]\n"
+                for p, c in zip(["", *"abcdefg"], "abcdefgh", strict=True))  # 9**8 strings from under 600 bytes
+# face-reid-up in a child that prints its own peak memory (KiB) after the exit status
+_UP_PEAK = ("import resource, sys; from face_reid_master.tools.up import main; rc = main(sys.argv[1:]); "
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); sys.exit(rc)")
+
+
+def test_a_yaml_alias_bomb_is_refused_at_once(tmp_path: Path) -> None:
+    """A "billion laughs" network file: aliases are refused with the line, at once, in little memory (before:
+    about 10 s and 1 GB for --dry-run, expanding the aliases into -p values)."""
+    net = tmp_path / "net.yaml"
+    net.write_text(f"hosts:\n  here:\n    master:\n      set:\n{_BOMB}")
+    assert len(net.read_bytes()) < 600
+    start = time.monotonic()
+    try:
+        done = subprocess.run([sys.executable, "-c", _UP_PEAK, str(net), "--host", "here", "--dry-run"],
+                              cwd=REPO_ROOT, capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("face-reid-up --dry-run took more than 60 s on a 600-byte file")
+    seconds, peak_kib = time.monotonic() - start, int(done.stdout.split()[-1])
+    assert seconds < 5.0 and peak_kib < 200_000, (seconds, peak_kib)
+    assert done.returncode == 2 and done.stdout.strip() == str(peak_kib)  # no command printed
+    assert done.stderr == f"face-reid-up: {net}: line 6: YAML aliases (*a) are not allowed (nested ones expand to " \
+                          "gigabytes): write the value out\n"
+
+
+def test_params_files_refuse_yaml_aliases_too(tmp_path: Path) -> None:
+    from face_reid_camera.common.param_table import ParamError
+    from face_reid_master.ros.params import TABLE
+
+    params = tmp_path / "master.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    photo_root: &r /srv/photos\n    gallery_path: *r\n")
+    with pytest.raises(ParamError, match=r"line 4: YAML aliases \(\*r\) are not allowed"):
+        TABLE.load_yaml(params)  # before: read, gallery_path /srv/photos
+
+
+@pytest.mark.parametrize("node", ["cameras: [{id: cam1, set: {network_key_path: ''}}]",
+                                  "master: {set: {network_key_path: ''}}",
+                                  "master: {set: {network_key_path: other.key}}"])
+def test_a_node_of_a_secured_network_cannot_set_its_own_key(tmp_path: Path, node: str,
+                                                            monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Before, the node's own (empty) key was silently replaced by network_key; now the file is refused, naming
+    the node, at dry run and at start (before any node)."""
+    from face_reid_camera.common.sealing import write_network_key
+    from face_reid_master.tools import up
+
+    write_network_key(tmp_path / "net.key")
+    net = tmp_path / "net.yaml"
+    net.write_text(f"network_key: net.key\nhosts:\n  here: {{{node}}}\n")
+    started: list[object] = []
+    monkeypatch.setattr(up, "supervise", lambda specs, *a, **k: started.append(specs) or 0)
+    who = "camera cam1 (hosts.here.cameras[0])" if "cam1" in node else "the master (hosts.here.master)"
+    for dry in (["--dry-run"], []):
+        assert up.main([str(net), "--host", "here", *dry]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"face-reid-up: {net}: {who}: set network_key_path") and "remove it" in err, err
+        if "''" in node:
+            assert "a secured network cannot have an unsecured node" in err
+    assert started == []  # no node was started
+    net.write_text("hosts:\n  here: {master: {set: {network_key_path: ''}}}\n")  # an unsecured network: fine
+    assert up.main([str(net), "--host", "here", "--dry-run"]) == 0
