@@ -138,3 +138,30 @@ def test_faces_lost_at_open_warn_on_diagnostics(ros_context, tmp_path: Path) -> 
         assert report.level == 1 and "2 learned face(s) lost at open" in report.message and "ids 2, 3" in report.message
     finally:
         node.destroy_node()
+
+
+def test_face_ids_that_cannot_be_reserved_are_an_error_on_diagnostics(ros_context, tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """A new person while the store cannot reserve face ids (disk full): no face id is published, the master's
+    status is ERROR saying so (with the reason), counted in faces_refused_no_id; it clears once the store writes."""
+
+    def disk_full(self, upto):
+        raise FaceStoreError(f"face store {self.path}: database or disk is full")
+
+    node = _master(ros_context, tmp_path / "faces.db", "save_interval_s:=0.5")
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        monkeypatch.setattr(FaceStore, "reserve_face_ids", disk_full)
+        for k in range(8):  # a new person: decided after a few observations, but no id can be reserved
+            node._on_frame(_frame(10.0 + 0.1 * k, seed=1))
+        tracks = node.core.tracks()
+        assert tracks and all(t.face_id == 0 for t in tracks)
+        report = node.diagnostics(node.now_s())
+        assert report.level == 2 and "new people get no face id" in report.message, report.message
+        assert "disk full" in report.message and int(report.values["faces_refused_no_id"]) >= 1, report
+        monkeypatch.undo()
+        node.core.tick(12.0)  # the retry (every save_interval_s) succeeds
+        report = node.diagnostics(node.now_s())
+        assert report.level < 2 and "face id" not in report.message, report.message  # (a WARN: the test's stamps)
+    finally:
+        node.destroy_node()
