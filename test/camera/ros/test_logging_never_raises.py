@@ -146,3 +146,51 @@ def test_a_private_line_stays_off_rosout_on_a_secured_node_and_reaches_it_on_an_
         executor.shutdown()
         for node in (secured, open_, listener):
             node.destroy_node()
+
+
+@pytest.mark.slow
+def test_a_secured_camera_that_logged_an_error_survives_an_unsealed_control_call(ros_domain_id: int, ros_context,
+                                                                                 tmp_path: Path) -> None:
+    """The attack as it was found (real process, real DDS): an ERROR-level input rejection, then one keyless,
+    unsealed ~/change_state_sealed call (refused: a WARN from the same throttled logger). The camera answers,
+    stays active and goes on publishing /diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from ros_procs import procs
+
+    from face_reid_camera.common.sealing import write_network_key
+    from face_reid_msgs.srv import ChangeState
+
+    key = write_network_key(tmp_path / "network.key")
+    log = tmp_path / "camera.log"
+    camera = procs.start(["-m", "face_reid_camera.ros.node", "--ros-args", "-r", "__ns:=/cam_a",
+                          "-p", "camera_id:=cam_a", "-p", f"network_key_path:={key}"], ros_domain_id, log)
+    ctx = ros_context()
+    peer = Node("peer", context=ctx)
+    reports: list[dict[str, str]] = []
+
+    def on_diagnostics(msg: Any) -> None:
+        reports.extend({kv.key: kv.value for kv in s.values} for s in msg.status if s.hardware_id == "cam_a")
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    colour = peer.create_publisher(Image, "/cam_a/color/image_raw", 10)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(peer)
+    try:
+        assert spin_until(executor, lambda: reports and colour.get_subscription_count() > 0, 180.0), log.read_text()
+        colour.publish(Image(encoding="no-such-encoding", height=2, width=2, step=2, data=b"\x00" * 4))
+        assert spin_until(executor, lambda: reports[-1].get("rejected_bad_color") == "1", 60.0), log.read_text()
+        assert "colour image rejected" in log.read_text()  # the ERROR line
+        client = peer.create_client(ChangeState, "/cam_a/face_reid_camera/change_state_sealed")
+        assert spin_until(executor, client.service_is_ready, 60.0)
+        future = client.call_async(ChangeState.Request(transition="shutdown"))  # plain: no key
+        assert spin_until(executor, future.done, 60.0), log.read_text()
+        reply = future.result()
+        assert not reply.success and "must be sealed" in reply.message and reply.state == "active"
+        seen = len(reports)
+        assert spin_until(executor, lambda: len(reports) >= seen + 2, 60.0), log.read_text()  # still publishing
+        assert camera.poll() is None, log.read_text()
+        assert "Logger severity cannot be changed" not in log.read_text()
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        procs.stop(camera)
