@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -396,14 +397,19 @@ def start_node(prog: str, argv: list[str], make_node: Callable[[], ManagedNode])
         return fatal_start(prog, f"bad --ros-args ({type(exc).__name__}: "
                                  f"{str(exc).splitlines()[0] if str(exc) else ''}); an empty string value is written "
                                  "name:=''")
-    try:
-        return make_node()
-    except (ParamError, ValueError, NameValidationException) as exc:
-        rclpy.try_shutdown()
-        return fatal_start(prog, str(exc))
-    except rclpy_implementation.RCLError as exc:  # rcl refused the node: e.g. a remapped name or namespace too long
-        rclpy.try_shutdown()
-        return fatal_start(prog, _rcl_reason(exc))
+    # warnings of a node that cannot be made (rclpy: "Failed to fini rosout publisher") would follow the FATAL line
+    with warnings.catch_warnings(record=True) as caught:
+        try:
+            node = make_node()
+        except (ParamError, ValueError, NameValidationException) as exc:
+            rclpy.try_shutdown()
+            return fatal_start(prog, str(exc))
+        except rclpy_implementation.RCLError as exc:  # rcl refused the node: e.g. a remapped name too long
+            rclpy.try_shutdown()
+            return fatal_start(prog, _rcl_reason(exc))
+    for w in caught:  # a node that started: its warnings as they would have been shown
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return node
 
 
 def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], ManagedNode],
