@@ -205,7 +205,8 @@ class ManagedNode(LifecycleNode):
         else:
             self.control_refusals += 1
             self.log_throttled("change_state_sealed", f"change_state_sealed: {response.message}",
-                               self.control_refusals, warn=True, private=True)  # a failure's reason may name a file
+                               self.control_refusals, warn=True,  # a failure's reason may name a file: private
+                               private=not response.message.startswith("refused:"))
         return response
 
     # ------------------------------------------------------------------ parameters
@@ -426,9 +427,6 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    def fatal(message: str) -> int:
-        return fatal_start(prog, message)
-
     node = start_node(prog, argv, make_node)
     if isinstance(node, int):
         return node
@@ -437,9 +435,9 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
         if node.get_parameter("autostart").value:
             node.quiet_failures = True
             if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                return (status := fatal(node.failure or "configure failed"))
+                return (status := fatal_start(prog, node.failure or "configure failed"))
             if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
-                return (status := fatal(node.failure or "activate failed"))
+                return (status := fatal_start(prog, node.failure or "activate failed"))
             node.quiet_failures = False
         node.warn_if_open()
         executor = SingleThreadedExecutor()
