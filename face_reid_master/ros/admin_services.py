@@ -83,7 +83,9 @@ class AdminServices:
         self.calls[what] = self.calls.get(what, 0) + 1
         if not response.success:
             self.refusals[what] = self.refusals.get(what, 0) + 1
-        self.node.get_logger().info(f"{what}: {response.message[:_MAX_LOG_CHARS]}", throttle_duration_sec=1.0)
+        # names, face ids and photo paths: private (local log only on a secured network)
+        self.node.log_throttled(what, f"{what}: {response.message[:_MAX_LOG_CHARS]}", level="info", every_s=1.0,
+                                private=True)
         return response
 
     async def _off_the_frame_path(self, work: Any) -> Any:

@@ -140,10 +140,10 @@ class GotoNode(ManagedNode):
         if values["network_key_path"]:
             load_network_key(str(values["network_key_path"]))  # a missing or unsafe key file fails the start
         self.values = values
-        self.get_logger().info(
-            f"goto: target {shown(self.core.target, 64) if self.core.target else '(none)'}, goals in frame "
-            f"{self.map_frame!r} (world->map x={transform.x_m:g} y={transform.y_m:g} "
-            f"yaw={math.degrees(transform.yaw_rad):g} deg), standoff {self.core.config.standoff_distance_m:g} m")
+        self.log(f"goto: target {shown(self.core.target, 64) if self.core.target else '(none)'}, goals in frame "
+                 f"{self.map_frame!r} (world->map x={transform.x_m:g} y={transform.y_m:g} "
+                 f"yaw={math.degrees(transform.yaw_rad):g} deg), standoff {self.core.config.standoff_distance_m:g} m",
+                 private=True)  # the target's name
 
     def activate(self) -> None:
         values = self.values
@@ -231,7 +231,8 @@ class GotoNode(ManagedNode):
         except ValueError as exc:
             self.counts["refusals"] += 1
             self._status(f"refused: invalid name: {exc}", force=True)
-            self.log_throttled("invalid_name", f"target refused: {exc}", self.counts["refusals"], warn=True)
+            self.log_throttled("invalid_name", f"target refused: {exc}", self.counts["refusals"], warn=True,
+                               private=True)  # the reason quotes the name
             return None
         return self._decide(self.now_s(), announce=True)
 
@@ -279,7 +280,7 @@ class GotoNode(ManagedNode):
             return
         self._last_status = line
         self.status_pub.publish(String(data=line))
-        self.get_logger().info(line, throttle_duration_sec=1.0)
+        self.log_throttled("status", line, level="info", every_s=1.0, private=True)  # names the target
 
     # ------------------------------------------------------------------ known names
     def _ask_names(self) -> None:

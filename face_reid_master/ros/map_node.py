@@ -23,9 +23,9 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
-from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable, config_from_values, config_specs
+from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
 from face_reid_camera.common.ros.floor_map import FLOOR_MAP_QOS, snapshot_from_msg
-from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
+from face_reid_camera.common.ros.lifecycle import ManagedNode, fatal_start, run_node, start_node
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_master.robot.camera_map import CameraMapConfig, CameraMapFusion, OccupancyGridMap, save_nav2_map
 from face_reid_msgs.msg import FloorOccupancy
@@ -121,7 +121,7 @@ class MapNode(ManagedNode):
             try:
                 self.save(path)
             except (OSError, ValueError) as exc:
-                self.get_logger().error(f"cannot save the camera map to {path}: {exc}")
+                self.log(f"cannot save the camera map to {path}: {exc}", "error", private=True)
         for sub in self._subs.values():
             self.destroy_subscription(sub)
         for timer in self._own_timers:
@@ -175,7 +175,7 @@ class MapNode(ManagedNode):
         """Save the fused map as a nav2 map; None (and a log line) when no camera reported."""
         grid = self.fusion.grid()
         if grid is None:
-            self.get_logger().warning(f"no floor summary received: nothing saved to {path}")
+            self.log(f"no floor summary received: nothing saved to {path}", "warn", private=True)
             return None
         ypath, ipath = save_nav2_map(grid, path)
         print(f"saved {ypath} and {ipath.name}: {grid.width} x {grid.height} cells of {grid.resolution_m} m from "
@@ -240,20 +240,15 @@ def _run_once(args: argparse.Namespace, ros_argv: list[str]) -> int:
     """``--save PATH --once``: configure, activate, wait for the cameras, save, stop."""
     import rclpy
 
-    rclpy.init(args=ros_argv)
-    try:
-        node = MapNode(args.save)
-    except (ParamError, ValueError) as exc:
-        print(f"[face-reid-map] FATAL: cannot start: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
+    node = start_node("face-reid-map", ros_argv, lambda: MapNode(args.save))
+    if isinstance(node, int):
+        return node
     status = 0
     try:
         node.quiet_failures = True
         if node.trigger_configure() != TransitionCallbackReturn.SUCCESS or \
                 node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
-            print(f"[face-reid-map] FATAL: cannot start: {node.failure}", file=sys.stderr)
-            return 2
+            return fatal_start("face-reid-map", node.failure)
         why = _wait_once(node, [c for c in args.cameras.split(",") if c], args.timeout, args.settle)
         if why:
             print(f"face-reid-map: {why}", file=sys.stderr)

@@ -217,15 +217,14 @@ class MasterNode(ManagedNode):
         store = WriteBehindStore(lambda: FaceStore(path, retention_unnamed_s=retention, embedding_dim=space_dim(space),
                                                    embedding_space=space))
         if store.recovered_from is not None:
-            self.get_logger().error(
-                f"face database {path} was corrupt: moved to {store.recovered_from}, started a fresh one"
-            )
+            self.log(f"face database {path} was corrupt: moved to {store.recovered_from}, started a fresh one",
+                     "error", private=True)
         if retention is not None:  # a shorter retention than before deletes faces on the first cycle: say so now
             doomed = len(store.prunable_unnamed(time.time()))
             if doomed:
-                self.get_logger().warning(
-                    f"retention_unnamed_s={retention:g} s: {doomed} of the {len(store.list_faces())} stored faces "
-                    f"(unnamed, not seen for longer) will be deleted from {path} once frames arrive")
+                self.log(f"retention_unnamed_s={retention:g} s: {doomed} of the {len(store.list_faces())} stored "
+                         f"faces (unnamed, not seen for longer) will be deleted from {path} once frames arrive",
+                         "warn", private=True)
         self._watch.store_opened(store.lost_face_ids, store.recovered_from, store.salvaged_face_ids)
         return store
 
@@ -237,10 +236,8 @@ class MasterNode(ManagedNode):
         result = load_gallery(Path(path), self.photo_embedder())
         skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
         if skipped:
-            self.get_logger().warning(
-                f"gallery {path}: skipped {len(result.skipped_unreadable)} unreadable photos and "
-                f"{len(result.skipped_no_face)} without a detectable face"
-            )
+            self.log(f"gallery {path}: skipped {len(result.skipped_unreadable)} unreadable photos and "
+                     f"{len(result.skipped_no_face)} without a detectable face", "warn", private=True)
         return dict(result.people)
 
     def photo_embedder(self) -> Any:
@@ -362,7 +359,7 @@ class MasterNode(ManagedNode):
 
     def _log_identity_events(self, events: list[Any]) -> None:
         for ev in events:
-            self.get_logger().info(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})")
+            self.log(f"track {ev.track_id}: {ev.kind.value} face {ev.face_id} (p={ev.confidence:.2f})", private=True)
 
     def _tick(self) -> None:
         if self.core is None:

@@ -72,7 +72,10 @@ class TracksSubscription:
                                      self.node.count_publishers(self.topic))
         problem, now = self.network.problem, time.monotonic()
         if problem and (problem != self._problem or now - self._problem_logged_s >= _REPEAT_PROBLEM_S):
-            (self.node.get_logger().warning if self.verifier is not None else self.node.get_logger().error)(problem)
+            if self.verifier is not None:  # a line per severity: rclpy refuses another severity from the same line
+                self.node.get_logger().warning(problem)
+            else:
+                self.node.get_logger().error(problem)
             self._problem_logged_s = now
         self._problem = problem
         return self.network

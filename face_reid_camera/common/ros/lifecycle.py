@@ -1,6 +1,10 @@
 """What both face-reid nodes share as ROS lifecycle nodes: parameter declaration from a :class:`ParamTable`,
 the start-up walk to ACTIVE (``autostart``), throttled logging of rejected input, and ``/diagnostics``.
 
+Logging (:meth:`ManagedNode.log`, :meth:`ManagedNode.log_throttled`) never raises, and a line marked private (names,
+file paths, track/face assignments) stays in the local log (stderr and the ROS log file) of a secured node: /rosout
+is a plain topic any participant of the domain reads.
+
 Subclasses implement ``configure`` / ``activate`` / ``deactivate`` / ``cleanup`` (plain methods; an
 exception in ``configure`` fails the transition with its message in :attr:`ManagedNode.failure`).
 
@@ -16,12 +20,14 @@ from __future__ import annotations
 import json
 import sys
 import time
+import warnings
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
+import rclpy.logging
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, NameValidationException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.node import Node
@@ -33,7 +39,8 @@ from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTabl
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.common.transitions import QUERY, TransitionError, plan
 
-__all__ = ["ManagedNode", "descriptor_for", "network_key_override", "report_to_msg", "run_node"]
+__all__ = ["LogLevel", "ManagedNode", "descriptor_for", "fatal_start", "network_key_override", "report_to_msg",
+           "run_node", "start_node"]
 
 _TYPES = {
     "bool": Parameter.Type.BOOL, "int": Parameter.Type.INTEGER, "float": Parameter.Type.DOUBLE,
@@ -44,6 +51,20 @@ LOG_THROTTLE_S = 5.0
 _MAX_LOG_CHARS = 300
 _DEFAULT_SEAL_AGE_S = 30.0  # a sealed transition request older (or newer) than this is refused, without max_seal_age_s
 _REPLY_LINGER_S = 0.5  # after a shutdown transition, the executor spins this long so the reply reaches the caller
+_LOCAL_LOGGER_SUFFIX = "local"  # <node logger>.local: not a registered sublogger, so rcl keeps it off /rosout
+
+LogLevel = Literal["info", "warn", "error"]
+
+
+def _emit(logger: Any, level: LogLevel, text: str) -> None:
+    """``text`` at ``level``, from one line of code per severity: rclpy ties a call site to the severity of its
+    first call and raises ValueError when the same line logs at another."""
+    if level == "info":
+        logger.info(text)
+    elif level == "warn":
+        logger.warning(text)
+    else:
+        logger.error(text)
 
 
 def network_key_override(overrides: dict[str, Parameter[Any]]) -> str:
@@ -106,6 +127,8 @@ class ManagedNode(LifecycleNode):
         self._configured = False
         self._active = False
         self._last_logged: dict[str, float] = {}
+        # child by name only (get_child would register it with /rosout): the node's level, stderr and log file only
+        self._local_logger = rclpy.logging.get_logger(f"{self.get_logger().name}.{_LOCAL_LOGGER_SUFFIX}")
         for spec in table.specs:
             try:
                 self.declare_parameter(spec.name, spec.default, descriptor_for(spec))
@@ -182,7 +205,8 @@ class ManagedNode(LifecycleNode):
         else:
             self.control_refusals += 1
             self.log_throttled("change_state_sealed", f"change_state_sealed: {response.message}",
-                               self.control_refusals, warn=True)
+                               self.control_refusals, warn=True,  # a failure's reason may name a file: private
+                               private=not response.message.startswith("refused:"))
         return response
 
     # ------------------------------------------------------------------ parameters
@@ -213,8 +237,8 @@ class ManagedNode(LifecycleNode):
             self.configure()
         except Exception as exc:  # a bad parameter, a missing model, a corrupt file: say why, stay unconfigured
             self.failure = f"{exc}" if isinstance(exc, ValueError | OSError) else f"{type(exc).__name__}: {exc}"
-            if not self.quiet_failures:
-                self.get_logger().error(f"configure failed: {self.failure}")
+            if not self.quiet_failures:  # the reason may name a file (database, gallery): private
+                self.log(f"configure failed: {self.failure}", "error", private=True)
             self._release_quietly()
             return TransitionCallbackReturn.FAILURE
         self._configured = True
@@ -229,7 +253,7 @@ class ManagedNode(LifecycleNode):
         except Exception as exc:
             self.failure = f"{type(exc).__name__}: {exc}"
             if not self.quiet_failures:
-                self.get_logger().error(f"activate failed: {self.failure}")
+                self.log(f"activate failed: {self.failure}", "error", private=True)
             self._stop_diagnostics()
             return TransitionCallbackReturn.FAILURE
         return TransitionCallbackReturn.SUCCESS
@@ -269,7 +293,7 @@ class ManagedNode(LifecycleNode):
         try:
             self.cleanup()
         except Exception as exc:
-            self.get_logger().error(f"cleanup after a failure failed too: {exc}")
+            self.log(f"cleanup after a failure failed too: {exc}", "error", private=True)
         self._configured = False
 
     def _stop_diagnostics(self) -> None:
@@ -309,16 +333,43 @@ class ManagedNode(LifecycleNode):
     def now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def log_throttled(self, key: str, message: str, total: int | None = None, warn: bool = False) -> None:
-        """Log at once the first time, then at most every LOG_THROTTLE_S per key; messages are truncated."""
+    @property
+    def keeps_private_local(self) -> bool:
+        """Whether private log lines stay off /rosout: the node has a network key (given at start, or set as a
+        parameter since on an unsecured node)."""
+        if self.secured:
+            return True
+        return self.has_parameter("network_key_path") and bool(self.get_parameter("network_key_path").value)
+
+    def log(self, text: str, level: LogLevel = "info", private: bool = False) -> None:
+        """One log line; never raises (a failed line goes to stderr). ``private``: it carries names, file paths or
+        track/face assignments, so on a secured network it goes to the local log only (stderr and the ROS log
+        file), not /rosout."""
+        logger = self._local_logger if private and self.keeps_private_local else self.get_logger()
+        try:
+            _emit(logger, level, text)
+        except Exception as exc:  # logging must never take the node down
+            print(f"[{level.upper()}] [{logger.name}]: {text} (logging failed: {type(exc).__name__}: {exc})",
+                  file=sys.stderr, flush=True)
+
+    def log_throttled(self, key: str, message: str, total: int | None = None, warn: bool = False,
+                      private: bool = False, level: LogLevel | None = None, every_s: float = LOG_THROTTLE_S) -> None:
+        """Log at once the first time, then at most every ``every_s`` per key; messages are truncated. At
+        ``level``, else WARN (``warn``) or ERROR; ``private`` as for :meth:`log`."""
         now = time.monotonic()
-        if now - self._last_logged.get(key, -1e18) < LOG_THROTTLE_S:
+        if now - self._last_logged.get(key, -1e18) < every_s:
             return
         self._last_logged[key] = now
         text = message if len(message) <= _MAX_LOG_CHARS else message[: _MAX_LOG_CHARS - 3] + "..."
         if total is not None:
             text += f" [{key}: {total} so far]"
-        (self.get_logger().warning if warn else self.get_logger().error)(text)
+        self.log(text, level or ("warn" if warn else "error"), private)
+
+
+def _rcl_reason(exc: Exception) -> str:
+    """An RCLError's reason without rcl's source locations (", at /project/src/...")."""
+    lines = str(exc).splitlines()
+    return (lines[0] if lines else type(exc).__name__).split(", at /")[0][:_MAX_LOG_CHARS]
 
 
 def _printed_help(argv: list[str], usage: str, table: ParamTable) -> bool:
@@ -327,6 +378,39 @@ def _printed_help(argv: list[str], usage: str, table: ParamTable) -> bool:
         print(usage + table.help_text(advanced="--help-all" in argv[1:]))
         return True
     return False
+
+
+def fatal_start(prog: str, message: str) -> int:
+    """The one line of a node that cannot start; returns its exit status, 2."""
+    print(f"[{prog}] FATAL: cannot start: {message}", file=sys.stderr, flush=True)
+    return 2
+
+
+def start_node(prog: str, argv: list[str], make_node: Callable[[], ManagedNode]) -> ManagedNode | int:
+    """rclpy started with ``argv`` and the node made; or, when either is refused (bad --ros-args, a bad parameter,
+    a node name or namespace rcl refuses), one FATAL line and the exit status 2 (rclpy shut down again)."""
+    import rclpy
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    try:
+        rclpy.init(args=argv)
+    except Exception as exc:  # rcl's own parser (e.g. "-p name:=" without a value): one line, not a traceback
+        return fatal_start(prog, f"bad --ros-args ({type(exc).__name__}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else ''}); an empty string value is written "
+                                 "name:=''")
+    # warnings of a node that cannot be made (rclpy: "Failed to fini rosout publisher") would follow the FATAL line
+    with warnings.catch_warnings(record=True) as caught:
+        try:
+            node = make_node()
+        except (ParamError, ValueError, NameValidationException) as exc:
+            rclpy.try_shutdown()
+            return fatal_start(prog, str(exc))
+        except rclpy_implementation.RCLError as exc:  # rcl refused the node: e.g. a remapped name too long
+            rclpy.try_shutdown()
+            return fatal_start(prog, _rcl_reason(exc))
+    for w in caught:  # a node that started: its warnings as they would have been shown
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return node
 
 
 def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], ManagedNode],
@@ -343,28 +427,17 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    def fatal(message: str) -> int:
-        print(f"[{prog}] FATAL: cannot start: {message}", file=sys.stderr, flush=True)
-        return 2
-
-    try:
-        rclpy.init(args=argv)
-    except Exception as exc:  # rcl's own parser (e.g. "-p name:=" without a value): one line, not a traceback
-        return fatal(f"bad --ros-args ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
-                     "an empty string value is written name:=''")
-    try:
-        node = make_node()
-    except (ParamError, ValueError) as exc:
-        rclpy.try_shutdown()
-        return fatal(str(exc))
+    node = start_node(prog, argv, make_node)
+    if isinstance(node, int):
+        return node
     status = 0
     try:
         if node.get_parameter("autostart").value:
             node.quiet_failures = True
             if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                return (status := fatal(node.failure or "configure failed"))
+                return (status := fatal_start(prog, node.failure or "configure failed"))
             if node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
-                return (status := fatal(node.failure or "activate failed"))
+                return (status := fatal_start(prog, node.failure or "activate failed"))
             node.quiet_failures = False
         node.warn_if_open()
         executor = SingleThreadedExecutor()
