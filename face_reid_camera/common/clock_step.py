@@ -47,6 +47,19 @@ class ClockStepDetector:
         self._stepped_since_count |= new or self.stepped
         return new
 
+    def observe(self, wall_s: float, mono_s: float, refused_total: int) -> list[str]:
+        """A node's diagnostics step: one reading of both clocks and the node's refused-input total; the errors
+        to report (the step while it lasts)."""
+        self.update(wall_s, mono_s)
+        self.count_refused(refused_total)
+        return [self.describe()] if self.stepped else []
+
+    def values(self) -> dict[str, object]:
+        """The fields of a node's /diagnostics about its clock."""
+        return {"clock_stepped": self.stepped, "clock_step_s": round(self.offset_s, 3), "clock_steps": self.steps,
+                "clock_last_step_s": round(self.last_step_s, 3),
+                "rejected_during_clock_steps": self.refused_during_steps}
+
     def count_refused(self, refused_total: int) -> None:
         """The node's total of refused inputs now: those refused since the last call are added to
         ``refused_during_steps`` when the clock was stepped meanwhile (the step's effect, counted)."""
