@@ -9,7 +9,8 @@ in the future is dropped, one far behind is dropped. Then against the stream's p
 (``stamp_out_of_pattern``), so that one forged stamp just under the future limit neither starves the
 regular images nor restarts the pairing (a real change of the pattern, a clock step, moves the median
 within half a window). Images are buffered in stamp order: one that came early does not push the
-regular ones out, only images at or before the last pair are out of order. An image in pattern more
+regular ones out, and pairs only once it is due (:data:`PATTERN_SLACK_S`), so that early images cannot make
+the regular ones out of order (only images at or before the last pair are). An image in pattern more
 than :data:`RESET_BACKWARD_S` before the stream's newest (a bag loop, a clock jump back of both the
 stamps and the receive clock) restarts the pairing. This is a plain class (no rclpy) so the policy is
 unit-tested directly.
@@ -18,6 +19,7 @@ unit-tested directly.
 from __future__ import annotations
 
 import bisect
+import math
 import statistics
 from collections import deque
 from collections.abc import Callable
@@ -37,6 +39,9 @@ PATTERN_AHEAD_S = 0.25
 image can cost the regular ones is bounded by it."""
 PATTERN_WINDOW = 15
 """Images (received within the absolute limits) whose ``stamp - now_s`` make a stream's pattern."""
+PATTERN_SLACK_S = 0.05
+"""An image ahead of its stream's pattern by more than this (but within PATTERN_AHEAD_S) waits to pair until
+the receive clock makes it due: a forged pair stamped a little ahead cannot make the regular ones out of order."""
 _PATTERN_MIN = 3  # the pattern is judged from this many images on
 
 DROP_REASONS = ("stamp_future", "stamp_past", "stamp_out_of_order", "stamp_out_of_pattern")
@@ -90,14 +95,14 @@ class StampSynchronizer(Generic[T, U]):
         if not self._accept("colour", stamp_s, now_s):
             return None
         self.stats.dropped_color += _insert(self._color, stamp_s, item)
-        return self._match()
+        return self._match(now_s)
 
     def add_depth(self, stamp_s: float, item: U, now_s: float) -> tuple[float, T, U] | None:
         """Add a depth frame received at ``now_s``; return (stamp, colour, depth) when it completes a pair."""
         if not self._accept("depth", stamp_s, now_s):
             return None
         self.stats.dropped_depth += _insert(self._depth, stamp_s, item)
-        return self._match()
+        return self._match(now_s)
 
     def reset(self) -> None:
         """Forget every buffered frame and stamp (counted in ``stats.resets``); the streams' patterns stay."""
@@ -136,10 +141,21 @@ class StampSynchronizer(Generic[T, U]):
             self._on_drop(reason, f"{text}: dropped")
         return False
 
-    def _match(self) -> tuple[float, T, U] | None:
+    def _due_s(self, stream: str, now_s: float) -> float:
+        """The newest stamp of ``stream`` that may pair at ``now_s``: its pattern's + PATTERN_SLACK_S (inf while
+        the pattern is not known)."""
+        pattern = self._pattern[stream]
+        return now_s + statistics.median(pattern) + PATTERN_SLACK_S if len(pattern) >= _PATTERN_MIN else math.inf
+
+    def _match(self, now_s: float) -> tuple[float, T, U] | None:
         best: tuple[float, int, int] | None = None
+        color_due, depth_due = self._due_s("colour", now_s), self._due_s("depth", now_s)
         for ci, (cs, _) in enumerate(self._color):
+            if cs > color_due:  # early for its stream: it waits until it is due (the buffer is in stamp order)
+                break
             for di, (ds, _) in enumerate(self._depth):
+                if ds > depth_due:
+                    break
                 gap = abs(cs - ds)
                 if gap <= self.slop_s and (best is None or max(cs, ds) > best[0]):
                     best = (max(cs, ds), ci, di)

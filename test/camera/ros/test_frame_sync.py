@@ -140,6 +140,26 @@ def test_an_image_a_little_ahead_costs_at_most_its_own_pair_and_one_far_behind_r
     assert behind.stats.rejected["stamp_out_of_pattern"] == 11
 
 
+def test_forged_pairs_a_little_ahead_wait_until_due_and_cost_the_regular_pairs_little() -> None:
+    """A colour+depth pair stamped +0.2 s (within the pattern's tolerance) five times a second: it pairs only
+    when the receive clock makes it due, so the regular pairs before it still go out (before: it paired at once,
+    the regular images up to its stamp were out of order: 15 of 300 out)."""
+    def forged_pair(s: StampSynchronizer[str, str], now: float) -> None:
+        s.add_color(now + 0.2, "evil_c", now)
+        s.add_depth(now + 0.2, "evil_d", now)
+
+    sync: StampSynchronizer[str, str] = StampSynchronizer(slop_s=0.01, max_age_s=0.5)
+    pairs = 0
+    for k in range(300):
+        t = 1000.0 + k / 30
+        sync.add_color(t, f"c{k}", t + 0.010)
+        if k % 6 == 5:
+            forged_pair(sync, t + 0.012)
+        pair = sync.add_depth(t, f"d{k}", t + 0.015)
+        pairs += pair is not None and pair[1] == f"c{k}"
+    assert pairs >= 200, f"{pairs} of 300 regular pairs out"
+
+
 def test_a_lasting_step_of_the_stamps_is_followed_within_the_pattern_window() -> None:
     """The driver's clock steps 1.5 s ahead for good (within the future limit): out of pattern for about half
     the window, then it is the pattern and every pair goes out."""
