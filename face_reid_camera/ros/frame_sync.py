@@ -10,7 +10,8 @@ in the future is dropped, one far behind is dropped. Then against the stream's p
 regular images nor restarts the pairing (a real change of the pattern, a clock step, moves the median
 within half a window). Images are buffered in stamp order: one that came early does not push the
 regular ones out, and pairs only once it is due (:data:`PATTERN_SLACK_S`), so that early images cannot make
-the regular ones out of order (only images at or before the last pair are). An image in pattern more
+the regular ones out of order (only images at or before the last pair are). The pattern applies with an age limit
+(``max_age_s`` > 0, the camera's default): stamps on the receive clock. An image in pattern more
 than :data:`RESET_BACKWARD_S` before the stream's newest (a bag loop, a clock jump back of both the
 stamps and the receive clock) restarts the pairing. This is a plain class (no rclpy) so the policy is
 unit-tested directly.
@@ -68,8 +69,9 @@ class SyncStats:
 class StampSynchronizer(Generic[T, U]):
     """Pairs colour and depth items by stamp (seconds), newest first, within ``slop_s``.
 
-    ``max_age_s`` (0 = no limit) drops stamps older than that on the receive clock; ``on_drop(reason, text)``
-    hears of every dropped stamp (the node logs and counts them).
+    ``max_age_s`` (0 = no limit) drops stamps older than that on the receive clock; 0 also says the stamps need
+    not follow the receive clock (a test's or a recording's stamps, fed at any rate): then only the future limit
+    applies, no pattern. ``on_drop(reason, text)`` hears of every dropped stamp (the node logs and counts them).
     """
 
     def __init__(self, slop_s: float = 0.02, buffer_size: int = 16, max_age_s: float = 0.0,
@@ -122,7 +124,7 @@ class StampSynchronizer(Generic[T, U]):
                                             f"{self.max_age_s:g})")
         pattern = self._pattern[stream]
         pattern.append(ahead)
-        if len(pattern) >= _PATTERN_MIN:
+        if self.max_age_s > 0 and len(pattern) >= _PATTERN_MIN:
             off = ahead - statistics.median(pattern)
             if off > PATTERN_AHEAD_S or off < -RESET_BACKWARD_S:
                 return self._drop("stamp_out_of_pattern", f"{stream} stamp {off:+.3f} s off its stream's pattern "
@@ -143,9 +145,11 @@ class StampSynchronizer(Generic[T, U]):
 
     def _due_s(self, stream: str, now_s: float) -> float:
         """The newest stamp of ``stream`` that may pair at ``now_s``: its pattern's + PATTERN_SLACK_S (inf while
-        the pattern is not known)."""
+        the pattern is not known, or without an age limit)."""
         pattern = self._pattern[stream]
-        return now_s + statistics.median(pattern) + PATTERN_SLACK_S if len(pattern) >= _PATTERN_MIN else math.inf
+        if self.max_age_s == 0 or len(pattern) < _PATTERN_MIN:
+            return math.inf
+        return now_s + statistics.median(pattern) + PATTERN_SLACK_S
 
     def _match(self, now_s: float) -> tuple[float, T, U] | None:
         best: tuple[float, int, int] | None = None
