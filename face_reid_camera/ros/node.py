@@ -385,7 +385,8 @@ class CameraNode(ManagedNode):
                 "; check the camera driver's stamps and this host's clock")
         errors = self._wall_steps.observe(time.time(), time.monotonic(), sum(health.rejected.values()))
         if errors:
-            errors[0] += ": this camera's frames are stamped and sealed off the other hosts' clocks (refused)"
+            errors[0] += ": this camera's stamps and seals are off the other hosts' clocks (the master refuses " \
+                         "what is beyond its limits)"
         extra.update(self._wall_steps.values())
         return health.report(now_s, extra, warnings, errors)
 
