@@ -85,7 +85,7 @@ def test_the_cameras_diagnostics_say_error_while_its_clock_is_stepped(
         assert all(t.clock.clock_type == ClockType.STEADY_TIME for t in (node._qos_timer, node._diagnostics_timer))
         levels = _levels_through_a_step(node, camera_node, monkeypatch)
         assert [lv for lv, _ in levels][1:3] == [2, 2] and levels[0][0] < 2 and levels[3][0] < 2, levels
-        assert "clock stepped +120.0 s" in levels[1][1] and "refused" in levels[1][1]
+        assert "clock stepped +120.0 s" in levels[1][1] and "master refuses" in levels[1][1]
         assert node.diagnostics(node.now_s()).values["clock_steps"] == "2"
     finally:
         node.destroy_node()
