@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -17,6 +18,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 from face_reid_camera.camera_model import CameraIntrinsics
+from face_reid_camera.common.clock_step import ClockStepDetector
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
 from face_reid_camera.common.ros.sealed import seal_message
@@ -67,6 +69,7 @@ class CameraNode(ManagedNode):
         self._floor_found: bool | None = None
         self._floor_check: Any = None  # FloorCheck of the last frame the pose was checked on
         self._floor_map: FloorMapOutput | None = None  # floor occupancy output (floor_map_period_s > 0)
+        self._wall_steps = ClockStepDetector()  # this host's wall clock stepping: frames stamped off it (an ERROR)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -133,7 +136,7 @@ class CameraNode(ManagedNode):
         self._subs = [self._subscribe_input(msg_type, topic, callback, reliable)
                       for msg_type, topic, callback in inputs]
         if values["image_qos"] == "auto":
-            self._qos_timer = self.create_timer(1.0, self._match_driver_qos)
+            self._qos_timer = self.create_steady_timer(1.0, self._match_driver_qos)
         if self._floor_map is not None:
             self._floor_map.activate()
         assert self.health is not None
@@ -380,7 +383,12 @@ class CameraNode(ManagedNode):
             warnings.append("images dropped for their stamps since the last report: " + ", ".join(
                 f"{n} {r} ({DROP_MEANINGS[r]})" for r, n in stamp_drops.items() if n) +
                 "; check the camera driver's stamps and this host's clock")
-        return health.report(now_s, extra, warnings)
+        errors = self._wall_steps.observe(time.time(), time.monotonic(), sum(health.rejected.values()))
+        if errors:
+            errors[0] += ": this camera's stamps and seals are off the other hosts' clocks (the master refuses " \
+                         "what is beyond its limits)"
+        extra.update(self._wall_steps.values())
+        return health.report(now_s, extra, warnings, errors)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,7 +3,7 @@
 A frame is refused whole for a stamp that is not a number, an unknown or empty camera id, too many people, a
 camera sending faster than ``max_camera_rate_hz``, or (live, with the caller's clock) a stamp too old or too far
 ahead. A frame a little ahead is applied at the caller's clock, and the caller's clock going back (a skewed or
-reset host clock) is reported so that tracking can start afresh.
+reset host clock, a step corrected), seen by a frame or by a tick, is reported so that tracking can start afresh.
 """
 
 from __future__ import annotations
@@ -76,14 +76,21 @@ class FrameAdmission:
             st.frames_rejected_future += 1
             return Admission(stamp, "future_stamp",
                              f"stamp {stamp - now_s:.2f} s in the future (> max_stamp_future_s)")
-        went_back = now_s < self._last_now_s - cfg.tracker.max_detection_delay_s  # our own clock went back
-        if went_back:
-            st.clock_jumps_back += 1
-        self._last_now_s = now_s
+        went_back = self.clock_went_back(now_s)
         if stamp > now_s:  # no camera moves the tracker clock past the master's: others' frames stay on time
             st.frames_future_clamped += 1
             stamp = now_s
         return Admission(stamp, clock_went_back=went_back)
+
+    def clock_went_back(self, now_s: float) -> bool:
+        """Whether the caller's clock ``now_s`` (a frame's receive time, or a tick's) is behind the last one by
+        more than ``max_detection_delay_s`` (a step back, a simulated time restarted: counted in
+        ``clock_jumps_back``, tracking must start afresh); it becomes the last one."""
+        went_back = now_s < self._last_now_s - self.config.tracker.max_detection_delay_s
+        if went_back:
+            self.stats.clock_jumps_back += 1
+        self._last_now_s = now_s
+        return went_back
 
     def _camera_rate_ok(self, camera_id: str, now_s: float) -> bool:
         """Whether the camera sent fewer than ``max_camera_rate_hz`` frames in the second before ``now_s``

@@ -242,9 +242,15 @@ class MasterCore:
         return self._last_stamp
 
     def tick(self, now_s: float) -> None:
-        """Advance time without a frame (tracks time out, released faces are saved)."""
+        """Advance time without a frame (tracks time out, released faces are saved). ``now_s`` behind the
+        caller's last clock (frame or tick) by more than max_detection_delay_s: the clock stepped back (e.g. a
+        forward step corrected), tracking starts afresh instead of waiting for the old future."""
         self.finish_frames()
-        if not math.isfinite(now_s) or now_s <= self._last_stamp:
+        if not math.isfinite(now_s):
+            return
+        if self.admission.clock_went_back(now_s):
+            self._restart_tracking(now_s)
+        if now_s <= self._last_stamp:
             return
         result = self.tracker.advance(now_s)
         self._last_stamp = now_s

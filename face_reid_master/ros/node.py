@@ -28,6 +28,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
 from face_reid_camera.common.checks import shown
+from face_reid_camera.common.clock_step import ClockStepDetector
 from face_reid_camera.common.diagnostics import DiagnosticReport, NodeHealth
 from face_reid_camera.common.embedding_spaces import embedder_for_space, space_dim
 from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
@@ -88,6 +89,7 @@ class MasterNode(ManagedNode):
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
         self.receiver = FrameReceiver(None, {}, self._reject, self.log_throttled)  # messages into the next cycle
         self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
+        self._wall_steps = ClockStepDetector()  # this host's wall clock stepping (an ERROR while it lasts)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -166,11 +168,12 @@ class MasterNode(ManagedNode):
             self.cameras.subscribe(topic)
         if self.cameras.regex is not None:
             self.cameras.discover()
-        self._own_timers.append(self.create_timer(float(values["topic_discovery_period_s"]), self.cameras.discover))
-        self._own_timers.append(self.create_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
+        self._own_timers.append(self.create_steady_timer(float(values["topic_discovery_period_s"]),
+                                                         self.cameras.discover))
+        self._own_timers.append(self.create_steady_timer(1.0 / float(values["tick_rate_hz"]), self._tick))
         if self.schedule.publish_interval_s:
-            self._own_timers.append(self.create_timer(self.schedule.publish_interval_s, self._flush))
-        self._own_timers.append(self.create_timer(float(values["stats_log_period_s"]), self._log_stats))
+            self._own_timers.append(self.create_steady_timer(self.schedule.publish_interval_s, self._flush))
+        self._own_timers.append(self.create_steady_timer(float(values["stats_log_period_s"]), self._log_stats))
         assert self.health is not None
         self.health.start(self.now_s())
         # What exists now (modules, models, loaded faces) lives as long as the node: out of the collector's full
@@ -445,7 +448,9 @@ class MasterNode(ManagedNode):
             self.log_throttled("clock_offset", warnings[-1], len(off), warn=True)
         verdict = self._health_verdict(now_s, core, health)
         extra.update(verdict.values)
-        return health.report(now_s, extra, warnings + verdict.warnings, verdict.errors)
+        clock_errors = self._wall_steps.observe(time.time(), time.monotonic(), sum(health.rejected.values()))
+        extra.update(self._wall_steps.values())
+        return health.report(now_s, extra, warnings + verdict.warnings, clock_errors + verdict.errors)
 
     def _health_verdict(self, now_s: float, core: MasterCore, health: NodeHealth) -> Any:
         """The store's, the overload's and the domain's part of the status (face_reid_master.health)."""

@@ -247,7 +247,7 @@ class ManagedNode(LifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-            self._diagnostics_timer = self.create_timer(1.0, self._publish_diagnostics)
+            self._diagnostics_timer = self.create_steady_timer(1.0, self._publish_diagnostics)
             self.activate()
             self._active = True
         except Exception as exc:
@@ -332,6 +332,13 @@ class ManagedNode(LifecycleNode):
 
     def now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
+
+    def create_steady_timer(self, period_s: float, callback: Any) -> Any:
+        """A timer on the monotonic clock: a wall clock stepped back does not hold it until the old future
+        comes round (a ROS-time timer would stay silent for the step's length)."""
+        from rclpy.clock import Clock, ClockType
+
+        return self.create_timer(period_s, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     @property
     def keeps_private_local(self) -> bool:

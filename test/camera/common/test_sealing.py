@@ -48,15 +48,16 @@ def test_a_stranger_can_neither_open_nor_forge_nor_alter() -> None:
     assert _code(Opener(KEY, purpose="forget_face"), sealed) == "forged"
 
 
-def test_replays_and_reordering_are_refused_per_sender() -> None:
+def test_replays_are_refused_per_sender_and_a_reordered_message_still_opens_once() -> None:
     a, b = Sealer(KEY, "cam_a"), Sealer(KEY, "cam_b")
     first, second, other = a.seal(b"1"), a.seal(b"2"), b.seal(b"3")
-    assert second.counter > first.counter
+    assert second.counter != first.counter
     opener = Opener(KEY)
     assert opener.open(second) == b"2"
     assert _code(opener, second) == "replayed"
-    assert _code(opener, first) == "replayed"  # older than what was seen
-    assert opener.open(other) == b"3"  # another sender has its own counter
+    assert opener.open(first) == b"1"  # reordered on the way: not seen yet (freshness is the clock's check)
+    assert _code(opener, first) == "replayed"
+    assert opener.open(other) == b"3"  # another sender has its own counters
     assert opener.open(a.seal(b"4")) == b"4"
 
 
@@ -128,3 +129,93 @@ def test_a_receiver_refuses_what_was_sealed_before_it_started_so_a_restart_reope
     assert _code(restarted, captured) == "replayed"  # within max_age_s, but older than the receiver
     assert restarted.open(Sealer(KEY, "admin").seal(PAYLOAD)) == PAYLOAD  # what is sealed now still opens
     assert Opener(KEY).open(captured) == PAYLOAD  # without not_before_s only the counters in memory protect
+
+
+def test_a_counter_far_ahead_from_a_key_holder_does_not_make_the_real_frames_replayed() -> None:
+    """8d: one frame sealed 25 s ahead (a key holder, or a clock glitch) must not cost the camera 25 s."""
+    now = time.time()
+    opener = Opener(KEY, max_age_s=30.0)
+    ahead = Sealer(KEY, "cam_a")
+    with _clock_at(now + 25.0):
+        future = ahead.seal(b"ahead")
+    assert opener.open(future, now) == b"ahead"
+    real = Sealer(KEY, "cam_a")
+    for k in range(250):  # the next 25 s of a 10 Hz camera
+        with _clock_at(now + k * 0.1):
+            sealed = real.seal(b"%d" % k)
+        assert opener.open(sealed, now + k * 0.1) == b"%d" % k
+    assert _code(opener, future, now + 1.0) == "replayed"  # and the one ahead is still not opened twice
+
+
+def test_a_sender_whose_clock_stepped_back_is_heard_at_once_and_replays_stay_refused() -> None:
+    """A camera's clock +120 s for 5 s, then corrected: its counters follow the corrected clock (no clamp)."""
+    now = time.time()
+    sealer, opener = Sealer(KEY, "cam_a"), Opener(KEY, max_age_s=30.0)
+    with _clock_at(now):
+        before = sealer.seal(b"before")
+    with _clock_at(now + 120.0):
+        sealer.seal(b"glitch")  # stale at the receiver (refused, counted by the caller)
+    with _clock_at(now + 5.0):
+        after = sealer.seal(b"after")
+    assert opener.open(before, now) == b"before"
+    assert opener.open(after, now + 5.0) == b"after"
+    assert _code(opener, before, now + 5.0) == "replayed"
+    assert _code(opener, after, now + 6.0) == "replayed"
+
+
+def test_the_replay_cache_is_pruned_by_age_and_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    import face_reid_camera.common.sealing as sealing
+
+    now = time.time()
+    opener, sealer = Opener(KEY, max_age_s=1.0), Sealer(KEY, "cam_a")
+    old = []
+    for k in range(100):
+        with _clock_at(now + k * 0.1):
+            sealed = sealer.seal(b"x")
+        opener.open(sealed, now + k * 0.1)
+        old.append(sealed)
+    assert opener._seen_total <= 11  # only the last max_age_s of counters are kept
+    assert _code(opener, old[-1], now + 9.95) == "replayed"  # still in the window: remembered
+    assert _code(opener, old[0], now + 9.95) == "stale"
+    monkeypatch.setattr(sealing, "_MAX_SEEN", 50)
+    flood = Opener(KEY, max_age_s=30.0)
+    senders = [Sealer(KEY, f"holder{k}") for k in range(20)]
+    for k in range(200):
+        flood.open(senders[k % 20].seal(b"x"))
+    assert flood._seen_total <= 50
+    first = senders[0].seal(b"y")
+    flood.open(first)
+    assert _code(flood, first) == "replayed"
+
+
+def test_the_start_guard_follows_a_corrected_clock() -> None:
+    """A receiver started while its clock ran 120 s ahead: once corrected, fresh messages open at once."""
+    mono = [100.0]
+    now = time.time()
+    with _clock_at(now + 120.0):
+        opener = Opener(KEY, max_age_s=30.0, not_before_s=now + 120.0, monotonic=lambda: mono[0])
+    mono[0] += 6.0
+    with _clock_at(now + 6.0):
+        fresh = Sealer(KEY, "cam_a").seal(b"fresh")
+    assert opener.open(fresh, now + 6.0) == b"fresh"
+    with _clock_at(now - 1.0):
+        captured = Sealer(KEY, "cam_a").seal(b"captured")  # sealed before the receiver started
+    assert _code(opener, captured, now + 6.0) == "replayed"
+
+
+class _clock_at:
+    """time.time_ns / time.time of the sealing module at ``t`` (s) inside the with block (a stepped clock)."""
+
+    def __init__(self, t: float) -> None:
+        self.t = t
+
+    def __enter__(self) -> None:
+        import face_reid_camera.common.sealing as sealing
+
+        self._patch = pytest.MonkeyPatch()
+        fake = type("FakeTime", (), {"time_ns": staticmethod(lambda: int(self.t * 1e9)),
+                                     "time": staticmethod(lambda: self.t), "monotonic": staticmethod(time.monotonic)})
+        self._patch.setattr(sealing, "time", fake)
+
+    def __exit__(self, *exc: object) -> None:
+        self._patch.undo()

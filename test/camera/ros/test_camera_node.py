@@ -406,3 +406,35 @@ def test_one_pair_stamped_an_hour_ahead_does_not_silence_the_camera(ros_context)
         assert "stamp" not in node.diagnostics(node.now_s()).message  # said once per report period, not forever
     finally:
         node.destroy_node()
+
+
+def test_a_depth_image_stamped_just_under_the_future_limit_does_not_silence_the_camera(ros_context) -> None:
+    """Break 6 in the node: after every third valid pair an extra depth image stamped +0.95 s (within the 2 s
+    future limit). Before, each one became the depth stream's last stamp and the valid pairs after it were
+    refused (0 of 18 out); now it is out of the stream's pattern: dropped, counted, named on /diagnostics."""
+    ctx = ros_context(["--ros-args", "-p", "camera_id:=cam_pattern", "-p", "detect_faces:=false",
+                       "-p", "describe_bodies:=false", "-p", "max_frame_age_s:=5.0"])
+    node = CameraNode(context=ctx)
+    sent: list = []
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        node.publisher.publish = sent.append
+        depth_mm = np.zeros((480, 640), np.uint16)
+        depth_mm[240:] = 2500
+        bgr = np.full((480, 640, 3), 90, np.uint8)
+        for k in range(18):
+            stamp = Time(nanoseconds=int(node.now_s() * 1e9)).to_msg()
+            node._on_info(_camera_info(stamp))
+            color, depth = _images(bgr, "bgr8", depth_mm, "16UC1", stamp)
+            node._on_color(color)
+            node._on_depth(depth)
+            assert spin_until_idle(node, node.health.frames_in)
+            if k % 3 == 2:
+                ahead = Time(nanoseconds=int((node.now_s() + 0.95) * 1e9)).to_msg()
+                node._on_depth(_images(bgr, "bgr8", depth_mm, "16UC1", ahead)[1])
+        assert len(sent) == 18, f"{len(sent)} published of 18 valid pairs"
+        report = node.diagnostics(node.now_s())
+        assert report.values["rejected_stamp_out_of_pattern"] == "6" and report.values["sync_resets"] == "0"
+        assert "6 stamp_out_of_pattern" in report.message and report.level == 1
+    finally:
+        node.destroy_node()

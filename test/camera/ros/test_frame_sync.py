@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from face_reid_camera.ros.frame_sync import MAX_STAMP_FUTURE_S, StampSynchronizer
+from face_reid_camera.ros.frame_sync import MAX_STAMP_FUTURE_S, PATTERN_AHEAD_S, StampSynchronizer
 
 
 def test_pairs_within_slop() -> None:
@@ -58,7 +58,8 @@ def test_a_future_stamp_is_dropped_and_the_valid_pairs_after_it_pair() -> None:
     assert sync.add_depth(100.0 + 3600.0, "evil_d", 100.0) is None
     pairs = _valid_pairs(sync, 100.1, 5)
     assert [p[1] if p else None for p in pairs] == ["c0", "c1", "c2", "c3", "c4"]
-    assert sync.stats.rejected == {"stamp_future": 2, "stamp_past": 0, "stamp_out_of_order": 0}
+    assert sync.stats.rejected == {"stamp_future": 2, "stamp_past": 0, "stamp_out_of_order": 0,
+                                   "stamp_out_of_pattern": 0}
     assert [r for r, _ in drops] == ["stamp_future", "stamp_future"]
     assert "3600.000 s ahead" in drops[0][1] and drops[0][1].startswith("colour stamp")
 
@@ -99,6 +100,77 @@ def test_a_big_step_back_restarts_the_pairing_and_a_small_one_is_out_of_order() 
     # the colour frame buffered before the jump was forgotten: a depth frame of its stamp pairs with nothing
     assert sync.add_depth(100.2, "d", 100.21) is None
     assert sync.stats.pairs == 6 and sync.stats.rejected["stamp_future"] == 0
+
+
+def _stream_with_injections(sync: StampSynchronizer[str, str], inject, seconds: float = 10.0) -> int:
+    """30 Hz colour/depth pairs (received 10 ms after their stamp, depth 5 ms after colour); ``inject(sync, now)``
+    called at each frame. Returns the regular pairs that went out."""
+    pairs, next_injection = 0, 0.5
+    for k in range(int(seconds * 30)):
+        t = 1000.0 + k / 30
+        sync.add_color(t, f"c{k}", t + 0.010)
+        if t - 1000.0 >= next_injection:
+            inject(sync, t + 0.012)
+            next_injection += 0.9
+        pair = sync.add_depth(t, f"d{k}", t + 0.015)
+        pairs += pair is not None and pair[1] == f"c{k}"
+    return pairs
+
+
+def test_a_depth_image_stamped_095_s_ahead_every_09_s_is_dropped_and_the_regular_pairs_go_out() -> None:
+    """Break 6: one extra depth image stamped +0.95 s every 0.9 s made every regular depth image "out of order"
+    (0 frames out). It is out of the stream's pattern: dropped, counted, the pairing untouched."""
+    sync: StampSynchronizer[str, str] = StampSynchronizer(slop_s=0.01, max_age_s=0.5)
+    pairs = _stream_with_injections(sync, lambda s, now: s.add_depth(now + 0.95, "evil", now))
+    assert pairs == 300, f"{pairs} of 300 regular pairs out"
+    assert sync.stats.rejected["stamp_out_of_pattern"] == 11 and sync.stats.resets == 0
+    assert sync.stats.rejected["stamp_out_of_order"] == 0
+
+
+def test_an_image_a_little_ahead_costs_at_most_its_own_pair_and_one_far_behind_resets_nothing() -> None:
+    """Within the pattern's tolerance an early image is buffered in stamp order: the regular images keep pairing
+    (before, it became its stream's last stamp and the regular ones after it were refused until it passed)."""
+    ahead = PATTERN_AHEAD_S * 0.8
+    sync: StampSynchronizer[str, str] = StampSynchronizer(slop_s=0.01, max_age_s=5.0)
+    pairs = _stream_with_injections(sync, lambda s, now: s.add_depth(now + ahead, "early", now))
+    assert pairs >= 300 - 11, f"{pairs} of 300 regular pairs out"
+    behind: StampSynchronizer[str, str] = StampSynchronizer(slop_s=0.01, max_age_s=5.0)
+    pairs = _stream_with_injections(behind, lambda s, now: s.add_color(now - 1.5, "old", now))
+    assert pairs == 300 and behind.stats.resets == 0  # before: each reset the pairing
+    assert behind.stats.rejected["stamp_out_of_pattern"] == 11
+
+
+def test_forged_pairs_a_little_ahead_wait_until_due_and_cost_the_regular_pairs_little() -> None:
+    """A colour+depth pair stamped +0.2 s (within the pattern's tolerance) five times a second: it pairs only
+    when the receive clock makes it due, so the regular pairs before it still go out (before: it paired at once,
+    the regular images up to its stamp were out of order: 15 of 300 out)."""
+    def forged_pair(s: StampSynchronizer[str, str], now: float) -> None:
+        s.add_color(now + 0.2, "evil_c", now)
+        s.add_depth(now + 0.2, "evil_d", now)
+
+    sync: StampSynchronizer[str, str] = StampSynchronizer(slop_s=0.01, max_age_s=0.5)
+    pairs = 0
+    for k in range(300):
+        t = 1000.0 + k / 30
+        sync.add_color(t, f"c{k}", t + 0.010)
+        if k % 6 == 5:
+            forged_pair(sync, t + 0.012)
+        pair = sync.add_depth(t, f"d{k}", t + 0.015)
+        pairs += pair is not None and pair[1] == f"c{k}"
+    assert pairs >= 200, f"{pairs} of 300 regular pairs out"
+
+
+def test_a_lasting_step_of_the_stamps_is_followed_within_the_pattern_window() -> None:
+    """The driver's clock steps 1.5 s ahead for good (within the future limit): out of pattern for about half
+    the window, then it is the pattern and every pair goes out."""
+    sync: StampSynchronizer[str, str] = StampSynchronizer(slop_s=0.01, max_age_s=0.5)
+    assert _stream_with_injections(sync, lambda s, now: None, 2.0) == 60
+    out = []
+    for k in range(30):
+        t = 1100.0 + k / 30
+        sync.add_color(t + 1.5, f"c{k}", t)
+        out.append(sync.add_depth(t + 1.5, f"d{k}", t + 0.005))
+    assert sum(p is not None for p in out) >= 20 and all(out[-10:])
 
 
 def test_invalid_arguments() -> None:
