@@ -11,9 +11,11 @@ open.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import sqlite3
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +26,7 @@ from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.errors import FaceStoreError
 
 __all__ = ["SCHEMA_VERSION", "VECTOR_DTYPE", "CorruptStore", "FaceDatabaseFile", "decode_face", "salvage_faces",
-           "set_meta"]
+           "set_meta", "transaction"]
 
 SCHEMA_VERSION = 1
 _DEFAULT_DIM = 128
@@ -73,6 +75,24 @@ def set_meta(conn: sqlite3.Connection, key: str, value: str) -> None:
         "INSERT INTO meta(key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = excluded.value",
         (key, value),
     )
+
+
+@contextlib.contextmanager
+def transaction(conn: sqlite3.Connection, path: Path) -> Iterator[sqlite3.Connection]:
+    """``BEGIN IMMEDIATE`` ... ``COMMIT`` on ``conn``, rolled back on any error; SQLite errors become
+    :class:`FaceStoreError` naming ``path``."""
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield conn
+            conn.execute("COMMIT")
+        except BaseException:
+            if conn.in_transaction:
+                with contextlib.suppress(sqlite3.Error):
+                    conn.execute("ROLLBACK")
+            raise
+    except sqlite3.Error as exc:
+        raise FaceStoreError(f"face store {path}: {exc}") from exc
 
 
 class FaceDatabaseFile:

@@ -29,7 +29,7 @@ import logging
 import math
 import os
 import sqlite3
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -47,6 +47,7 @@ from face_reid_master.storage.database_file import (
     FaceDatabaseFile,
     decode_face,
     salvage_faces,
+    transaction,
 )
 from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError
 from face_reid_master.storage.id_ledger import IdLedger
@@ -250,21 +251,8 @@ class FaceStore:
             raise FaceStoreError("face store is closed")
         return self._conn
 
-    @contextlib.contextmanager
-    def _transaction(self) -> Iterator[sqlite3.Connection]:
-        conn = self._db
-        try:
-            conn.execute("BEGIN IMMEDIATE")
-            try:
-                yield conn
-                conn.execute("COMMIT")
-            except BaseException:
-                if conn.in_transaction:
-                    with contextlib.suppress(sqlite3.Error):
-                        conn.execute("ROLLBACK")
-                raise
-        except sqlite3.Error as exc:
-            raise FaceStoreError(f"face store {self.path}: {exc}") from exc
+    def _transaction(self) -> contextlib.AbstractContextManager[sqlite3.Connection]:
+        return transaction(self._db, self.path)
 
     def _encode(self, face: LearnedFace) -> npt.NDArray[np.float32]:
         """The face's features as stored (contiguous little-endian float32); ValueError for an invalid face."""
