@@ -432,6 +432,7 @@ class MasterNode(ManagedNode):
                                                                        "detections_rejected", "bodies_", "body_"))})
         extra.update({f"{k}_calls": v for k, v in self.admin.calls.items()})
         extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
+        extra.update(self.control_values())  # ~/change_state_sealed
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         topics, warnings = self.cameras.status()
         extra.update(topics)
