@@ -58,12 +58,16 @@ def _sealed(node: Any, target: str, transition: str, key_path: str, timeout_s: f
     request = seal_request(sealer, ChangeState.Request(transition=transition), target)
     opener = Opener(key, "replies", _REPLY_AGE_S)
 
+    passed_over: list[str] = []
+
     def genuine(reply: Any) -> Any:
         try:
             return open_response(opener, reply, target, request)
         except SealError as exc:
-            print(f"{PROG}: {target}: unauthenticated reply from a server without the key ({exc}): ignored, "
-                  "waiting for the node's own", file=sys.stderr, flush=True)
+            if not passed_over:  # once: a rogue server answers every copy
+                print(f"{PROG}: {target}: unauthenticated reply from a server without the key ({exc}): ignored, "
+                      "waiting for the node's own", file=sys.stderr, flush=True)
+            passed_over.append(exc.code)
             return None
 
     reply = call_service(node, ChangeState, f"{target}/change_state_sealed", request, timeout_s, _HINT, genuine)

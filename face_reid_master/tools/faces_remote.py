@@ -44,12 +44,16 @@ class _Client:
 
         sealed = seal_request(self.sealer, request, self.master)
 
+        passed_over: list[str] = []
+
         def genuine(reply: Any) -> Any:
             try:
                 return open_response(self.opener, reply, self.master, sealed)
             except SealError as exc:
-                print(f"{self.prog}: {name}: unauthenticated reply from a server without the key ({exc}): ignored, "
-                      "waiting for the master's own", file=sys.stderr, flush=True)
+                if not passed_over:  # once: a rogue server answers every copy
+                    print(f"{self.prog}: {name}: unauthenticated reply from a server without the key ({exc}): "
+                          "ignored, waiting for the master's own", file=sys.stderr, flush=True)
+                passed_over.append(exc.code)
                 return None
 
         return call_service(self.node, srv_type, name, sealed, self.timeout_s, _HINT, genuine)
