@@ -154,12 +154,13 @@ def _sealed_state(executor: Any, peer: Node, sealer: Sealer | None, fqn: str, tr
 
 def _list_faces(executor: Any, client: Any, key: bytes | None) -> Any:
     """The master's ~/list_faces reply: a keyless request, or one sealed with ``key`` (its sealed reply opened)."""
-    from face_reid_camera.common.ros.sealed import open_response, seal_request
-    from face_reid_camera.common.sealing import Opener
     from face_reid_msgs.srv import ListFaces
 
     if key is None:
         return _call(executor, client, ListFaces.Request())
+    from face_reid_camera.common.ros.sealed import open_response, seal_request
+    from face_reid_camera.common.sealing import Opener
+
     request = seal_request(Sealer(key, f"lister-{time.time_ns()}"), ListFaces.Request(), MASTER)
     return open_response(Opener(key, "replies"), _call(executor, client, request), MASTER, request)
 
