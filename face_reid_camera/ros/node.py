@@ -372,6 +372,7 @@ class CameraNode(ManagedNode):
             "rejected_top_at_border": self.pipeline.cut_by_border_rejected if self.pipeline is not None else 0,
             "pose_agrees_with_floor": "not checked" if check is None else check.agrees,
         }
+        extra.update(self.control_values())  # ~/change_state_sealed
         if check is not None:
             extra.update({"pose_camera_height_m": check.pose_height_m, "floor_camera_height_m": check.floor_height_m,
                           "pose_tilt_deg": check.pose_tilt_deg, "floor_tilt_deg": check.floor_tilt_deg})

@@ -1,7 +1,9 @@
 """``face-reid-state NODE TRANSITION --key PATH``: ask a face-reid node for a lifecycle transition.
 
-A node with a network key offers only ``NODE/change_state_sealed``: the request is sealed with the key (a
-participant without it cannot stop or reconfigure the node). Without ``--key`` the node's standard
+A node with a network key offers only ``NODE/change_state_sealed``: the request is sealed with the key for that
+node (a participant without it cannot stop or reconfigure the node, nor replay it to another), and the outcome is
+taken only from the node's reply sealed for this request (a reply from a server without the key is reported as
+unauthenticated and passed over). Without ``--key`` the node's standard
 ``NODE/change_state`` / ``NODE/get_state`` services are used (an unsecured node). TRANSITION is configure,
 activate, deactivate, cleanup, shutdown (the node's process ends) or get (print the state).
 
@@ -36,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 _HINT = "is the node running on this ROS_DOMAIN_ID, and secured exactly when --key is given?"
+_REPLY_AGE_S = 30.0  # a sealed reply stamped further than this from this host's clock is not trusted
 
 
 def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
@@ -43,13 +46,31 @@ def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -
 
 
 def _sealed(node: Any, target: str, transition: str, key_path: str, timeout_s: float) -> tuple[bool, str, str]:
-    from face_reid_camera.common.ros.sealed import seal_request
-    from face_reid_camera.common.sealing import Sealer, load_network_key
+    """The transition asked for with a request sealed for ``target``; the outcome from the node's sealed reply
+    only (a plain or forged reply, e.g. from a server without the key on the same name, is reported and passed
+    over: the call waits on for the genuine one until the timeout)."""
+    from face_reid_camera.common.ros.sealed import open_response, seal_request
+    from face_reid_camera.common.sealing import Opener, Sealer, SealError, load_network_key
     from face_reid_msgs.srv import ChangeState
 
-    sealer = Sealer(load_network_key(key_path), f"{PROG}-{time.time_ns() % 10**9}")
-    request = seal_request(sealer, ChangeState.Request(transition=transition))
-    reply = _call(node, ChangeState, f"{target}/change_state_sealed", request, timeout_s)
+    key = load_network_key(key_path)
+    sealer = Sealer(key, f"{PROG}-{time.time_ns() % 10**9}")
+    request = seal_request(sealer, ChangeState.Request(transition=transition), target)
+    opener = Opener(key, "replies", _REPLY_AGE_S)
+
+    passed_over: list[str] = []
+
+    def genuine(reply: Any) -> Any:
+        try:
+            return open_response(opener, reply, target, request)
+        except SealError as exc:
+            if not passed_over:  # once: a rogue server answers every copy
+                print(f"{PROG}: {target}: unauthenticated reply from a server without the key ({exc}): ignored, "
+                      "waiting for the node's own", file=sys.stderr, flush=True)
+            passed_over.append(exc.code)
+            return None
+
+    reply = call_service(node, ChangeState, f"{target}/change_state_sealed", request, timeout_s, _HINT, genuine)
     return bool(reply.success), str(reply.message), str(reply.state)
 
 

@@ -1,9 +1,10 @@
 """The master's services: ``~/list_faces`` always, ``~/add_person`` and ``~/forget_face`` when
 ``admin_services`` is on (their own callback group: while a request waits for its photos, frames and timers go
-on). On a secured network only a request sealed with the network key is done; a refused request or any error
-is reported in the response, logged (cut) and counted (calls and refusals per service on /diagnostics), never
-raised into the executor. Photos are read, decoded and embedded on a worker thread, within a request's pixel
-budget.
+on). On a secured network only a request sealed with the network key for this master is done (a keyless
+``list_faces`` gets empty lists: names and last-seen times are personal data), and the reply is sealed for the
+request (only its sender can read it, nobody else can forge it); a refused request or any error is reported in the
+response, logged (cut) and counted (calls and refusals per service on /diagnostics), never raised into the
+executor. Photos are read, decoded and embedded on a worker thread, within a request's pixel budget.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.embedding_spaces import space_dim
-from face_reid_camera.common.ros.sealed import open_request
+from face_reid_camera.common.ros.sealed import open_request, reply_is_sealed, seal_response
 from face_reid_camera.common.sealing import SealError
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
@@ -68,25 +69,46 @@ class AdminServices:
         """Run a service handler (a coroutine: the executor goes on with frames while it waits): a refused request
         (ValueError) or any other error is reported in the response and logged (cut), never raised into the
         executor."""
+        wire, error = request, None
         try:
-            if self.node._openers:  # secured: only what a holder of the network key sealed is done
-                try:
-                    request = open_request(self.node._openers["requests"], request, time.time())
-                except SealError as exc:
-                    raise ValueError(f"refused: {exc}") from exc
+            request, error = self._opened(request)
+            if error is not None:
+                raise ValueError(f"refused: {error}")
             await handler(request, response)
         except ValueError as exc:
             response.success, response.message = False, str(exc)[:_MAX_REPLY_CHARS]
         except Exception as exc:  # a request must never take the node down
             response.success = False
             response.message = f"internal error: {type(exc).__name__}: {str(exc)[:200]}"
-        self.calls[what] = self.calls.get(what, 0) + 1
-        if not response.success:
-            self.refusals[what] = self.refusals.get(what, 0) + 1
+        self._count(what, not response.success)
         # names, face ids and photo paths: private (local log only on a secured network)
         self.node.log_throttled(what, f"{what}: {response.message[:_MAX_LOG_CHARS]}", level="info", every_s=1.0,
                                 private=True)
-        return response
+        return self._reply(wire, response, error)
+
+    def _opened(self, request: Any) -> tuple[Any, SealError | None]:
+        """The request to act on, and why it is refused (None: not refused): on a secured master only what a
+        holder of the network key sealed for this master is done."""
+        if not self.node._openers:
+            return request, None
+        try:
+            return open_request(self.node._openers["requests"], request, self.node.get_fully_qualified_name(),
+                                time.time()), None
+        except SealError as exc:
+            return request, exc
+
+    def _reply(self, wire: Any, response: Any, error: SealError | None) -> Any:
+        """``response`` as sent: on a secured master sealed for the request ``wire`` when a key holder's fresh
+        request to this master was opened (else plain: why it was refused, nothing else)."""
+        if not self.node._openers or not reply_is_sealed(error):
+            return response
+        # the master's sealer (sender: this node's name); each seal names its own purpose
+        return seal_response(self.node._tracks_sealer, response, self.node.get_fully_qualified_name(), wire)
+
+    def _count(self, what: str, refused: bool) -> None:
+        self.calls[what] = self.calls.get(what, 0) + 1
+        if refused:
+            self.refusals[what] = self.refusals.get(what, 0) + 1
 
     async def _off_the_frame_path(self, work: Any) -> Any:
         """``work()`` on the admin worker thread; the executor serves frames meanwhile (rclpy resumes the awaiting
@@ -161,10 +183,19 @@ class AdminServices:
         response.message = "; ".join(said) if said else "no such face or person"
 
     def list_faces(self, request: Any, response: Any) -> Any:
+        """The learned faces (ids, names, features, last seen); on a secured master only for a request sealed with
+        the key for this master (others get empty lists, counted as refused)."""
+        _, error = self._opened(request)
+        if error is not None:
+            self._count("list_faces", True)
+            self.node.get_logger().warning(f"list_faces: refused: {str(error)[:_MAX_LOG_CHARS]}",
+                                           throttle_duration_sec=5.0)
+            return self._reply(request, response, error)
+        self._count("list_faces", False)
         core = self.node.configured_core()
         for face in core.identity.faces.export_all():
             response.face_ids.append(face.face_id)
             response.names.append(core.face_name(face.face_id))
             response.num_features.append(int(face.features.shape[0]))
             response.last_seen_s.append(float(face.last_seen_s))
-        return response
+        return self._reply(request, response, None)

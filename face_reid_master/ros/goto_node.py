@@ -80,6 +80,7 @@ TABLE = ParamTable(NODE_NAME, (*_NODE_PARAMS, *config_specs(StandoffGoalConfig))
                    "--params-file config/goto.yaml")
 
 _MAX_STATUS_CHARS = 400
+_NAMES_REPLY_AGE_S = 30.0  # a sealed names reply stamped further than this from this host's clock is not taken
 
 
 def tracks_from_msg(msg: Any) -> tuple[list[NamedTrackRecord], int]:
@@ -125,6 +126,10 @@ class GotoNode(ManagedNode):
         self.goal_pub: Any = None
         self.status_pub: Any = None
         self._names_client: Any = None
+        self._names_master = ""  # the master's full name: what a sealed names request is for
+        self._names_sealer: Any = None  # with a network key: names requests sealed, replies opened
+        self._names_opener: Any = None
+        self._names_request: Any = None  # the request of the call in flight (its reply is sealed for it)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -163,6 +168,7 @@ class GotoNode(ManagedNode):
                                                        self._on_robot_pose, reliable))
         if values["names_service"]:
             self._names_client = self.create_client(ListFaces, str(values["names_service"]))
+            self._seal_names(str(values["names_service"]), str(values["network_key_path"]))
             self._own_timers.append(self.create_timer(1.0, self._ask_names))
         self._started_s = self.now_s()
         self._decide(self.now_s(), announce=True)
@@ -283,6 +289,18 @@ class GotoNode(ManagedNode):
         self.log_throttled("status", line, level="info", every_s=1.0, private=True)  # names the target
 
     # ------------------------------------------------------------------ known names
+    def _seal_names(self, service: str, key_path: str) -> None:
+        """With a network key, names requests are sealed for the master that offers ``service`` (a secured master
+        answers nothing else) and only its reply sealed for the request is taken."""
+        from face_reid_camera.common.sealing import Opener, Sealer
+
+        self._names_master = self.resolve_service_name(service).rsplit("/", 1)[0] or "/"
+        self._names_sealer = self._names_opener = None
+        if key_path:
+            key = load_network_key(key_path)
+            self._names_sealer = Sealer(key, self.get_fully_qualified_name(), "requests")
+            self._names_opener = Opener(key, "replies", _NAMES_REPLY_AGE_S)
+
     def _ask_names(self) -> None:
         """Ask the master for its learned names (every names_refresh_period_s; every second until it answers)."""
         client, now = self._names_client, self.now_s()
@@ -292,16 +310,33 @@ class GotoNode(ManagedNode):
         if now - self._names_asked_s < period:
             return
         self._names_asked_s = now
-        self._names_future = client.call_async(ListFaces.Request())
+        request = ListFaces.Request()
+        if self._names_sealer is not None:
+            from face_reid_camera.common.ros.sealed import seal_request
+
+            request = seal_request(self._names_sealer, request, self._names_master)
+        self._names_request = request
+        self._names_future = client.call_async(request)
         self._names_future.add_done_callback(self._on_names)
 
     def _on_names(self, future: Any) -> None:
         self._names_future = None
         try:
-            names = list(future.result().names)
+            reply = future.result()
         except Exception as exc:  # the master went away mid-call: asked again later
             self.log_throttled("names", f"{self.values['names_service']}: {type(exc).__name__}: {exc}", warn=True)
             return
+        if self._names_opener is not None:
+            from face_reid_camera.common.ros.sealed import open_response
+            from face_reid_camera.common.sealing import SealError
+
+            try:
+                reply = open_response(self._names_opener, reply, self._names_master, self._names_request)
+            except SealError as exc:  # e.g. a server without the key answered first: asked again later
+                self._reject(f"names_{exc.code}", f"{self.values['names_service']}: unauthenticated reply from a "
+                                                  f"server without the key ({exc}): ignored")
+                return
+        names = list(reply.names)
         if self.core is not None:
             self.core.add_known_names(names)
             self._names_loaded = True

@@ -431,7 +431,7 @@ class MasterNode(ManagedNode):
                                                                        "embeddings_rejected", "faces_", "store_",
                                                                        "detections_rejected", "bodies_", "body_"))})
         extra.update({f"{k}_calls": v for k, v in self.admin.calls.items()})
-        extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()})
+        extra.update({f"{k}_refused": v for k, v in self.admin.refusals.items()}, **self.control_values())
         health.frames_dropped = stats["frames_received"] - stats["frames_applied"] + self.frames_dropped_overload
         topics, warnings = self.cameras.status()
         extra.update(topics)

@@ -1,7 +1,9 @@
 """``face-reid-faces --master NODE``: the same list / forget, plus add, on a running master through its
 services (~/list_faces, ~/forget_face, ~/add_person; the last two need ``admin_services: true`` on the master).
-With ``--key`` the admin requests are sealed with the network key (a secured master takes nothing else).
-Photos given to ``add`` are turned into embeddings here (the images never leave this process).
+With ``--key`` the requests are sealed with the network key for that master (a secured master takes nothing else:
+a keyless listing gets nothing), and only the master's reply sealed for the request is believed (a reply from a
+server without the key is reported as unauthenticated and passed over). Photos given to ``add`` are turned into
+embeddings here (the images never leave this process).
 """
 
 from __future__ import annotations
@@ -19,10 +21,42 @@ EXIT_OK, EXIT_NOT_FOUND, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 
 
 _HINT = "is the master running, with admin_services: true for add / forget, on this ROS_DOMAIN_ID?"
+_REPLY_AGE_S = 30.0  # a sealed reply stamped further than this from this host's clock is not trusted
 
 
-def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
-    return call_service(node, srv_type, name, request, timeout_s, _HINT)
+class _Client:
+    """Calls the master's services: plain without a key; with one, requests sealed for the master and only its
+    reply sealed for the request taken (others reported and passed over, the call waits on)."""
+
+    def __init__(self, node: Any, master: str, key: bytes | None, prog: str, timeout_s: float) -> None:
+        from face_reid_camera.common.sealing import Opener, Sealer
+
+        self.node, self.master, self.prog, self.timeout_s = node, master, prog, timeout_s
+        self.sealer = Sealer(key, f"{prog}-{time.time_ns() % 10**9}") if key is not None else None
+        self.opener = Opener(key, "replies", _REPLY_AGE_S) if key is not None else None
+
+    def call(self, srv_type: Any, service: str, request: Any) -> Any:
+        name = f"{self.master}/{service}"
+        if self.sealer is None:
+            return call_service(self.node, srv_type, name, request, self.timeout_s, _HINT)
+        from face_reid_camera.common.ros.sealed import open_response, seal_request
+        from face_reid_camera.common.sealing import SealError
+
+        sealed = seal_request(self.sealer, request, self.master)
+
+        passed_over: list[str] = []
+
+        def genuine(reply: Any) -> Any:
+            try:
+                return open_response(self.opener, reply, self.master, sealed)
+            except SealError as exc:
+                if not passed_over:  # once: a rogue server answers every copy
+                    print(f"{self.prog}: {name}: unauthenticated reply from a server without the key ({exc}): "
+                          "ignored, waiting for the master's own", file=sys.stderr, flush=True)
+                passed_over.append(exc.code)
+                return None
+
+        return call_service(self.node, srv_type, name, sealed, self.timeout_s, _HINT, genuine)
 
 
 def format_remote_list(rows: list[tuple[int, str, int, float]], master: str) -> str:
@@ -66,31 +100,27 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
         print(f"{prog}: rename needs the store itself (the master offers no rename service): stop the master "
               "and run without --master", file=sys.stderr)
         return EXIT_USAGE
-    sealer = None
+    key = None
     if args.key:
-        from face_reid_camera.common.sealing import Sealer, load_network_key
+        from face_reid_camera.common.sealing import load_network_key
 
-        sealer = Sealer(load_network_key(args.key), f"{prog}-{time.time_ns() % 10**9}")
-    master = args.master.rstrip("/")
+        key = load_network_key(args.key)
+    master = "/" + args.master.strip("/")
     rclpy.init()
     node = rclpy.create_node("face_reid_faces_client")
-
-    def sealed(request: Any) -> Any:
-        if sealer is None:
-            return request
-        from face_reid_camera.common.ros.sealed import seal_request
-
-        return seal_request(sealer, request)
-
+    client = _Client(node, master, key, prog, args.timeout_s)
     try:
         if args.command == "list":
-            reply = _call(node, ListFaces, f"{master}/list_faces", ListFaces.Request(), args.timeout_s)
+            reply = client.call(ListFaces, "list_faces", ListFaces.Request())
             rows = list(zip(reply.face_ids, reply.names, reply.num_features, reply.last_seen_s, strict=False))
             print(format_remote_list(rows, master))
+            if not rows and key is None:
+                print(f"{prog}: a master with a network key answers a listing without --key with nothing",
+                      file=sys.stderr)
             return EXIT_OK
         if args.command == "forget":
             request = ForgetFace.Request(face_id=args.face_id or 0, name=args.name or "")
-            reply = _call(node, ForgetFace, f"{master}/forget_face", sealed(request), args.timeout_s)
+            reply = client.call(ForgetFace, "forget_face", request)
         else:  # add
             values, notes = _embeddings(args.photos, args.space)
             for note in notes:
@@ -99,7 +129,7 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
                 print(f"{prog}: no usable face in the photos", file=sys.stderr)
                 return EXIT_NOT_FOUND
             request = AddPerson.Request(name=args.name, embeddings=values)
-            reply = _call(node, AddPerson, f"{master}/add_person", sealed(request), args.timeout_s)
+            reply = client.call(AddPerson, "add_person", request)
     except TimeoutError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return EXIT_UNREACHABLE

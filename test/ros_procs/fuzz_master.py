@@ -82,7 +82,7 @@ def main() -> int:
                 request = AddPerson.Request(name=text(int(rng.integers(0, 100))),
                                             embeddings=rng.normal(0, 1, 128).astype(np.float32).tolist(),
                                             image_paths=["/etc/shadow", "/dev/zero"])
-                add.call_async(request if k % 100 == 9 else seal_request(forger, request))
+                add.call_async(request if k % 100 == 9 else seal_request(forger, request, "/face_reid_master"))
                 forget.call_async(ForgetFace.Request(face_id=1))
                 calls += 2
             else:

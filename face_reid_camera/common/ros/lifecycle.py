@@ -120,8 +120,9 @@ class ManagedNode(LifecycleNode):
         self.table = table
         self.finished = False  # shut down (a shutdown transition): run_node ends the process
         self.control_requests = 0  # ~/change_state_sealed requests received
-        self.control_refusals = 0  # ... of which refused (not sealed with the key, replayed, not allowed)
+        self.control_refusals = 0  # ... of which refused (not sealed with the key for this node, replayed, not allowed)
         self._control_opener: Any = None
+        self._control_sealer: Any = None  # seals this node's replies to them
         self.failure = ""  # why the last transition failed (for the FATAL line at start-up)
         self.quiet_failures = False  # run_node reports start-up failures itself, as one FATAL line
         self._configured = False
@@ -161,31 +162,40 @@ class ManagedNode(LifecycleNode):
 
     # ------------------------------------------------------------------ operator control (secured)
     def _offer_sealed_control(self) -> None:
-        """``~/change_state_sealed``: transitions asked for by a holder of the network key (loaded now: a missing
-        or unsafe key file stops the node from starting, ValueError)."""
-        from face_reid_camera.common.sealing import Opener, load_network_key
+        """``~/change_state_sealed``: transitions asked for by a holder of the network key, for this node (loaded
+        now: a missing or unsafe key file stops the node from starting, ValueError); replies sealed for the
+        request."""
+        from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
         from face_reid_msgs.srv import ChangeState
 
         age = float(self.get_parameter("max_seal_age_s").value) if self.has_parameter("max_seal_age_s") else (
             _DEFAULT_SEAL_AGE_S)
+        key = load_network_key(self.network_key_path)
         # nothing sealed before this process started is accepted (a request captured earlier, replayed)
-        self._control_opener = Opener(load_network_key(self.network_key_path), "requests", age, time.time())
+        self._control_opener = Opener(key, "requests", age, time.time())
+        self._control_sealer = Sealer(key, self.get_fully_qualified_name(), "replies")
         self.create_service(ChangeState, "~/change_state_sealed", self._on_change_state_sealed)
         self.get_logger().info(
             "secured: no lifecycle or parameter services; transitions only through ~/change_state_sealed, sealed "
-            "with the network key (face-reid-state)")
+            "with the network key for this node (face-reid-state); replies sealed")
+
+    def control_values(self) -> dict[str, object]:
+        """The sealed control's counts, for the node's /diagnostics values."""
+        return {"control_requests": self.control_requests, "control_refused": self.control_refusals}
 
     def state_label(self) -> str:
         """The current lifecycle state: unconfigured, inactive, active or finalized (or a transition state)."""
         return str(self._state_machine.current_state[1])
 
     def _on_change_state_sealed(self, request: Any, response: Any) -> Any:
-        from face_reid_camera.common.ros.sealed import open_request
+        from face_reid_camera.common.ros.sealed import open_request, reply_is_sealed, seal_response
         from face_reid_camera.common.sealing import SealError
 
         self.control_requests += 1
+        fqn = self.get_fully_qualified_name()
+        error: SealError | None = None
         try:
-            inner = open_request(self._control_opener, request, time.time())
+            inner = open_request(self._control_opener, request, fqn, time.time())
             name = inner.transition.strip().lower()
             plan(name, self.state_label())  # refused here when not allowed from this state
             if name == QUERY:
@@ -195,19 +205,24 @@ class ManagedNode(LifecycleNode):
                 done = getattr(self, f"trigger_{name}")() == TransitionCallbackReturn.SUCCESS
                 response.success = done
                 response.message = f"{name}: done" if done else f"{name} failed: {self.failure or 'see the log'}"
-        except (SealError, TransitionError) as exc:
+        except SealError as exc:
+            error = exc
+            response.success, response.message = False, f"refused: {exc}"
+        except TransitionError as exc:
             response.success, response.message = False, f"refused: {exc}"
         except Exception as exc:  # a request must never take the node down
             response.success, response.message = False, f"internal error: {type(exc).__name__}: {str(exc)[:200]}"
-        response.state = self.state_label()
         if response.success:
-            self.get_logger().info(f"change_state_sealed: {response.message} (now {response.state})")
+            self.get_logger().info(f"change_state_sealed: {response.message} (now {self.state_label()})")
         else:
             self.control_refusals += 1
             self.log_throttled("change_state_sealed", f"change_state_sealed: {response.message}",
                                self.control_refusals, warn=True,  # a failure's reason may name a file: private
                                private=not response.message.startswith("refused:"))
-        return response
+        if not reply_is_sealed(error):  # not a key holder's fresh request to this node: why, and nothing else
+            return response
+        response.state = self.state_label()
+        return seal_response(self._control_sealer, response, fqn, request)
 
     # ------------------------------------------------------------------ parameters
     def _warn_unknown_overrides(self) -> None:

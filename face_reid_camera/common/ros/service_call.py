@@ -1,16 +1,29 @@
-"""One blocking service call for the command-line tools: wait for the service, call it, wait for the reply."""
+"""One blocking service call for the command-line tools: wait for the service, call it, wait for the reply (for a
+sealed call, for the reply that opens with the network key)."""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
-__all__ = ["call_service"]
+__all__ = ["RESEND_S", "call_service"]
+
+RESEND_S = 1.0  # after a passed-over reply, the request is sent again this often (s) until a reply is taken
 
 
-def call_service(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float, hint: str = "") -> Any:
+def call_service(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float, hint: str = "",
+                 accept: Callable[[Any], Any] | None = None) -> Any:
     """The reply of service ``name``; TimeoutError (naming ``hint``, what to check) when it is not offered or
-    does not answer within ``timeout_s`` in all."""
+    does not answer within ``timeout_s`` in all.
+
+    ``accept(reply)``: what to return for a reply, or None to pass it over and wait on for another until the
+    timeout. Another server on the same name (one without the key) may answer first, and rclpy hands only the
+    first reply to a call: the call is put back in the client's pending calls for the genuine reply, and, while
+    only passed-over replies came, the same request is sent again every RESEND_S (for the genuine server when it
+    was not yet discovered as the request went out; a secured node refuses a copy it already had as a replay, so
+    what was asked is done at most once).
+    """
     import rclpy
 
     client = node.create_client(srv_type, name)
@@ -19,9 +32,42 @@ def call_service(node: Any, srv_type: Any, name: str, request: Any, timeout_s: f
         if time.monotonic() > deadline:
             raise TimeoutError(f"no service {name} within {timeout_s:g} s" + (f" ({hint})" if hint else ""))
         rclpy.spin_once(node, timeout_sec=0.1)
-    future = client.call_async(request)
-    while not future.done():
+    pending = [_send(client, request)]
+    passed_over, sent_s = 0, time.monotonic()
+    while True:
+        for k, (sequence, future) in enumerate(pending):
+            if not future.done():
+                continue
+            reply = future.result()
+            taken = reply if accept is None else accept(reply)
+            if taken is not None:
+                return taken
+            passed_over += 1
+            pending[k] = (sequence, _wait_again(client, sequence))
+        if passed_over and time.monotonic() - sent_s > RESEND_S:
+            pending.append(_send(client, request))
+            sent_s = time.monotonic()
         if time.monotonic() > deadline:
-            raise TimeoutError(f"{name} did not answer within {timeout_s:g} s")
+            raise TimeoutError(f"{name} did not answer within {timeout_s:g} s" + (
+                f" (only {passed_over} unauthenticated repl{'y' if passed_over == 1 else 'ies'}: from a server "
+                "without the key, or the node refusing the repeated request)" if passed_over else ""))
         rclpy.spin_once(node, timeout_sec=0.1)
-    return future.result()
+
+
+def _send(client: Any, request: Any) -> tuple[int, Any]:
+    """``request`` sent: its sequence number and future."""
+    future = client.call_async(request)
+    with client._lock:  # rclpy's private table of pending calls (the same since Humble)
+        return next(seq for seq, waiting in client._pending_requests.items() if waiting is future), future
+
+
+def _wait_again(client: Any, sequence: int) -> Any:
+    """A new future for the next reply to call ``sequence`` (spin_once takes replies one at a time and this runs
+    between them, so none is missed)."""
+    from rclpy.task import Future
+
+    future: Any = Future()
+    with client._lock:
+        client._pending_requests[sequence] = future
+    future.add_done_callback(client.remove_pending_request)
+    return future

@@ -18,15 +18,16 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
 
-from face_reid_camera.common.ros.sealed import open_message, seal_message, seal_request
+from face_reid_camera.common.ros.sealed import open_message, open_response, seal_message, seal_request
 from face_reid_camera.common.sealing import Opener, Sealer, SealError, load_network_key, write_network_key
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.ros.convert import frame_record_to_msg
 from face_reid_master.ros.node import MasterNode
 from face_reid_msgs.msg import CameraFrame, Sealed
-from face_reid_msgs.srv import AddPerson, ForgetFace
+from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
 OK = TransitionCallbackReturn.SUCCESS
+MASTER = "/face_reid_master"
 
 
 def _face(seed: int) -> np.ndarray:
@@ -45,6 +46,12 @@ def _call(executor, client, request):
     future = client.call_async(request)
     assert spin_until(executor, future.done)
     return future.result()
+
+
+def _opened(key: bytes, reply, request):
+    """The master's reply sealed for ``request`` (its plain fields are empty)."""
+    assert not reply.message and not reply.success
+    return open_response(Opener(key, "replies"), reply, MASTER, request)
 
 
 def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) -> None:
@@ -105,29 +112,42 @@ def test_only_holders_of_the_network_key_are_heard(ros_context, tmp_path: Path) 
         request = AddPerson.Request(name="Mallory", embeddings=mallory.tolist())
         reply = _call(executor, add, request)
         assert not reply.success and "must be sealed" in reply.message
-        reply = _call(executor, add, seal_request(Sealer(stranger_key, "stranger"), request))
+        reply = _call(executor, add, seal_request(Sealer(stranger_key, "stranger"), request, MASTER))
         assert not reply.success and "network's key" in reply.message
         assert master.core.people.names() == []
         admin = Sealer(key, "admin")
-        sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=alice.tolist()))
+        sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=alice.tolist()), MASTER)
         assert not sealed.embeddings and not sealed.name  # on the wire only in the sealed copy
-        reply = _call(executor, add, sealed)
+        reply = _opened(key, _call(executor, add, sealed), sealed)
         assert reply.success, reply.message
         assert master.core.people.names() == ["Alice"]
         reply = _call(executor, add, sealed)  # the same request again
         assert not reply.success and "replayed" in reply.message
         faces = master.core.identity.face_ids()
         assert faces  # Alice's face, learned from cam_a and named by the request
+        # the learned faces (names, last seen): nothing for a keyless request or one sealed for another node
+        listing = stranger.create_client(ListFaces, f"{MASTER}/list_faces")
+        reply = _call(executor, listing, ListFaces.Request())
+        assert list(reply.names) == [] and list(reply.face_ids) == [] and not reply.sealed_response.ciphertext
+        elsewhere = seal_request(Sealer(key, "admin3"), ListFaces.Request(), "/cam_a/face_reid_camera")
+        assert list(_call(executor, listing, elsewhere).face_ids) == []
+        ask = seal_request(Sealer(key, "admin3"), ListFaces.Request(), MASTER)
+        reply = _call(executor, listing, ask)
+        assert list(reply.names) == [] and reply.sealed_response.ciphertext  # the names only inside the seal
+        opened = open_response(Opener(key, "replies"), reply, MASTER, ask)
+        assert list(opened.names) == ["Alice"] and list(opened.face_ids) == faces
         reply = _call(executor, forget, ForgetFace.Request(face_id=faces[0]))
         assert not reply.success and master.core.identity.face_ids() == faces
         # a seal made for add_person does not work for forget_face
         reply = _call(executor, forget, ForgetFace.Request(sealed_request=sealed.sealed_request))
         assert not reply.success and master.core.identity.face_ids() == faces
-        reply = _call(executor, forget, seal_request(Sealer(key, "admin2"), ForgetFace.Request(face_id=faces[0])))
+        forget_one = seal_request(Sealer(key, "admin2"), ForgetFace.Request(face_id=faces[0]), MASTER)
+        reply = _opened(key, _call(executor, forget, forget_one), forget_one)
         assert reply.success and faces[0] not in master.core.identity.face_ids()
         values = master.diagnostics(master.now_s()).values
         assert values["rejected_sealed_forged"] == "8" and values["add_person_refused"] == "3"
         assert values["forget_face_refused"] == "2"
+        assert values["list_faces_calls"] == "3" and values["list_faces_refused"] == "2"
     finally:
         executor.shutdown()
         for node in (camera, stranger, master):
@@ -141,14 +161,14 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
                        "-p", f"network_key_path:={tmp_path / 'network.key'}", "-p", "admin_services:=true",
                        "-p", "body_appearance_tracking:=false"])
     admin = Sealer(key, "admin")
-    early = seal_request(admin, AddPerson.Request(name="Early", embeddings=_face(3).tolist()))
+    early = seal_request(admin, AddPerson.Request(name="Early", embeddings=_face(3).tolist()), MASTER)
     master = MasterNode(context=ctx)
     try:
         assert master.trigger_configure() == OK
         reply = call_handler(master.admin.add_person, early, AddPerson.Response())
         assert not reply.success and "before this receiver started" in reply.message
-        sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=_face(1).tolist()))
-        assert call_handler(master.admin.add_person, sealed, AddPerson.Response()).success
+        sealed = seal_request(admin, AddPerson.Request(name="Alice", embeddings=_face(1).tolist()), MASTER)
+        assert _opened(key, call_handler(master.admin.add_person, sealed, AddPerson.Response()), sealed).success
         assert master.trigger_cleanup() == OK and master.trigger_configure() == OK  # a restart of the master
         reply = call_handler(master.admin.add_person, sealed, AddPerson.Response())  # captured, replayed after it
         assert not reply.success and "before this receiver started" in reply.message

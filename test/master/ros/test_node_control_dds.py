@@ -47,15 +47,17 @@ N_FACES = 4
 START_S = 180.0  # a loaded machine: the camera loads its models, three processes share two cores
 
 
-def _store_faces(db: Path) -> list[int]:
-    """N_FACES unnamed faces, last seen an hour ago (a retention_unnamed_s of 1 s would delete them all)."""
+def _store_faces(db: Path, names: dict[int, str] | None = None) -> list[int]:
+    """N_FACES faces (unnamed but for ``names``: face id -> name), last seen an hour ago (a retention_unnamed_s of
+    1 s would delete the unnamed ones)."""
     from face_reid_master.identity.records import LearnedFace
     from face_reid_master.storage.face_store import FaceStore
 
     rng = np.random.default_rng(0)
     old = time.time() - 3600.0
+    names = names or {}
     with FaceStore(db, embedding_dim=128, embedding_space="dlib_resnet_v1") as store:
-        store.save_faces([LearnedFace(i, rng.normal(size=(2, 128)).astype(np.float32), None, old, old, 3)
+        store.save_faces([LearnedFace(i, rng.normal(size=(2, 128)).astype(np.float32), names.get(i), old, old, 3)
                           for i in range(1, N_FACES + 1)])
         return [f.face_id for f in store.list_faces()]
 
@@ -133,15 +135,34 @@ def _state_cli(domain_id: int, *args: str, timeout_s: float = 120.0) -> subproce
                           env=procs.ros_env(domain_id), capture_output=True, text=True, timeout=timeout_s)
 
 
-def _sealed_state(executor: Any, peer: Node, sealer: Sealer | None, fqn: str, transition: str) -> Any:
-    """A ChangeState request (sealed with ``sealer``, or plain) to ``fqn``/change_state_sealed; its reply."""
-    from face_reid_camera.common.ros.sealed import seal_request
+def _sealed_state(executor: Any, peer: Node, sealer: Sealer | None, fqn: str, transition: str,
+                  key: bytes | None = None) -> Any:
+    """A ChangeState request (sealed with ``sealer`` for ``fqn``, or plain) to ``fqn``/change_state_sealed; its
+    reply (opened with ``key`` when given: the node's reply sealed for the request)."""
+    from face_reid_camera.common.ros.sealed import open_response, seal_request
+    from face_reid_camera.common.sealing import Opener
     from face_reid_msgs.srv import ChangeState
 
     client = peer.create_client(ChangeState, f"{fqn}/change_state_sealed")
     assert spin_until(executor, client.service_is_ready, 60.0)
     request = ChangeState.Request(transition=transition)
-    return _call(executor, client, seal_request(sealer, request) if sealer is not None else request)
+    if sealer is not None:
+        request = seal_request(sealer, request, fqn)
+    reply = _call(executor, client, request)
+    return open_response(Opener(key, "replies"), reply, fqn, request) if key is not None else reply
+
+
+def _list_faces(executor: Any, client: Any, key: bytes | None) -> Any:
+    """The master's ~/list_faces reply: a keyless request, or one sealed with ``key`` (its sealed reply opened)."""
+    from face_reid_msgs.srv import ListFaces
+
+    if key is None:
+        return _call(executor, client, ListFaces.Request())
+    from face_reid_camera.common.ros.sealed import open_response, seal_request
+    from face_reid_camera.common.sealing import Opener
+
+    request = seal_request(Sealer(key, f"lister-{time.time_ns()}"), ListFaces.Request(), MASTER)
+    return open_response(Opener(key, "replies"), _call(executor, client, request), MASTER, request)
 
 
 def test_a_peer_without_the_key_controls_nothing_and_the_operator_with_it_does(ros_domain_id: int, ros_context,
@@ -170,7 +191,7 @@ def test_a_peer_without_the_key_controls_nothing_and_the_operator_with_it_does(r
         assert spin_until(executor, lambda: "/cam_a/color/image_raw" in _subscriptions(peer, CAMERA), START_S), logs()
         list_faces = peer.create_client(ListFaces, f"{MASTER}/list_faces")
         assert spin_until(executor, list_faces.service_is_ready, 60.0)
-        assert sorted(_call(executor, list_faces, ListFaces.Request()).face_ids) == stored
+        assert sorted(_list_faces(executor, list_faces, key).face_ids) == stored
 
         # the keyless peer tries everything on both nodes
         answered = {fqn: _attack(executor, peer, fqn) for fqn in (MASTER, CAMERA)}
@@ -181,15 +202,15 @@ def test_a_peer_without_the_key_controls_nothing_and_the_operator_with_it_does(r
             assert f"{fqn}/change_state_sealed" in _services(peer, fqn)
             # the sealed service: a plain request, one sealed with another key, a replay are all refused
             reply = _sealed_state(executor, peer, None, fqn, "shutdown")
-            assert not reply.success and "must be sealed" in reply.message and reply.state == "active"
+            assert not reply.success and "must be sealed" in reply.message and not reply.state
             reply = _sealed_state(executor, peer, Sealer(stranger_key, "stranger"), fqn, "deactivate")
-            assert not reply.success and "network's key" in reply.message and reply.state == "active"
+            assert not reply.success and "network's key" in reply.message and not reply.state
         # nothing changed: both still active, every face still there
         operator = Sealer(key, "operator")
         for fqn in (MASTER, CAMERA):
-            reply = _sealed_state(executor, peer, operator, fqn, "get")
+            reply = _sealed_state(executor, peer, operator, fqn, "get", key)
             assert reply.success and reply.state == "active", reply
-        assert sorted(_call(executor, list_faces, ListFaces.Request()).face_ids) == stored
+        assert sorted(_list_faces(executor, list_faces, key).face_ids) == stored
 
         # the operator with the key: face-reid-state walks the master through a full reconfigure
         for transition, state in (("deactivate", "inactive"), ("cleanup", "unconfigured"),
@@ -202,17 +223,18 @@ def test_a_peer_without_the_key_controls_nothing_and_the_operator_with_it_does(r
         assert keyless.returncode == 5, (keyless.stdout, keyless.stderr)  # no standard service to call
         # parameters unchanged: the reconfigure read retention_unnamed_s 0 again (no face to delete, no warning)
         assert spin_until(executor, list_faces.service_is_ready, 60.0)
-        assert sorted(_call(executor, list_faces, ListFaces.Request()).face_ids) == stored
+        assert sorted(_list_faces(executor, list_faces, key).face_ids) == stored
         assert "retention_unnamed_s" not in (tmp_path / "master.log").read_text()
         # a replayed operator request is refused too
-        from face_reid_camera.common.ros.sealed import seal_request
+        from face_reid_camera.common.ros.sealed import open_response, seal_request
+        from face_reid_camera.common.sealing import Opener
         from face_reid_msgs.srv import ChangeState
 
-        captured = seal_request(Sealer(key, "operator2"), ChangeState.Request(transition="deactivate"))
+        captured = seal_request(Sealer(key, "operator2"), ChangeState.Request(transition="deactivate"), CAMERA)
         client = peer.create_client(ChangeState, f"{CAMERA}/change_state_sealed")
-        assert _call(executor, client, captured).success
+        assert open_response(Opener(key, "replies"), _call(executor, client, captured), CAMERA, captured).success
         reply = _call(executor, client, captured)
-        assert not reply.success and "replayed" in reply.message and reply.state == "inactive"
+        assert not reply.success and "replayed" in reply.message and not reply.state
 
         # shutdown ends the process (exit status 0), it does not leave a finalized node behind
         done = _state_cli(ros_domain_id, CAMERA, "shutdown", "--key", str(key_path))
@@ -227,6 +249,130 @@ def test_a_peer_without_the_key_controls_nothing_and_the_operator_with_it_does(r
 
     with FaceStore(db, read_only=True, embedding_dim=128, embedding_space="dlib_resnet_v1") as store:
         assert sorted(f.face_id for f in store.list_faces()) == stored
+
+
+def _diagnostics_of(peer: Node) -> dict[str, dict[str, str]]:
+    """The newest /diagnostics values per hardware id (the master: its name; a camera: its camera id), kept
+    up to date by a subscription of ``peer``."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    latest: dict[str, dict[str, str]] = {}
+
+    def keep(msg: Any) -> None:
+        for status in msg.status:
+            latest[status.hardware_id] = {kv.key: kv.value for kv in status.values}
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", keep, 50)
+    return latest
+
+
+def test_a_sealed_request_is_for_its_node_and_only_the_nodes_sealed_reply_is_believed(
+        ros_domain_id: int, ros_context, tmp_path: Path) -> None:
+    """The attacks of a keyless peer on the sealed control and listing: a deactivate sealed for the camera, sent
+    to the master; a rogue server on the master's control service answering the operator first; polling
+    list_faces for names and last-seen times. And the counts of all that on /diagnostics."""
+    from face_reid_camera.common.ros.sealed import seal_request
+    from face_reid_msgs.srv import ChangeState, ListFaces
+
+    key_path = write_network_key(tmp_path / "network.key")
+    key = load_network_key(key_path)
+    db = tmp_path / "faces.db"
+    stored = _store_faces(db, {1: "Alice"})
+    master = procs.start(["-m", "face_reid_master.ros.node", "--ros-args", "-p", f"db_path:={db}",
+                          "-p", "embedding_space:=dlib_resnet_v1", "-p", f"network_key_path:={key_path}",
+                          "-p", "body_appearance_tracking:=false"], ros_domain_id, tmp_path / "master.log")
+    camera = procs.start(["-m", "face_reid_camera.ros.node", "--ros-args", "-r", "__ns:=/cam_a",
+                          "-p", "camera_id:=cam_a", "-p", "detect_faces:=false", "-p", f"network_key_path:={key_path}"],
+                         ros_domain_id, tmp_path / "camera.log")
+    ctx = ros_context()
+    peer = Node("peer", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(peer)
+    diagnostics = _diagnostics_of(peer)
+    logs = lambda: {p.name: p.read_text()[-3000:] for p in tmp_path.glob("*.log")}  # noqa: E731
+
+    def faces_cli(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--master", MASTER,
+                               "--timeout-s", "60", *args], cwd=REPO_ROOT, env=procs.ros_env(ros_domain_id),
+                              capture_output=True, text=True, timeout=120)
+
+    try:
+        assert spin_until(executor, lambda: f"{MASTER}/list_faces" in _services(peer, MASTER), START_S), logs()
+        assert spin_until(executor, lambda: "/cam_a/color/image_raw" in _subscriptions(peer, CAMERA), START_S), logs()
+        list_faces = peer.create_client(ListFaces, f"{MASTER}/list_faces")
+        assert spin_until(executor, list_faces.service_is_ready, 60.0)
+
+        # list_faces: nothing for a keyless peer (no names, no last-seen times); the names for a key holder
+        keyless = _list_faces(executor, list_faces, None)
+        assert (list(keyless.face_ids), list(keyless.names), list(keyless.last_seen_s)) == ([], [], [])
+        held = _list_faces(executor, list_faces, key)
+        assert sorted(held.face_ids) == stored and dict(zip(held.face_ids, held.names, strict=True))[1] == "Alice"
+        run = faces_cli("list")
+        assert run.returncode == 0 and "0 face(s)" in run.stdout and "Alice" not in run.stdout, run
+        run = faces_cli("--key", str(key_path), "list")
+        assert run.returncode == 0 and f"{N_FACES} face(s)" in run.stdout and "Alice" in run.stdout, run
+
+        # a deactivate sealed for the camera, captured and sent to the master: refused, saying for whom it was
+        captured = seal_request(Sealer(key, "operator"), ChangeState.Request(transition="deactivate"), CAMERA)
+        to_master = peer.create_client(ChangeState, f"{MASTER}/change_state_sealed")
+        assert spin_until(executor, to_master.service_is_ready, 60.0)
+        reply = _call(executor, to_master, captured)
+        assert not reply.success and f"sealed for '{CAMERA}', not for this node ({MASTER})" in reply.message, reply
+        assert _sealed_state(executor, peer, Sealer(key, "operator2"), MASTER, "get", key).state == "active"
+        # the camera counts its sealed control requests and refusals on /diagnostics
+        assert _sealed_state(executor, peer, Sealer(key, "operator3"), CAMERA, "get", key).state == "active"
+        assert not _sealed_state(executor, peer, None, CAMERA, "deactivate").success
+        assert spin_until(executor, lambda: diagnostics.get("cam_a", {}).get("control_requests") == "2"
+                          and diagnostics["cam_a"].get("control_refused") == "1", 30.0), diagnostics.get("cam_a")
+
+        # a keyless rogue server on the master's control service, answering at once with a refusal: the tool
+        # passes its reply over and reports the master's own (the tool's discovery decides whether the rogue hears
+        # the request: asked again until it did)
+        for transition in ("deactivate", "cleanup"):
+            assert _sealed_state(executor, peer, Sealer(key, f"op-{transition}"), MASTER, transition, key).success
+        rogue_calls: list[str] = []
+
+        def rogue(request: Any, response: Any) -> Any:
+            rogue_calls.append(request.sealed_request.sender_id)
+            response.success, response.message, response.state = False, "refused: ROGUE WORDS", "unconfigured"
+            return response
+
+        rogue_srv = peer.create_service(ChangeState, f"{MASTER}/change_state_sealed", rogue)
+
+        def state_tool(transition: str) -> tuple[int, str, str]:
+            tool = subprocess.Popen([sys.executable, "-m", "face_reid_camera.tools.state", MASTER, transition,
+                                     "--key", str(key_path), "--timeout-s", "90"], cwd=REPO_ROOT,
+                                    env=procs.ros_env(ros_domain_id), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    text=True)
+            assert spin_until(executor, lambda: tool.poll() is not None, 150.0), logs()
+            out, err = tool.communicate()
+            assert "ROGUE" not in out + err, (out, err)
+            return tool.returncode, out, err
+
+        for _ in range(5):
+            code, out, err = state_tool("get")
+            assert code == 0 and "state unconfigured" in out, (out, err)
+            if rogue_calls:
+                break
+        assert rogue_calls, "the rogue never heard the tool's request"
+        code, out, err = state_tool("configure")
+        assert code == 0 and "configure: done (state inactive)" in out, (out, err)
+        peer.destroy_service(rogue_srv)
+        assert _sealed_state(executor, peer, Sealer(key, "op-activate"), MASTER, "activate", key).success
+
+        # the master's counts: 2 list_faces refused (the peer's and the tool's keyless), 2 answered; control
+        # requests: the camera's captured one (refused), get, deactivate, cleanup, the tool's, activate
+        def master_counts() -> bool:
+            values = diagnostics.get(MASTER, {})
+            return (values.get("list_faces_calls"), values.get("list_faces_refused")) == ("4", "2") and int(
+                values.get("control_requests", 0)) >= 6 and int(values.get("control_refused", 0)) >= 1
+
+        assert spin_until(executor, master_counts, 30.0), diagnostics.get(MASTER)
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        for proc in (camera, master):
+            procs.stop(proc)
 
 
 def test_an_unsecured_camera_keeps_the_standard_services_and_warns(ros_domain_id: int, ros_context,

@@ -46,8 +46,12 @@ def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_con
         run = faces("--key", str(key), "add", "Alice", *photos, "--space", "dlib_resnet_v1")
         assert run.returncode == 0 and "added Alice with 3 embeddings" in run.stdout, run.stderr
         assert master.core.people.names() == ["Alice"]
-        run = faces("list")
-        assert run.returncode == 0 and "on /face_reid_master" in run.stdout
+        run = faces("list")  # no key: a secured master lists nothing, and the tool says why
+        assert run.returncode == 0 and "0 face(s) on /face_reid_master" in run.stdout
+        assert "answers a listing without --key with nothing" in run.stderr, run.stderr
+        run = faces("--key", str(key), "list")
+        assert run.returncode == 0 and "on /face_reid_master" in run.stdout, run.stderr
+        assert master.admin.refusals["list_faces"] == 1 and master.admin.calls["list_faces"] == 2
         run = faces("add", "Mallory", *photos, "--space", "dlib_resnet_v1")  # no key: a secured master refuses
         assert run.returncode == 1 and "must be sealed" in run.stderr and master.core.people.names() == ["Alice"]
         run = faces("--key", str(key), "forget", "--name", "Alice")
