@@ -83,6 +83,8 @@ class MasterNode(ManagedNode):
         self._own_timers: list[Any] = []
         self.tracks_pub: Any = None  # /tracks_named, or <tracks_topic>_sealed on a secured network
         self._tracks_sealer: Any = None  # seals the tracks (purpose "tracks") when the network has a key
+        self._network_key: bytes | None = None
+        self._own_topic: Any = None  # OwnTopicListener while others publish the sealed tracks topic
         self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
@@ -117,11 +119,11 @@ class MasterNode(ManagedNode):
                                int(values["max_camera_topics"]),
                                frozenset(master_params.clean_list(values["known_camera_ids"])),
                                sealed=bool(values["network_key_path"]))
-        self._openers, self._tracks_sealer = {}, None
+        self._openers, self._tracks_sealer, self._network_key = {}, None, None
         if values["network_key_path"]:
             from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
 
-            key = load_network_key(str(values["network_key_path"]))
+            key = self._network_key = load_network_key(str(values["network_key_path"]))
             age = float(values["max_seal_age_s"])
             started = time.time()  # nothing sealed before this configure is accepted (replays across restarts)
             self._openers = {purpose: Opener(key, purpose, age, started) for purpose in ("frames", "requests")}
@@ -189,6 +191,7 @@ class MasterNode(ManagedNode):
             if pub is not None:
                 self.destroy_publisher(pub)
         self.tracks_pub = self.markers_pub = None
+        self._listen_to_own_topic(False)
         if self.people_topics is not None:
             self.people_topics.deactivate()
 
@@ -254,21 +257,22 @@ class MasterNode(ManagedNode):
         return self._photos
 
     # ------------------------------------------------------------------ camera messages
-    def _on_camera_message(self, message: bytes) -> None:
-        """A camera topic's message (CDR bytes): sealed on a secured network, else a CameraFrame."""
+    def _on_camera_message(self, message: bytes) -> bool:
+        """A camera topic's message (CDR bytes): sealed on a secured network, else a CameraFrame; whether it was
+        received (opened with the key, read)."""
         if self._openers:
-            self._on_sealed(message)
-        else:
-            self._on_frame(message)
+            return self._on_sealed(message)
+        return self._on_frame(message)
 
-    def _on_frame(self, frame: bytes | Any) -> None:
+    def _on_frame(self, frame: bytes | Any) -> bool:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
         (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
         meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
-        self.receiver.receive(frame, now)
+        received = self.receiver.receive(frame, now)
         self._cycle(now)
+        return received
 
     @property
     def frames_dropped_overload(self) -> int:
@@ -281,12 +285,14 @@ class MasterNode(ManagedNode):
         if wait > 0.0:
             time.sleep(wait)
 
-    def _on_sealed(self, sealed: bytes) -> None:
-        """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one."""
+    def _on_sealed(self, sealed: bytes) -> bool:
+        """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one (True)."""
         self._wait_for_cycle()
         now = self.now_s()
-        if self.receiver.receive_sealed(sealed, now):
-            self._cycle(now)
+        if not self.receiver.receive_sealed(sealed, now):
+            return False
+        self._cycle(now)
+        return True
 
     def _cycle(self, now: float) -> None:
         """One master cycle: everything received since the last one (by ``now``, the node clock's seconds), in
@@ -295,7 +301,7 @@ class MasterNode(ManagedNode):
         if core is None or health is None or self.tracks_pub is None:
             return
         limit = self.schedule.begin_cycle(time.monotonic())
-        self.receiver.drain(self.cameras.subscribed.values(), now)
+        self.receiver.drain(self.cameras.subscribed.values(), now, self.cameras.heard)
         frames, dropped = self.receiver.intake.take(limit)
         if dropped:
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
@@ -460,12 +466,27 @@ class MasterNode(ManagedNode):
             mine = f"{self.get_namespace().rstrip('/')}/{self.get_name()}"
             if mine in others:  # ours, once: a second master of the same name is another entry
                 others.remove(mine)
+        own = self._listen_to_own_topic(bool(others))
         return self._watch.verdict(
             now_s, frames_in=health.frames_in, frames_dropped_overload=self.frames_dropped_overload,
             store_write_failures=getattr(store, "write_failures", core.stats.store_errors),
             store_last_write_ok=getattr(store, "last_write_ok", None),
             store_last_error=getattr(store, "last_error", ""), other_publishers=others,
-            output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
+            output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named",
+            others_opened=own.opened if own is not None else 0, others_unopened=own.unopened if own is not None else 0)
+
+    def _listen_to_own_topic(self, others: bool) -> Any:
+        """While others publish a secured master's tracks topic, listen to it: do their messages open with the
+        key (another master) or not (a keyless participant)? The listener, or None."""
+        if others and self._own_topic is None and self._network_key is not None and self.tracks_pub is not None:
+            from face_reid_master.ros.tracks_in import OwnTopicListener
+
+            self._own_topic = OwnTopicListener(self, self.tracks_pub.topic_name, self._network_key,
+                                               self.get_fully_qualified_name(), float(self.values["max_seal_age_s"]))
+        elif not others and self._own_topic is not None:
+            self._own_topic.destroy()
+            self._own_topic = None
+        return self._own_topic
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up

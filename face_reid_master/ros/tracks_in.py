@@ -5,7 +5,8 @@ checked (:class:`~face_reid_master.tracks_auth.TracksVerifier`: forged, replayed
 refused and counted); plain tracks are never taken, and a warning says when someone publishes them. Without
 it: the plain topic is read, but when a sealed tracks topic exists (a secured master's network) an ERROR says
 the key is needed and plain tracks are refused (there they can only be spoofed). The callback gets a verified
-face_reid_msgs/NamedTrackArray.
+face_reid_msgs/NamedTrackArray. :class:`OwnTopicListener` is the master's: whether others publishing its
+sealed tracks topic hold the key.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from face_reid_master.tracks_auth import NetworkCheck, TracksVerifier, check_net
 from face_reid_msgs.msg import NamedTrackArray
 from face_reid_msgs.msg import Sealed as SealedMsg
 
-__all__ = ["MAX_SEALED_TRACKS_BYTES", "TracksSubscription", "subscribe_tracks"]
+__all__ = ["MAX_SEALED_TRACKS_BYTES", "OwnTopicListener", "TracksSubscription", "subscribe_tracks"]
 
 # A sealed tracks message larger than this is refused unread (a NamedTrack is ~300 bytes: 4 MiB is >10,000 tracks).
 MAX_SEALED_TRACKS_BYTES = 4 << 20
@@ -131,3 +132,33 @@ def subscribe_tracks(node: Any, callback: Callable[[Any], None], topic: str = "/
     """The master's tracks for ``callback`` (a verified face_reid_msgs/NamedTrackArray each): sealed ones opened
     with the network key in ``key_path`` ('' = none: plain ones); ``options``: see :class:`TracksSubscription`."""
     return TracksSubscription(node, callback, topic, key_path, **options)
+
+
+class OwnTopicListener:
+    """What others publish on a secured master's own sealed tracks topic (``topic``): counts the messages of other
+    senders that open with the network key (``key``: another master) and those that do not (a keyless
+    participant). The master's own messages (``own_sender``) are opened and not counted."""
+
+    def __init__(self, node: Any, topic: str, key: bytes, own_sender: str, max_age_s: float = 30.0) -> None:
+        self.node, self.own_sender = node, own_sender
+        self.verifier = TracksVerifier(key, max_age_s)
+        self.opened = 0
+        self.unopened = 0
+        qos = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+        self._sub = node.create_subscription(SealedMsg, topic, self._on_sealed, qos, raw=True)
+
+    def _on_sealed(self, raw: bytes) -> None:
+        if len(raw) > MAX_SEALED_TRACKS_BYTES:
+            self.unopened += 1
+            return
+        try:
+            sealed = unpack(deserialize_message(raw, SealedMsg))
+            self.verifier.open(sealed)
+        except Exception:  # not a Sealed, or not sealed with the key (forged, replayed, stale)
+            self.unopened += 1
+            return
+        if sealed.sender_id != self.own_sender:
+            self.opened += 1
+
+    def destroy(self) -> None:
+        self.node.destroy_subscription(self._sub)
