@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import pytest
 
-from face_reid_master.camera_slots import (PROBATION_MESSAGES, PROBATION_S, PROBATION_TOPICS, RETRY_S, CameraSlots,
-                                           camera_of_topic)
+from face_reid_master import camera_slots as cs
+from face_reid_master.camera_slots import CameraSlots, camera_of_topic
+
+PROBATION_MESSAGES, PROBATION_S, PROBATION_TOPICS, RETRY_S = (cs.PROBATION_MESSAGES, cs.PROBATION_S,
+                                                              cs.PROBATION_TOPICS, cs.RETRY_S)
 
 EVIL, CAM = frozenset({"evil"}), frozenset({"cam"})
 
