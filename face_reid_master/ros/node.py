@@ -45,6 +45,7 @@ from face_reid_master.ros.convert import markers_for
 from face_reid_master.ros.frame_receiver import FrameReceiver
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
+from face_reid_master.ros.tracks_in import OwnTopicListener
 from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
 from face_reid_msgs.msg import NamedTrackArray, Sealed
 
@@ -83,8 +84,7 @@ class MasterNode(ManagedNode):
         self._own_timers: list[Any] = []
         self.tracks_pub: Any = None  # /tracks_named, or <tracks_topic>_sealed on a secured network
         self._tracks_sealer: Any = None  # seals the tracks (purpose "tracks") when the network has a key
-        self._network_key: bytes | None = None
-        self._own_topic: Any = None  # OwnTopicListener while others publish the sealed tracks topic
+        self._own_topic = OwnTopicListener(self)  # a second master, or a keyless participant, on the tracks topic?
         self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
@@ -119,15 +119,16 @@ class MasterNode(ManagedNode):
                                int(values["max_camera_topics"]),
                                frozenset(master_params.clean_list(values["known_camera_ids"])),
                                sealed=bool(values["network_key_path"]))
-        self._openers, self._tracks_sealer, self._network_key = {}, None, None
+        self._openers, self._tracks_sealer = {}, None
         if values["network_key_path"]:
             from face_reid_camera.common.sealing import Opener, Sealer, load_network_key
 
-            key = self._network_key = load_network_key(str(values["network_key_path"]))
+            key = load_network_key(str(values["network_key_path"]))
             age = float(values["max_seal_age_s"])
             started = time.time()  # nothing sealed before this configure is accepted (replays across restarts)
             self._openers = {purpose: Opener(key, purpose, age, started) for purpose in ("frames", "requests")}
             self._tracks_sealer = Sealer(key, self.get_fully_qualified_name(), TRACKS_PURPOSE)
+            self._own_topic.configure(key, self.get_fully_qualified_name(), age)
             self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted; "
                                    "tracks are published sealed with it")
             clear = [name for name in ("publish_people", "publish_hri") if values[name]]
@@ -191,7 +192,7 @@ class MasterNode(ManagedNode):
             if pub is not None:
                 self.destroy_publisher(pub)
         self.tracks_pub = self.markers_pub = None
-        self._listen_to_own_topic(False)
+        self._own_topic.listen("", False)
         if self.people_topics is not None:
             self.people_topics.deactivate()
 
@@ -258,8 +259,7 @@ class MasterNode(ManagedNode):
 
     # ------------------------------------------------------------------ camera messages
     def _on_camera_message(self, message: bytes) -> bool:
-        """A camera topic's message (CDR bytes): sealed on a secured network, else a CameraFrame; whether it was
-        received (opened with the key, read)."""
+        """A camera topic's message (CDR bytes; sealed on a secured network): whether it was received."""
         if self._openers:
             return self._on_sealed(message)
         return self._on_frame(message)
@@ -289,10 +289,9 @@ class MasterNode(ManagedNode):
         """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one (True)."""
         self._wait_for_cycle()
         now = self.now_s()
-        if not self.receiver.receive_sealed(sealed, now):
-            return False
-        self._cycle(now)
-        return True
+        if received := self.receiver.receive_sealed(sealed, now):
+            self._cycle(now)
+        return received
 
     def _cycle(self, now: float) -> None:
         """One master cycle: everything received since the last one (by ``now``, the node clock's seconds), in
@@ -459,34 +458,15 @@ class MasterNode(ManagedNode):
     def _health_verdict(self, now_s: float, core: MasterCore, health: NodeHealth) -> Any:
         """The store's, the overload's and the domain's part of the status (face_reid_master.health)."""
         store = self.store
-        others: list[str] = []
-        if self.tracks_pub is not None:  # another master (or anything) publishing our output topic
-            others = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                      for info in self.get_publishers_info_by_topic(self.tracks_pub.topic_name)]
-            mine = f"{self.get_namespace().rstrip('/')}/{self.get_name()}"
-            if mine in others:  # ours, once: a second master of the same name is another entry
-                others.remove(mine)
-        own = self._listen_to_own_topic(bool(others))
+        # another master (or anything) publishing our output topic
+        others = self._own_topic.others(self.tracks_pub.topic_name if self.tracks_pub is not None else "")
         return self._watch.verdict(
             now_s, frames_in=health.frames_in, frames_dropped_overload=self.frames_dropped_overload,
             store_write_failures=getattr(store, "write_failures", core.stats.store_errors),
             store_last_write_ok=getattr(store, "last_write_ok", None),
             store_last_error=getattr(store, "last_error", ""), other_publishers=others,
             output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named",
-            others_opened=own.opened if own is not None else 0, others_unopened=own.unopened if own is not None else 0)
-
-    def _listen_to_own_topic(self, others: bool) -> Any:
-        """While others publish a secured master's tracks topic, listen to it: do their messages open with the
-        key (another master) or not (a keyless participant)? The listener, or None."""
-        if others and self._own_topic is None and self._network_key is not None and self.tracks_pub is not None:
-            from face_reid_master.ros.tracks_in import OwnTopicListener
-
-            self._own_topic = OwnTopicListener(self, self.tracks_pub.topic_name, self._network_key,
-                                               self.get_fully_qualified_name(), float(self.values["max_seal_age_s"]))
-        elif not others and self._own_topic is not None:
-            self._own_topic.destroy()
-            self._own_topic = None
-        return self._own_topic
+            others_opened=self._own_topic.opened, others_unopened=self._own_topic.unopened)
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up

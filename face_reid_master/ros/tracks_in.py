@@ -135,20 +135,46 @@ def subscribe_tracks(node: Any, callback: Callable[[Any], None], topic: str = "/
 
 
 class OwnTopicListener:
-    """What others publish on a secured master's own sealed tracks topic (``topic``): counts the messages of other
-    senders that open with the network key (``key``: another master) and those that do not (a keyless
-    participant). The master's own messages (``own_sender``) are opened and not counted."""
+    """What others publish on a secured master's own sealed tracks topic: while :meth:`listen` is told that others
+    publish there, counts the messages of other senders that open with the network key (:attr:`opened`: another
+    master) and those that do not (:attr:`unopened`: a keyless participant). The master's own messages
+    (``own_sender``) are opened and not counted. Unsecured (no key configured) it never listens."""
 
-    def __init__(self, node: Any, topic: str, key: bytes, own_sender: str, max_age_s: float = 30.0) -> None:
-        self.node, self.own_sender = node, own_sender
-        self.verifier = TracksVerifier(key, max_age_s)
-        self.opened = 0
-        self.unopened = 0
-        qos = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
-        self._sub = node.create_subscription(SealedMsg, topic, self._on_sealed, qos, raw=True)
+    def __init__(self, node: Any) -> None:
+        self.node = node
+        self.key: bytes | None = None
+        self.own_sender, self.max_age_s = "", 30.0
+        self.opened = self.unopened = 0
+        self.verifier: TracksVerifier | None = None
+        self._sub: Any = None
+
+    def configure(self, key: bytes | None, own_sender: str, max_age_s: float) -> None:
+        self.key, self.own_sender, self.max_age_s = key, own_sender, max_age_s
+
+    def others(self, topic: str) -> list[str]:
+        """The other publishers of ``topic`` (namespaced node names; the master itself once), listened to while
+        they exist ('' = none)."""
+        others = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                  for info in self.node.get_publishers_info_by_topic(topic)] if topic else []
+        mine = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
+        if mine in others:  # ours, once: a second master of the same name is another entry
+            others.remove(mine)
+        self.listen(topic, bool(others))
+        return others
+
+    def listen(self, topic: str, others: bool) -> None:
+        """Listen to ``topic`` while ``others`` publish it (and a key is configured); stop when they are gone."""
+        if others and self._sub is None and self.key is not None and topic:
+            self.verifier = TracksVerifier(self.key, self.max_age_s)
+            self.opened = self.unopened = 0
+            qos = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+            self._sub = self.node.create_subscription(SealedMsg, topic, self._on_sealed, qos, raw=True)
+        elif not others and self._sub is not None:
+            self.node.destroy_subscription(self._sub)
+            self._sub = None
 
     def _on_sealed(self, raw: bytes) -> None:
-        if len(raw) > MAX_SEALED_TRACKS_BYTES:
+        if len(raw) > MAX_SEALED_TRACKS_BYTES or self.verifier is None:
             self.unopened += 1
             return
         try:
@@ -159,6 +185,3 @@ class OwnTopicListener:
             return
         if sealed.sender_id != self.own_sender:
             self.opened += 1
-
-    def destroy(self) -> None:
-        self.node.destroy_subscription(self._sub)
