@@ -7,8 +7,10 @@ within ``probation_s`` (a silent publisher) or ``probation_messages`` messages (
 and offered again after a cool-down that doubles on each release: a stranger's keyless topics cannot fill the
 slots, and a topic a stranger used before the real camera came still gets its turn. A topic whose publishers'
 participants all had a topic released before waits behind the others, so one stranger's many topics do not hold
-back a camera that appears after them. Pure: the node subscribes and unsubscribes what :meth:`CameraSlots.step`
-says.
+back a camera that appears after them. A discovered topic holding a slot on which nothing opened for
+``slot_idle_s`` (a camera stopped, or a replayed frame that once got a stranger's topic in) gives its slot back
+and is offered again like a new one; topics gone from the graph are forgotten. Pure: the node subscribes and
+unsubscribes what :meth:`CameraSlots.step` says.
 """
 
 from __future__ import annotations
@@ -23,6 +25,9 @@ PROBATION_S = 5.0  # a topic on probation with no message opened with the key th
 PROBATION_MESSAGES = 20  # ... or after this many messages none of which opened
 RETRY_S = 10.0  # a released topic is offered again after this (s), doubled on each further release
 RETRY_MAX_S = 160.0  # ... up to this (s)
+SLOT_IDLE_S = 60.0  # a discovered topic with no message opened this long gives its slot back (s; cameras publish
+#                     every frame, people or not)
+MAX_PARTICIPANTS = 4096  # participants remembered as suspected / trusted (the oldest forgotten first)
 CAMERA_TOPIC_DEPTH = 2  # a camera's own topic below its namespace: face_reid/frames or face_reid/frames_sealed
 
 
@@ -37,11 +42,15 @@ def camera_of_topic(topic: str) -> str:
 @dataclass
 class SlotChanges:
     """What the node does after a :meth:`CameraSlots.step`: ``subscribe`` (put on probation, or given a slot
-    unsecured), ``unsubscribe`` (released: not authenticated in time), ``refused`` (not subscribed: no slot)."""
+    unsecured), ``unsubscribe`` (released: not authenticated in time), ``idle`` (a slot given back: nothing opened
+    on it for slot_idle_s), ``refused`` (not subscribed: no slot); ``unopened``: how many messages each released
+    topic carried (0: a silent publisher)."""
 
     subscribe: list[str] = field(default_factory=list)
     unsubscribe: list[str] = field(default_factory=list)
+    idle: list[str] = field(default_factory=list)
     refused: list[str] = field(default_factory=list)
+    unopened: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -70,21 +79,21 @@ class CameraSlots:
 
     def __init__(self, max_slots: int, authenticate: bool, probation_topics: int = PROBATION_TOPICS,
                  probation_s: float = PROBATION_S, probation_messages: int = PROBATION_MESSAGES,
-                 retry_s: float = RETRY_S, retry_max_s: float = RETRY_MAX_S) -> None:
+                 retry_s: float = RETRY_S, retry_max_s: float = RETRY_MAX_S, slot_idle_s: float = SLOT_IDLE_S) -> None:
         if max_slots < 1 or probation_topics < 1 or probation_s <= 0 or probation_messages < 1 or retry_s < 0:
             raise ValueError("max_slots, probation_topics, probation_messages >= 1, probation_s > 0, retry_s >= 0")
         self.max_slots, self.authenticate = max_slots, authenticate
         self.probation_topics, self.probation_s, self.probation_messages = (probation_topics, probation_s,
                                                                              probation_messages)
-        self.retry_s, self.retry_max_s = retry_s, retry_max_s
-        self.slots: dict[str, None] = {}  # topics holding a slot, in the order they took it
+        self.retry_s, self.retry_max_s, self.slot_idle_s = retry_s, retry_max_s, slot_idle_s
+        self.slots: dict[str, float | None] = {}  # topic -> when a message on it last opened (None: configured)
         self.probation: dict[str, _Probation] = {}
         self.waiting: dict[str, _Waiting] = {}
         self.refused: set[str] = set()  # never subscribed (no slot unsecured, or an authenticated one beyond the cap)
         self.released = 0  # probation releases so far
         self.last_release_s: float | None = None
-        self._suspect: set[str] = set()  # participants that published on a released topic
-        self._trusted: set[str] = set()  # participants that published on a topic that authenticated
+        self._suspect: dict[str, None] = {}  # participants that published on a released topic
+        self._trusted: dict[str, None] = {}  # participants that published on a topic that authenticated
         self._order = itertools.count()
 
     def known(self, topic: str) -> bool:
@@ -110,14 +119,16 @@ class CameraSlots:
     def heard(self, topic: str, authenticated: bool, now_s: float) -> None:
         """A message on ``topic``: opened with the key (``authenticated``: the topic takes a slot if one is free)
         or not (counted towards its release)."""
+        if authenticated and self.slots.get(topic) is not None:
+            self.slots[topic] = now_s
         entry = self.probation.get(topic)
         if entry is None:
             return
         if authenticated:
             del self.probation[topic]
-            self._trusted |= entry.sources
+            _remember(self._trusted, entry.sources)
             if len(self.slots) < self.max_slots:
-                self.slots[topic] = None
+                self.slots[topic] = now_s
             else:
                 self.refused.add(topic)
         else:
@@ -127,16 +138,21 @@ class CameraSlots:
         """Release the topics whose probation is over, then admit waiting ones (probation secured, a slot
         unsecured); ``sources_of``: the current publishers' participants of topics, where known."""
         out = SlotChanges()
+        for topic, last_s in list(self.slots.items()):
+            if last_s is not None and now_s - last_s >= self.slot_idle_s:  # offered again, as a new topic is
+                del self.slots[topic]
+                out.idle.append(topic)
         for topic, entry in list(self.probation.items()):
             if entry.failed >= self.probation_messages or now_s - entry.since_s >= self.probation_s:
                 del self.probation[topic]
                 sources = (sources_of or {}).get(topic, entry.sources)
-                self._suspect |= sources - self._trusted
+                _remember(self._suspect, sources - self._trusted.keys())
                 delay = min(self.retry_max_s, self.retry_s * 2 ** entry.releases)
                 self.waiting[topic] = _Waiting(now_s + delay, next(self._order), sources, entry.releases + 1)
                 self.released += 1
                 self.last_release_s = now_s
                 out.unsubscribe.append(topic)
+                out.unopened[topic] = entry.failed
         if sources_of:
             for topic, sources in sources_of.items():
                 if topic in self.waiting and sources:
@@ -170,7 +186,13 @@ class CameraSlots:
         return [t for *_, t in sorted(due)]
 
     def _suspected(self, sources: frozenset[str]) -> bool:
-        return bool(sources) and sources <= self._suspect
+        return bool(sources) and sources <= self._suspect.keys()
+
+    def prune(self, present: set[str]) -> None:
+        """Forget the waiting and refused topics that are gone from the graph (``present``: the topics there)."""
+        for topic in [t for t in self.waiting if t not in present]:
+            del self.waiting[topic]
+        self.refused &= present
 
     def forget(self) -> None:
         """Everything (the node's subscriptions are gone: deactivated)."""
@@ -178,3 +200,12 @@ class CameraSlots:
         self.probation.clear()
         self.waiting.clear()
         self.refused.clear()
+
+
+def _remember(seen: dict[str, None], ids: frozenset[str]) -> None:
+    """Add ``ids`` to ``seen`` (insertion-ordered), keeping the newest MAX_PARTICIPANTS."""
+    for i in ids:
+        seen.pop(i, None)
+        seen[i] = None
+    while len(seen) > MAX_PARTICIPANTS:
+        del seen[next(iter(seen))]

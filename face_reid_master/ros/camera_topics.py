@@ -74,6 +74,8 @@ class CameraTopics:
         self._subscribe(topic)
 
     def _subscribe(self, topic: str) -> None:
+        if topic in self.subscribed:  # a slot given back and on probation again at once: the same subscription
+            return
         # Without rclpy's default QoS-event handlers (two per subscription, each walked by the executor on every
         # cycle): publishers that do not match are found by warn_unmatched instead.
         events = SubscriptionEventCallbacks(use_default_callbacks=False)
@@ -131,7 +133,11 @@ class CameraTopics:
         now = self.clock()
         if self.regex is not None:
             wanted = "face_reid_msgs/msg/Sealed" if self.sealed else "face_reid_msgs/msg/CameraFrame"
-            for name, types in self.node.get_topic_names_and_types():
+            graph = self.node.get_topic_names_and_types()
+            present = {name for name, _ in graph}  # what is gone is forgotten (a stranger's names do not pile up)
+            self.slots.prune(present)
+            self.unknown &= present
+            for name, types in graph:
                 if wanted not in types or not self.regex.search(name) or self.slots.known(name) \
                         or name in self.unknown:
                     continue
@@ -150,10 +156,15 @@ class CameraTopics:
             self._subscribe(topic)
         for topic in changes.refused:
             self._refused_for_cap(topic)
+        for topic in changes.idle:
+            self.node.get_logger().info(f"camera topic {shown(topic, 128)}: nothing on it opened with the network "
+                                        f"key for {self.slots.slot_idle_s:g} s: its slot is given back (offered "
+                                        "again while it has publishers)")
         for topic in changes.unsubscribe:
-            self.reject("topic_released", f"camera topic {shown(topic, 128)} released: nothing on it opened with the "
-                                          f"network key within {self.slots.probation_s:g} s or "
-                                          f"{self.slots.probation_messages} messages (a keyless publisher); offered "
+            heard = changes.unopened.get(topic, 0)
+            why = f"{heard} message(s), none opened: a keyless publisher" if heard else "nothing heard on it"
+            self.reject("topic_released", f"camera topic {shown(topic, 128)} released: no message on it opened with "
+                                          f"the network key within {self.slots.probation_s:g} s ({why}); offered "
                                           "again later")
         for topic in [t for t in self.subscribed if t not in self.slots.slots and t not in self.slots.probation]:
             self.node.destroy_subscription(self.subscribed.pop(topic))

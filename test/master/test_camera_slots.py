@@ -57,6 +57,38 @@ def test_a_released_topic_is_offered_again_after_a_doubling_cool_down() -> None:
     assert topic in slots.slots and not slots.step(t + 100.0).unsubscribe
 
 
+def test_a_slot_on_which_nothing_opens_is_given_back_and_gone_topics_are_forgotten() -> None:
+    """A replayed frame that once got a stranger's topic a slot (or a stopped camera) does not hold it for good;
+    the names a stranger made and dropped do not pile up."""
+    slots = CameraSlots(4, authenticate=True)
+    assert slots.fixed("/fixed/face_reid/frames_sealed")
+    slots.offer("/a/face_reid/frames_sealed", EVIL, 0.0)
+    slots.offer("/b/face_reid/frames_sealed", CAM, 0.0)
+    slots.step(0.0)
+    slots.heard("/a/face_reid/frames_sealed", True, 1.0)  # e.g. a replay that won the race
+    slots.heard("/b/face_reid/frames_sealed", True, 1.0)
+    for t in range(2, 61):
+        slots.heard("/b/face_reid/frames_sealed", True, float(t))  # a live camera: every frame opens
+    changes = slots.step(1.0 + cs.SLOT_IDLE_S)
+    assert changes.idle == ["/a/face_reid/frames_sealed"] and not slots.known("/a/face_reid/frames_sealed")
+    assert set(slots.slots) == {"/fixed/face_reid/frames_sealed", "/b/face_reid/frames_sealed"}  # fixed: kept
+    for k in range(3):
+        slots.offer(f"/gone{k}/face_reid/frames_sealed", EVIL, 100.0)
+    slots.prune({"/gone0/face_reid/frames_sealed"})
+    assert set(slots.waiting) == {"/gone0/face_reid/frames_sealed"}
+
+
+def test_a_release_says_how_many_messages_did_not_open() -> None:
+    slots = CameraSlots(4, authenticate=True)
+    slots.offer("/noisy/face_reid/frames_sealed", EVIL, 0.0)
+    slots.offer("/silent/face_reid/frames_sealed", EVIL, 0.0)
+    slots.step(0.0)
+    for _ in range(3):
+        slots.heard("/noisy/face_reid/frames_sealed", False, 1.0)
+    changes = slots.step(PROBATION_S)
+    assert changes.unopened == {"/noisy/face_reid/frames_sealed": 3, "/silent/face_reid/frames_sealed": 0}
+
+
 def test_at_most_max_slots_authenticated_topics_and_fixed_ones_count() -> None:
     slots = CameraSlots(2, authenticate=True)
     assert slots.fixed("/fixed/face_reid/frames_sealed")
