@@ -3,14 +3,14 @@
 Unsecured (nothing to authenticate), a topic takes a slot when offered while one is free; later ones are refused.
 Secured, a discovered topic first goes on probation: subscribed, at most ``probation_topics`` at once (the
 longest waiting first), it takes a slot only once a message on it opened with the network key. One that does not
-within ``probation_s`` (a silent publisher) or ``probation_messages`` messages (a stranger's garbage) is released
-and offered again after a cool-down that doubles on each release: a stranger's keyless topics cannot fill the
-slots, and a topic a stranger used before the real camera came still gets its turn. A topic whose publishers'
-participants all had a topic released before waits behind the others, so one stranger's many topics do not hold
-back a camera that appears after them. A discovered topic holding a slot on which nothing opened for
-``slot_idle_s`` (a camera stopped, or a replayed frame that once got a stranger's topic in) gives its slot back
-and is offered again like a new one; topics gone from the graph are forgotten. Pure: the node subscribes and
-unsubscribes what :meth:`CameraSlots.step` says.
+within ``probation_s``, or ``probation_messages`` messages when one participant publishes it (a stranger's
+garbage), is released and offered again after a cool-down that doubles on each release: a stranger's keyless
+topics cannot fill the slots, and a topic a stranger used before the real camera came still gets its turn. A
+topic whose publishers' participants all had a topic released before waits behind the others, so one stranger's
+many topics do not hold back a camera that appears after them. A discovered topic holding a slot on which nothing
+opened for ``slot_idle_s`` (a camera stopped, or a replayed frame that once got a stranger's topic in) gives its
+slot back and is offered again like a new one; topics gone from the graph are forgotten. Pure: the node
+subscribes and unsubscribes what :meth:`CameraSlots.step` says.
 """
 
 from __future__ import annotations
@@ -143,9 +143,12 @@ class CameraSlots:
                 del self.slots[topic]
                 out.idle.append(topic)
         for topic, entry in list(self.probation.items()):
-            if entry.failed >= self.probation_messages or now_s - entry.since_s >= self.probation_s:
+            sources = (sources_of or {}).get(topic, entry.sources)
+            # garbage ends a probation early only on a topic of one participant: with several (a camera and a
+            # stranger flooding its topic) the camera's frames get the whole probation_s to open
+            noisy = entry.failed >= self.probation_messages and len(sources) <= 1
+            if noisy or now_s - entry.since_s >= self.probation_s:
                 del self.probation[topic]
-                sources = (sources_of or {}).get(topic, entry.sources)
                 _remember(self._suspect, sources - self._trusted.keys())
                 delay = min(self.retry_max_s, self.retry_s * 2 ** entry.releases)
                 self.waiting[topic] = _Waiting(now_s + delay, next(self._order), sources, entry.releases + 1)

@@ -78,6 +78,22 @@ def test_a_slot_on_which_nothing_opens_is_given_back_and_gone_topics_are_forgott
     assert set(slots.waiting) == {"/gone0/face_reid/frames_sealed"}
 
 
+def test_garbage_on_a_cameras_own_topic_does_not_cut_its_probation_short() -> None:
+    """A stranger flooding the real camera's topic (two participants publish it) cannot get it released before the
+    camera's frames had probation_s to open; on a topic of its own, the garbage ends the probation early."""
+    slots = CameraSlots(4, authenticate=True)
+    shared, own = "/cam1/face_reid/frames_sealed", "/cam2/face_reid/frames_sealed"
+    slots.offer(shared, EVIL | CAM, 0.0)
+    slots.offer(own, EVIL, 0.0)
+    slots.step(0.0)
+    for _ in range(10 * PROBATION_MESSAGES):
+        slots.heard(shared, False, 0.5)
+        slots.heard(own, False, 0.5)
+    assert slots.step(1.0).unsubscribe == [own]
+    slots.heard(shared, True, 2.0)  # the camera's frame, among the garbage
+    assert shared in slots.slots
+
+
 def test_a_release_says_how_many_messages_did_not_open() -> None:
     slots = CameraSlots(4, authenticate=True)
     slots.offer("/noisy/face_reid/frames_sealed", EVIL, 0.0)
