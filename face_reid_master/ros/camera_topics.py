@@ -186,7 +186,7 @@ class CameraTopics:
                             f"named after a known camera), e.g. {shown(min(self.refused), 64)}")
         if slots.last_release_s is not None and self.clock() - slots.last_release_s <= _RELEASE_WARN_S:
             warnings.append(f"{slots.released} camera topic(s) released so far: nothing on them opened with the "
-                            "network key (a keyless publisher on this domain)")
+                            "network key (a keyless or silent publisher on this domain)")
         if self.unmatched:
             warnings.append(f"{len(self.unmatched)} camera topic(s) whose publishers do not match the master's "
                             f"reliable subscription, e.g. {shown(min(self.unmatched), 64)}: publish camera frames "
