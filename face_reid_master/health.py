@@ -1,6 +1,7 @@
 """What the master's /diagnostics must say beyond the inputs: store failures, faces lost at open, overload, a
-second master on the domain. Pure (no rclpy): the node feeds :class:`MasterHealthWatch` counters, it answers
-errors and warnings for :meth:`~face_reid_camera.common.diagnostics.NodeHealth.report`.
+second master (or a keyless publisher of its tracks) on the domain. Pure (no rclpy): the node feeds
+:class:`MasterHealthWatch` counters, it answers errors and warnings for
+:meth:`~face_reid_camera.common.diagnostics.NodeHealth.report`.
 """
 
 from __future__ import annotations
@@ -43,7 +44,8 @@ class MasterHealthWatch:
       -> WARN for the rest of the run;
     - frames dropped for overload above ``overload_fraction`` of the frames received in the last ``window_s``
       -> WARN with the percentage;
-    - other publishers of the master's output topic (another master on the domain) -> WARN naming them.
+    - other publishers of the master's output topic -> WARN naming them: a keyless participant when what they
+      published so far never opened with the network key, else another master on the domain.
     """
 
     def __init__(self, overload_fraction: float = OVERLOAD_WARN_FRACTION, window_s: float = OVERLOAD_WINDOW_S,
@@ -74,8 +76,10 @@ class MasterHealthWatch:
     def verdict(self, now_s: float, *, frames_in: int = 0, frames_dropped_overload: int = 0,
                 store_write_failures: int = 0, store_last_write_ok: bool | None = None, store_last_error: str = "",
                 faces_refused_no_id: int = 0, face_id_error: str = "", other_publishers: Sequence[str] = (),
-                output_topic: str = "/tracks_named") -> HealthVerdict:
-        """Errors, warnings and values now (call about once a second with the totals since start)."""
+                output_topic: str = "/tracks_named", others_opened: int = 0, others_unopened: int = 0) -> HealthVerdict:
+        """Errors, warnings and values now (call about once a second with the totals since start).
+        ``others_opened`` / ``others_unopened``: messages of other senders on a secured master's output topic
+        that opened with the network key / did not."""
         out = HealthVerdict()
         self._store(now_s, store_write_failures, store_last_write_ok, store_last_error, out)
         if face_id_error:
@@ -84,10 +88,16 @@ class MasterHealthWatch:
         out.warnings += self._lost_at_open
         self._overload(now_s, frames_in, frames_dropped_overload, out)
         out.values["other_output_publishers"] = len(other_publishers)
+        out.values["other_output_messages_unopened"] = others_unopened
         if other_publishers:
             names = ", ".join(sorted(other_publishers)[:5])
-            out.warnings.append(f"another publisher of {output_topic} on this domain ({names}): two masters give the "
-                                "same people different track and face ids; run one master per domain")
+            if others_unopened and not others_opened:  # what it published is not a key holder's: not a master
+                out.warnings.append(f"an unauthenticated publisher of {output_topic} on this domain ({names}): "
+                                    f"{others_unopened} of its message(s) did not open with the network key (a "
+                                    "keyless participant, not a second master); consumers with the key refuse them")
+            else:
+                out.warnings.append(f"another publisher of {output_topic} on this domain ({names}): two masters "
+                                    "give the same people different track and face ids; run one master per domain")
         return out
 
     def _store(self, now_s: float, failures: int, last_ok: bool | None, last_error: str, out: HealthVerdict) -> None:

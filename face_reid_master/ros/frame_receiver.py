@@ -94,17 +94,18 @@ class FrameReceiver:
             pass
         return True
 
-    def drain(self, subscriptions: Iterable[Any], now: float) -> None:
+    def drain(self, subscriptions: Iterable[Any], now: float,
+              heard: Callable[[str, bool], None] | None = None) -> None:
         """Take every message already waiting on the camera subscriptions (not one per executor pass), so that
-        one cycle sees all of them and drops the oldest when they are too many."""
-        for sub in subscriptions:
+        one cycle sees all of them and drops the oldest when they are too many; ``heard(topic, received)`` is told
+        of each (the camera topic slots count what opened with the key)."""
+        for sub in list(subscriptions):
             try:
                 with sub.handle:
                     while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                        if self.openers:
-                            self.receive_sealed(taken[0], now)
-                        else:
-                            self.receive(taken[0], now)
+                        received = self.receive_sealed(taken[0], now) if self.openers else self.receive(taken[0], now)
+                        if heard is not None:
+                            heard(sub.topic_name, received)
             except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway
                 self.log_throttled("drain", f"could not drain {sub.topic_name}: {type(exc).__name__}: {exc}",
                                    1, warn=True)

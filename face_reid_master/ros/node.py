@@ -46,6 +46,7 @@ from face_reid_master.ros.convert import markers_for
 from face_reid_master.ros.frame_receiver import FrameReceiver
 from face_reid_master.ros.people_topics import PeopleTopics
 from face_reid_master.ros.track_cdr import tracks_to_cdr
+from face_reid_master.ros.tracks_in import OwnTopicListener
 from face_reid_master.tracks_auth import TRACKS_PURPOSE, sealed_topic
 from face_reid_msgs.msg import NamedTrackArray, Sealed
 
@@ -84,6 +85,7 @@ class MasterNode(ManagedNode):
         self._own_timers: list[Any] = []
         self.tracks_pub: Any = None  # /tracks_named, or <tracks_topic>_sealed on a secured network
         self._tracks_sealer: Any = None  # seals the tracks (purpose "tracks") when the network has a key
+        self._own_topic = OwnTopicListener(self)  # a second master, or a keyless participant, on the tracks topic?
         self._stamps = OutputStamps()  # output stamps: not ahead of this master's clock, never backwards
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
@@ -128,6 +130,7 @@ class MasterNode(ManagedNode):
             started = time.time()  # nothing sealed before this configure is accepted (replays across restarts)
             self._openers = {purpose: Opener(key, purpose, age, started) for purpose in ("frames", "requests")}
             self._tracks_sealer = Sealer(key, self.get_fully_qualified_name(), TRACKS_PURPOSE)
+            self._own_topic.configure(key, self.get_fully_qualified_name(), age)
             self.get_logger().info("secured: only frames and admin requests sealed with the network key are accepted; "
                                    "tracks are published sealed with it")
             clear = [name for name in ("publish_people", "publish_hri") if values[name]]
@@ -192,6 +195,7 @@ class MasterNode(ManagedNode):
             if pub is not None:
                 self.destroy_publisher(pub)
         self.tracks_pub = self.markers_pub = None
+        self._own_topic.listen("", False)
         if self.people_topics is not None:
             self.people_topics.deactivate()
 
@@ -254,21 +258,21 @@ class MasterNode(ManagedNode):
         return self._photos
 
     # ------------------------------------------------------------------ camera messages
-    def _on_camera_message(self, message: bytes) -> None:
-        """A camera topic's message (CDR bytes): sealed on a secured network, else a CameraFrame."""
+    def _on_camera_message(self, message: bytes) -> bool:
+        """A camera topic's message (CDR bytes; sealed on a secured network): whether it was received."""
         if self._openers:
-            self._on_sealed(message)
-        else:
-            self._on_frame(message)
+            return self._on_sealed(message)
+        return self._on_frame(message)
 
-    def _on_frame(self, frame: bytes | Any) -> None:
+    def _on_frame(self, frame: bytes | Any) -> bool:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
         (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
         meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
-        self.receiver.receive(frame, now)
+        received = self.receiver.receive(frame, now)
         self._cycle(now)
+        return received
 
     @property
     def frames_dropped_overload(self) -> int:
@@ -281,12 +285,13 @@ class MasterNode(ManagedNode):
         if wait > 0.0:
             time.sleep(wait)
 
-    def _on_sealed(self, sealed: bytes) -> None:
-        """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one."""
+    def _on_sealed(self, sealed: bytes) -> bool:
+        """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one (True)."""
         self._wait_for_cycle()
         now = self.now_s()
-        if self.receiver.receive_sealed(sealed, now):
+        if received := self.receiver.receive_sealed(sealed, now):
             self._cycle(now)
+        return received
 
     def _cycle(self, now: float) -> None:
         """One master cycle: everything received since the last one (by ``now``, the node clock's seconds), in
@@ -295,7 +300,7 @@ class MasterNode(ManagedNode):
         if core is None or health is None or self.tracks_pub is None:
             return
         limit = self.schedule.begin_cycle(time.monotonic())
-        self.receiver.drain(self.cameras.subscribed.values(), now)
+        self.receiver.drain(self.cameras.subscribed.values(), now, self.cameras.heard)
         frames, dropped = self.receiver.intake.take(limit)
         if dropped:
             self.log_throttled("overload", f"overloaded: dropped the {dropped} oldest frames of this cycle "
@@ -455,20 +460,16 @@ class MasterNode(ManagedNode):
     def _health_verdict(self, now_s: float, core: MasterCore, health: NodeHealth) -> Any:
         """The store's, the overload's and the domain's part of the status (face_reid_master.health)."""
         store = self.store
-        others: list[str] = []
-        if self.tracks_pub is not None:  # another master (or anything) publishing our output topic
-            others = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                      for info in self.get_publishers_info_by_topic(self.tracks_pub.topic_name)]
-            mine = f"{self.get_namespace().rstrip('/')}/{self.get_name()}"
-            if mine in others:  # ours, once: a second master of the same name is another entry
-                others.remove(mine)
+        # another master (or anything) publishing our output topic
+        others = self._own_topic.others(self.tracks_pub.topic_name if self.tracks_pub is not None else "")
         return self._watch.verdict(
             now_s, frames_in=health.frames_in, frames_dropped_overload=self.frames_dropped_overload,
             store_write_failures=getattr(store, "write_failures", core.stats.store_errors),
             store_last_write_ok=getattr(store, "last_write_ok", None),
             store_last_error=getattr(store, "last_error", ""), faces_refused_no_id=core.stats.faces_refused_no_id,
             face_id_error=core.memory.id_error, other_publishers=others,
-            output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named")
+            output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named",
+            others_opened=self._own_topic.opened, others_unopened=self._own_topic.unopened)
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up

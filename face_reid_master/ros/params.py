@@ -14,6 +14,7 @@ from face_reid_camera.common.param_table import (
     config_from_values,
     config_specs,
 )
+from face_reid_master.camera_slots import PROBATION_MESSAGES, PROBATION_S, PROBATION_TOPICS
 from face_reid_master.core import MasterConfig
 from face_reid_master.robot.people_outputs import PeopleOutputConfig
 from face_reid_master.tracking.config import TrackerConfig
@@ -41,10 +42,14 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("topic_discovery_period_s", 2.0,
               "How often new camera topics are looked for and unmatched camera publishers checked (s).",
               low=0.05, high=3600.0),
-    ParamSpec("known_camera_ids", [""], "Accepted camera ids (list; [''] = accept any camera)."),
+    ParamSpec("known_camera_ids", [""],
+              "Accepted camera ids (list; [''] = accept any camera); a discovered camera topic must then be "
+              "<namespace>/<a known id>/face_reid/frames[_sealed] (other topics: list them in camera_topics)."),
     ParamSpec("max_camera_topics", 64,
-              "At most this many camera topics are subscribed (each buffers messages before they are checked; "
-              "with known_camera_ids, discovered topics must have a known camera id as a namespace) (count).",
+              "At most this many camera topics are subscribed for good (each buffers messages before they are "
+              "checked). With a network key a discovered topic takes one only once a message on it opens with the "
+              f"key: until then it is on probation (at most {PROBATION_TOPICS} at once; released, and tried again "
+              f"later, after {PROBATION_S:g} s or {PROBATION_MESSAGES} messages without one) (count).",
               low=1, high=10_000),
     ParamSpec("tracks_topic", "/tracks_named",
               "Where face_reid_msgs/NamedTrackArray is published (with a network key: sealed, as "

@@ -5,7 +5,8 @@ checked (:class:`~face_reid_master.tracks_auth.TracksVerifier`: forged, replayed
 refused and counted); plain tracks are never taken, and a warning says when someone publishes them. Without
 it: the plain topic is read, but when a sealed tracks topic exists (a secured master's network) an ERROR says
 the key is needed and plain tracks are refused (there they can only be spoofed). The callback gets a verified
-face_reid_msgs/NamedTrackArray.
+face_reid_msgs/NamedTrackArray. :class:`OwnTopicListener` is the master's: whether others publishing its
+sealed tracks topic hold the key.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from face_reid_master.tracks_auth import NetworkCheck, TracksVerifier, check_net
 from face_reid_msgs.msg import NamedTrackArray
 from face_reid_msgs.msg import Sealed as SealedMsg
 
-__all__ = ["MAX_SEALED_TRACKS_BYTES", "TracksSubscription", "subscribe_tracks"]
+__all__ = ["MAX_SEALED_TRACKS_BYTES", "OwnTopicListener", "TracksSubscription", "subscribe_tracks"]
 
 # A sealed tracks message larger than this is refused unread (a NamedTrack is ~300 bytes: 4 MiB is >10,000 tracks).
 MAX_SEALED_TRACKS_BYTES = 4 << 20
@@ -134,3 +135,56 @@ def subscribe_tracks(node: Any, callback: Callable[[Any], None], topic: str = "/
     """The master's tracks for ``callback`` (a verified face_reid_msgs/NamedTrackArray each): sealed ones opened
     with the network key in ``key_path`` ('' = none: plain ones); ``options``: see :class:`TracksSubscription`."""
     return TracksSubscription(node, callback, topic, key_path, **options)
+
+
+class OwnTopicListener:
+    """What others publish on a secured master's own sealed tracks topic: while :meth:`listen` is told that others
+    publish there, counts the messages of other senders that open with the network key (:attr:`opened`: another
+    master) and those that do not (:attr:`unopened`: a keyless participant). The master's own messages
+    (``own_sender``) are opened and not counted. Unsecured (no key configured) it never listens."""
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+        self.key: bytes | None = None
+        self.own_sender, self.max_age_s = "", 30.0
+        self.opened = self.unopened = 0
+        self.verifier: TracksVerifier | None = None
+        self._sub: Any = None
+
+    def configure(self, key: bytes | None, own_sender: str, max_age_s: float) -> None:
+        self.key, self.own_sender, self.max_age_s = key, own_sender, max_age_s
+
+    def others(self, topic: str) -> list[str]:
+        """The other publishers of ``topic`` (namespaced node names; the master itself once), listened to while
+        they exist ('' = none)."""
+        others = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                  for info in self.node.get_publishers_info_by_topic(topic)] if topic else []
+        mine = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
+        if mine in others:  # ours, once: a second master of the same name is another entry
+            others.remove(mine)
+        self.listen(topic, bool(others))
+        return others
+
+    def listen(self, topic: str, others: bool) -> None:
+        """Listen to ``topic`` while ``others`` publish it (and a key is configured); stop when they are gone."""
+        if others and self._sub is None and self.key is not None and topic:
+            self.verifier = TracksVerifier(self.key, self.max_age_s)
+            self.opened = self.unopened = 0
+            qos = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+            self._sub = self.node.create_subscription(SealedMsg, topic, self._on_sealed, qos, raw=True)
+        elif not others and self._sub is not None:
+            self.node.destroy_subscription(self._sub)
+            self._sub = None
+
+    def _on_sealed(self, raw: bytes) -> None:
+        if len(raw) > MAX_SEALED_TRACKS_BYTES or self.verifier is None:
+            self.unopened += 1
+            return
+        try:
+            sealed = unpack(deserialize_message(raw, SealedMsg))
+            self.verifier.open(sealed)
+        except Exception:  # not a Sealed, or not sealed with the key (forged, replayed, stale)
+            self.unopened += 1
+            return
+        if sealed.sender_id != self.own_sender:
+            self.opened += 1

@@ -46,6 +46,18 @@ def test_another_publisher_of_the_output_is_named() -> None:
     assert "/site_b/face_reid_master" in w and "/tracks_named" in w
 
 
+def test_a_keyless_publisher_of_the_sealed_output_is_not_called_a_second_master() -> None:
+    """What another publisher of a secured master's tracks topic sent did not open with the key: a keyless
+    participant, not a master (which would hold the key); once a message of another sender opens, a master."""
+    others = ["/stranger"]
+    (w,) = MasterHealthWatch().verdict(1.0, other_publishers=others, output_topic="/tracks_named_sealed",
+                                       others_unopened=5).warnings
+    assert "unauthenticated publisher of /tracks_named_sealed" in w and "/stranger" in w
+    assert "keyless" in w and "one master per domain" not in w
+    (w,) = MasterHealthWatch().verdict(1.0, other_publishers=others, others_unopened=5, others_opened=1).warnings
+    assert "one master per domain" in w
+
+
 def test_node_health_reports_errors_as_error_level() -> None:
     health = NodeHealth("m", "m")
     health.start(0.0)

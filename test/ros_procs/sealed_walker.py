@@ -20,6 +20,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--rate-hz", type=float, default=10.0)
     parser.add_argument("--wait-s", type=float, default=60.0)
+    parser.add_argument("--camera", default="walker", help="its camera id (it publishes in the namespace /<camera>)")
     args = parser.parse_args()
 
     import numpy as np
@@ -36,10 +37,10 @@ def main() -> int:
     node = rclpy.create_node("sealed_walker")
     qos = QoSProfile(depth=50, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     if args.key:
-        pub = node.create_publisher(Sealed, "/walker/face_reid/frames_sealed", qos)
-        sealer = Sealer(load_network_key(args.key), "walker")
+        pub = node.create_publisher(Sealed, f"/{args.camera}/face_reid/frames_sealed", qos)
+        sealer = Sealer(load_network_key(args.key), args.camera)
     else:
-        pub = node.create_publisher(CameraFrame, "/walker/face_reid/frames", qos)
+        pub = node.create_publisher(CameraFrame, f"/{args.camera}/face_reid/frames", qos)
         sealer = None
     rng = np.random.default_rng(7)
     face = rng.normal(size=128)
@@ -60,7 +61,7 @@ def main() -> int:
         emb = (1.4 * emb / np.linalg.norm(emb)).astype(np.float32)
         person = PersonRecord(np.array([2.0 * math.cos(0.2 * t), 2.0 * math.sin(0.2 * t), 0.0]), 0.05, 1.75, emb,
                               0.9, 0.8, "dlib_resnet_v1", 40.0)
-        msg = frame_record_to_msg(CameraFrameRecord("walker", now, (person,)), now)
+        msg = frame_record_to_msg(CameraFrameRecord(args.camera, now, (person,)), now)
         pub.publish(msg if sealer is None else seal_message(sealer, msg))
         sent += 1
         rclpy.spin_once(node, timeout_sec=0.0)

@@ -74,8 +74,10 @@ def test_fuzzed_master_keeps_the_walker_and_stores_nothing_forged(ros_domain_id:
         assert last.get("frames_rejected_unknown_camera", 0) >= 300, last
         assert last.get("detections_rejected_position", 0) + last.get("embeddings_rejected_norm", 0) >= 100, last
         return
-    # the hostile traffic did reach the master, and was refused and counted
-    assert last.get("rejected_sealed_forged", 0) >= 1000 and last.get("rejected_sealed_replayed", 0) >= 10, last
+    # the hostile traffic did reach the master, and was refused and counted; the hostile topics were released
+    # (nothing on them opened with the key) and tried again later, so most of their messages were never read
+    assert last.get("rejected_sealed_forged", 0) + last.get("rejected_sealed_replayed", 0) >= 20, last
+    assert last.get("rejected_topic_released", 0) >= 2, last
     assert last.get("add_person_refused", 0) >= 10 and last.get("forget_face_refused", 0) >= 10, last
     store = FaceStore(db, read_only=True, embedding_dim=128, embedding_space="dlib_resnet_v1")
     try:

@@ -176,9 +176,10 @@ def test_a_request_sealed_before_the_master_started_is_refused_also_after_a_rest
         master.destroy_node()
 
 
-def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_context, tmp_path: Path) -> None:
+def test_oversized_messages_are_refused_unread_and_keyless_topics_hold_no_slot(ros_context, tmp_path: Path) -> None:
     """Memory before authentication: a message larger than MAX_FRAME_BYTES is refused before it is read (no
-    deserialization, no decryption), and at most max_camera_topics camera topics are subscribed."""
+    deserialization, no decryption), and keyless camera topics are only on probation: none takes one of the
+    max_camera_topics slots."""
     from face_reid_master.ros.frame_receiver import MAX_FRAME_BYTES
 
     write_network_key(tmp_path / "network.key")
@@ -193,16 +194,16 @@ def test_oversized_messages_are_refused_unread_and_camera_topics_are_capped(ros_
     try:
         assert master.trigger_configure() == OK and master.trigger_activate() == OK
         pubs = [stranger.create_publisher(Sealed, f"/s{k}/face_reid/frames_sealed", 10) for k in range(3)]
-        assert spin_until(executor, lambda: len(master.cameras.subscribed) == 2 and len(master.cameras.refused) == 1)
-        assert spin_until(executor, lambda: sum(p.get_subscription_count() for p in pubs) == 2)
+        assert spin_until(executor, lambda: len(master.cameras.slots.probation) == 3)
+        assert spin_until(executor, lambda: sum(p.get_subscription_count() for p in pubs) == 3)
         big = Sealed(sender_id="s0", counter=time.time_ns(), nonce=bytes(12), ciphertext=bytes(MAX_FRAME_BYTES + 1))
         matched = [p for p in pubs if p.get_subscription_count() > 0]
         matched[0].publish(big)
         assert spin_until(executor, lambda: master.health.rejected.get("oversized", 0) == 1)
         assert master.health.rejected.get("sealed_forged", 0) == 0  # refused before any decryption
         report = master.diagnostics(master.now_s())
-        assert report.values["camera_topics_refused"] == "1" and report.values["rejected_oversized"] == "1"
-        assert "not subscribed (max_camera_topics" in report.message
+        assert report.values["camera_topics"] == "0" and report.values["camera_topics_probation"] == "3"
+        assert report.values["rejected_oversized"] == "1" and "no camera topic authenticated yet" in report.message
     finally:
         executor.shutdown()
         for node in (stranger, master):

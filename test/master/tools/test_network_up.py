@@ -113,6 +113,22 @@ def test_bad_network_files_are_refused_with_the_place(tmp_path: Path, text: str,
         load_network_file(path)
 
 
+def test_the_example_network_lists_its_cameras_for_the_master() -> None:
+    """The example master accepts exactly the example's cameras (known_camera_ids), and each camera's sealed topic
+    is one the master's discovery takes as that camera's (a stranger's look-alike topics are refused unread)."""
+    from face_reid_master.camera_slots import camera_of_topic
+
+    net = load_network_file(EXAMPLE)
+    cameras = [s for host in ("pc-entrance", "pc-hall") for s in node_specs(net, host)]
+    (master,) = node_specs(net, "pc-master")
+    known = _settings(master)["known_camera_ids"]
+    assert sorted(known) == sorted(_settings(c)["camera_id"] for c in cameras) == ["cam1", "cam2", "cam3"]
+    for camera in cameras:
+        namespace = next(a.removeprefix("__ns:=") for a in camera.args if a.startswith("__ns:="))
+        topic = f"{namespace}/{_settings(camera)['sealed_output_topic']}"
+        assert camera_of_topic(topic) == _settings(camera)["camera_id"], topic
+
+
 def test_dry_run_prints_runnable_commands(capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(EXAMPLE), "--host", "pc-hall", "--dry-run"]) == 0
     out = capsys.readouterr().out
