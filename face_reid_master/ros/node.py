@@ -105,7 +105,7 @@ class MasterNode(ManagedNode):
         self.values = values
         self.people_topics = PeopleTopics(self, values)  # checks its parameters and the world->map file first
         self.store = self._open_store() if values["persist_faces"] else None
-        gallery = self._load_gallery(str(values["gallery_path"]))
+        gallery = _gallery_people(self, str(values["gallery_path"]))
         body_metric = None
         if config.body_appearance_tracking and values["body_metric_path"]:
             from face_reid_master.body.metric_file import load_body_metric
@@ -234,18 +234,6 @@ class MasterNode(ManagedNode):
                          "warn", private=True)
         self._watch.store_opened(store.lost_face_ids, store.recovered_from, store.salvaged_face_ids)
         return store
-
-    def _load_gallery(self, path: str) -> dict[str, np.ndarray]:
-        if not path:
-            return {}
-        from face_reid_master.storage.gallery import load_gallery
-
-        result = load_gallery(Path(path), self.photo_embedder())
-        skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
-        if skipped:
-            self.log(f"gallery {path}: skipped {len(result.skipped_unreadable)} unreadable photos and "
-                     f"{len(result.skipped_no_face)} without a detectable face", "warn", private=True)
-        return dict(result.people)
 
     def photo_embedder(self) -> Any:
         """Photos -> embeddings of the master's space (gallery folder, add-person service)."""
@@ -470,6 +458,20 @@ class MasterNode(ManagedNode):
             face_id_error=core.memory.id_error, other_publishers=others,
             output_topic=self.tracks_pub.topic_name if self.tracks_pub is not None else "/tracks_named",
             others_opened=self._own_topic.opened, others_unopened=self._own_topic.unopened)
+
+
+def _gallery_people(node: MasterNode, path: str) -> dict[str, np.ndarray]:
+    """The predefined people of the gallery folder ``path`` ('' = none), with a warning for skipped photos."""
+    if not path:
+        return {}
+    from face_reid_master.storage.gallery import load_gallery
+
+    result = load_gallery(Path(path), node.photo_embedder())
+    skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
+    if skipped:
+        node.log(f"gallery {path}: skipped {len(result.skipped_unreadable)} unreadable photos and "
+                 f"{len(result.skipped_no_face)} without a detectable face", "warn", private=True)
+    return dict(result.people)
 
 
 # The store's worker thread takes the GIL whenever the main thread waits for DDS, and the main thread then waits up
