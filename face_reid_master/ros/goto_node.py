@@ -169,7 +169,7 @@ class GotoNode(ManagedNode):
         if values["names_service"]:
             self._names_client = self.create_client(ListFaces, str(values["names_service"]))
             self._seal_names(str(values["names_service"]), str(values["network_key_path"]))
-            self._own_timers.append(self.create_timer(1.0, self._ask_names))
+            self._own_timers.append(self.create_steady_timer(1.0, self._ask_names))
         self._started_s = self.now_s()
         self._decide(self.now_s(), announce=True)
 
@@ -360,6 +360,7 @@ class GotoNode(ManagedNode):
         values["target"] = shown(core.target, 64) if core is not None else ""
         values["status"] = self._last_status
         values["tracks_skipped_not_finite"] = str(core.tracks_skipped_not_finite if core is not None else 0)
+        values.update({k: str(v) for k, v in self.control_values().items()})  # ~/change_state_sealed
         return DiagnosticReport(self.get_name(), self.get_fully_qualified_name(),
                                 DiagnosticLevel.WARN if warnings else DiagnosticLevel.OK,
                                 "; ".join(warnings) or "ok", values)

@@ -110,8 +110,8 @@ class MapNode(ManagedNode):
         qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.publisher = self.create_publisher(OccupancyGrid, str(self.values["output_topic"]), qos)
-        self._own_timers = [self.create_timer(float(self.values["discovery_period_s"]), self.discover),
-                        self.create_timer(float(self.values["publish_period_s"]), self.publish_grid)]
+        self._own_timers = [self.create_steady_timer(float(self.values["discovery_period_s"]), self.discover),
+                            self.create_steady_timer(float(self.values["publish_period_s"]), self.publish_grid)]
         self._started_s = self.now_s()
         self.discover()
 
@@ -189,7 +189,8 @@ class MapNode(ManagedNode):
                    if quiet else "")
         values = {"cameras": str(len(self.fusion.cameras)), "summaries_received": str(self.received),
                   "summaries_rejected": str(self.rejected), "grids_published": str(self.published),
-                  "subscribed_topics": str(len(self._subs))}
+                  "subscribed_topics": str(len(self._subs)),
+                  **{k: str(v) for k, v in self.control_values().items()}}  # ~/change_state_sealed
         return DiagnosticReport(self.get_name(), self.get_fully_qualified_name(),
                                 DiagnosticLevel.WARN if quiet else DiagnosticLevel.OK, warning or "ok", values)
 

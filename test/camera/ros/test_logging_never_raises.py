@@ -194,3 +194,22 @@ def test_a_secured_camera_that_logged_an_error_survives_an_unsealed_control_call
         executor.shutdown()
         peer.destroy_node()
         procs.stop(camera)
+
+
+def test_the_map_and_goto_nodes_count_sealed_control_requests_on_diagnostics(ros_context) -> None:
+    """Every node kind with ``~/change_state_sealed`` reports its requests and refusals (the camera's and the
+    master's are checked with their DDS tests)."""
+    from face_reid_master.ros.goto_node import GotoNode
+    from face_reid_master.ros.map_node import MapNode
+
+    ctx = ros_context()
+    fmap, goto = MapNode(context=ctx), GotoNode(context=ctx)
+    try:
+        assert fmap.trigger_configure() == OK and goto.trigger_configure() == OK
+        for node in (fmap, goto):
+            node.control_requests, node.control_refusals = 3, 2
+            values = node.diagnostics(node.now_s()).values
+            assert (values["control_requests"], values["control_refused"]) == ("3", "2"), values
+    finally:
+        fmap.destroy_node()
+        goto.destroy_node()
