@@ -21,12 +21,13 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_rosout_default
 
-from face_reid_camera.common.ros.sealed import seal_message, seal_request
-from face_reid_camera.common.sealing import Sealer, load_network_key, write_network_key
+from face_reid_camera.common.ros.sealed import open_response, seal_message, seal_request
+from face_reid_camera.common.sealing import Opener, Sealer, load_network_key, write_network_key
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 NAME = "Zelda Quux"
+MASTER = "/face_reid_master"
 START_S = 180.0  # a loaded machine: the master embeds the gallery's photos first
 
 
@@ -54,11 +55,12 @@ def _frame(emb: np.ndarray) -> Any:
     return frame_record_to_msg(CameraFrameRecord("cam_a", now, (person,)), now)
 
 
-def _call(executor: Any, client: Any, request: Any) -> Any:
+def _call(executor: Any, client: Any, request: Any, key: bytes) -> Any:
+    """The master's reply to a sealed ``request``, opened with ``key``."""
     assert spin_until(executor, client.service_is_ready, 60.0)
     future = client.call_async(request)
     assert spin_until(executor, future.done, 60.0)
-    return future.result()
+    return open_response(Opener(key, "replies"), future.result(), MASTER, request)
 
 
 def test_a_secured_master_keeps_names_paths_and_assignments_off_rosout(ros_domain_id: int, ros_context,
@@ -92,7 +94,8 @@ def test_a_secured_master_keeps_names_paths_and_assignments_off_rosout(ros_domai
             log.read_text()[-3000:])
         admin = Sealer(key, "admin")
         add = peer.create_client(AddPerson, "/face_reid_master/add_person")
-        assert _call(executor, add, seal_request(admin, AddPerson.Request(name=NAME, embeddings=_face(1).tolist())))
+        assert _call(executor, add, seal_request(admin, AddPerson.Request(name=NAME, embeddings=_face(1).tolist()),
+                                                 MASTER), key).success
         # sealed frames of that person: a track, a face, the face named (assignment lines)
         assert spin_until(executor, lambda: frames.get_subscription_count() > 0, 60.0)
         camera = Sealer(key, "cam_a")
@@ -101,7 +104,8 @@ def test_a_secured_master_keeps_names_paths_and_assignments_off_rosout(ros_domai
             executor.spin_once(timeout_sec=0.1)
         assert spin_until(executor, lambda: "track " in log.read_text(), 60.0), log.read_text()[-3000:]
         forget = peer.create_client(ForgetFace, "/face_reid_master/forget_face")
-        assert _call(executor, forget, seal_request(Sealer(key, "admin2"), ForgetFace.Request(name=NAME)))
+        assert _call(executor, forget, seal_request(Sealer(key, "admin2"), ForgetFace.Request(name=NAME), MASTER),
+                     key).success
         # a barrier: public lines the master logged after all that have reached the reader
         stats_before = sum(m.startswith("stats:") for m in said())
         assert spin_until(executor, lambda: sum(m.startswith("stats:") for m in said()) >= stats_before + 2, 60.0)
