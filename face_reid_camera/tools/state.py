@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from collections.abc import Sequence
 from typing import Any
 
-from face_reid_camera.common.ros.service_call import call_service
+from face_reid_camera.common.ros.service_call import SealedCaller, call_service
 from face_reid_camera.common.transitions import QUERY, TRANSITIONS, TransitionError, plan
 
 __all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main"]
@@ -38,7 +37,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 _HINT = "is the node running on this ROS_DOMAIN_ID, and secured exactly when --key is given?"
-_REPLY_AGE_S = 30.0  # a sealed reply stamped further than this from this host's clock is not trusted
 
 
 def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
@@ -47,30 +45,13 @@ def _call(node: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -
 
 def _sealed(node: Any, target: str, transition: str, key_path: str, timeout_s: float) -> tuple[bool, str, str]:
     """The transition asked for with a request sealed for ``target``; the outcome from the node's sealed reply
-    only (a plain or forged reply, e.g. from a server without the key on the same name, is reported and passed
-    over: the call waits on for the genuine one until the timeout)."""
-    from face_reid_camera.common.ros.sealed import open_response, seal_request
-    from face_reid_camera.common.sealing import Opener, Sealer, SealError, load_network_key
+    only (:class:`SealedCaller`)."""
+    from face_reid_camera.common.sealing import load_network_key
     from face_reid_msgs.srv import ChangeState
 
-    key = load_network_key(key_path)
-    sealer = Sealer(key, f"{PROG}-{time.time_ns() % 10**9}")
-    request = seal_request(sealer, ChangeState.Request(transition=transition), target)
-    opener = Opener(key, "replies", _REPLY_AGE_S)
-
-    passed_over: list[str] = []
-
-    def genuine(reply: Any) -> Any:
-        try:
-            return open_response(opener, reply, target, request)
-        except SealError as exc:
-            if not passed_over:  # once: a rogue server answers every copy
-                print(f"{PROG}: {target}: unauthenticated reply from a server without the key ({exc}): ignored, "
-                      "waiting for the node's own", file=sys.stderr, flush=True)
-            passed_over.append(exc.code)
-            return None
-
-    reply = call_service(node, ChangeState, f"{target}/change_state_sealed", request, timeout_s, _HINT, genuine)
+    caller = SealedCaller(node, load_network_key(key_path), PROG, _HINT)
+    reply = caller.call(ChangeState, target, "change_state_sealed", ChangeState.Request(transition=transition),
+                        timeout_s)
     return bool(reply.success), str(reply.message), str(reply.state)
 
 

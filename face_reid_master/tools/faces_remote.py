@@ -10,53 +10,30 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from typing import Any
 
 from face_reid_camera.common.checks import shown
-from face_reid_camera.common.ros.service_call import call_service
+from face_reid_camera.common.ros.service_call import SealedCaller, call_service
 from face_reid_master.tools.faces_cli import TIME_HEADER, local_time, name_cell
 
 EXIT_OK, EXIT_NOT_FOUND, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 
 
 _HINT = "is the master running, with admin_services: true for add / forget, on this ROS_DOMAIN_ID?"
-_REPLY_AGE_S = 30.0  # a sealed reply stamped further than this from this host's clock is not trusted
 
 
 class _Client:
-    """Calls the master's services: plain without a key; with one, requests sealed for the master and only its
-    reply sealed for the request taken (others reported and passed over, the call waits on)."""
+    """Calls the master's services: plain without a key; with one, through :class:`SealedCaller` (requests sealed
+    for the master, only its reply sealed for the request taken)."""
 
     def __init__(self, node: Any, master: str, key: bytes | None, prog: str, timeout_s: float) -> None:
-        from face_reid_camera.common.sealing import Opener, Sealer
-
-        self.node, self.master, self.prog, self.timeout_s = node, master, prog, timeout_s
-        self.sealer = Sealer(key, f"{prog}-{time.time_ns() % 10**9}") if key is not None else None
-        self.opener = Opener(key, "replies", _REPLY_AGE_S) if key is not None else None
+        self.node, self.master, self.timeout_s = node, master, timeout_s
+        self.sealed = SealedCaller(node, key, prog, _HINT) if key is not None else None
 
     def call(self, srv_type: Any, service: str, request: Any) -> Any:
-        name = f"{self.master}/{service}"
-        if self.sealer is None:
-            return call_service(self.node, srv_type, name, request, self.timeout_s, _HINT)
-        from face_reid_camera.common.ros.sealed import open_response, seal_request
-        from face_reid_camera.common.sealing import SealError
-
-        sealed = seal_request(self.sealer, request, self.master)
-
-        passed_over: list[str] = []
-
-        def genuine(reply: Any) -> Any:
-            try:
-                return open_response(self.opener, reply, self.master, sealed)
-            except SealError as exc:
-                if not passed_over:  # once: a rogue server answers every copy
-                    print(f"{self.prog}: {name}: unauthenticated reply from a server without the key ({exc}): "
-                          "ignored, waiting for the master's own", file=sys.stderr, flush=True)
-                passed_over.append(exc.code)
-                return None
-
-        return call_service(self.node, srv_type, name, sealed, self.timeout_s, _HINT, genuine)
+        if self.sealed is None:
+            return call_service(self.node, srv_type, f"{self.master}/{service}", request, self.timeout_s, _HINT)
+        return self.sealed.call(srv_type, self.master, service, request, self.timeout_s)
 
 
 def format_remote_list(rows: list[tuple[int, str, int, float]], master: str) -> str:
