@@ -77,7 +77,8 @@ class StatusReader:
     """The goto's status lines for ``callback`` (one str each): with the key in ``key_path``, those on
     ``<goto>/status_sealed`` that open with it (sealed by the goto itself, purpose "status"; others are counted
     in :attr:`refused` by reason); without, the plain ``<goto>/status``. Latched: the current line arrives on
-    subscribing (a secured goto re-seals it every few seconds, so it is fresh enough to open)."""
+    subscribing (a secured goto keeps only it and re-seals it every 10 s, so it is fresh enough to open; an
+    unsecured one keeps its last 10 lines)."""
 
     def __init__(self, node: Any, callback: Callable[[str], None], key_path: str = "",
                  goto: str = DEFAULT_GOTO) -> None:

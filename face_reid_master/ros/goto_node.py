@@ -180,7 +180,10 @@ class GotoNode(ManagedNode):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.goal_pub = self.create_publisher(PoseStamped, str(values["goal_topic"]), reliable)
         secured = self._status_sealer is not None
-        self.status_pub = (self.create_publisher(SealedMsg, "~/status_sealed", latched) if secured else
+        # sealed: only the current line is kept for a late reader (older seals would not open: too old)
+        current = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.status_pub = (self.create_publisher(SealedMsg, "~/status_sealed", current) if secured else
                            self.create_publisher(String, "~/status", latched))
         self._tracks_sub = TracksSubscription(self, self._on_tracks, str(values["tracks_topic"]),
                                               str(values["network_key_path"]), reliable,

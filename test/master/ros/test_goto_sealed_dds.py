@@ -2,7 +2,8 @@
 name goes out only sealed. A keyless peer finds no ~/target topic to publish on and its plain or wrongly sealed
 ~/go_to requests are refused (counted on /diagnostics), so the robot keeps going to Alice; nothing is published
 on ~/status and /diagnostics names nobody; the sealed status opens with the key and names the target; the
-operator's sealed request (face-reid-goto --send NAME --key KEY) sends the robot to Bob and gets a sealed reply.
+operator's sealed request (face-reid-goto --send NAME --key KEY) sends the robot to Bob and gets a sealed reply,
+and the client takes no reply from a keyless server on the same service name.
 The unsecured goto's plain topic, service and status are covered by test_goto_dds.py."""
 
 from __future__ import annotations
@@ -160,15 +161,31 @@ def test_a_keyless_peer_cannot_steer_a_secured_goto_nor_read_its_target(ros_doma
 
         code, out, err = finished(cli("--send", "Bob"))
         assert code == 1 and "must be sealed" in err, (code, out, err)
-        code, out, err = finished(cli("--send", "Alice", "--key", str(key_path)))
-        assert code == 0 and f"{GOTO}: goal for 'Alice'" in out, (code, out, err)
+        # a keyless rogue server on the same service answers too ("accepted"): the client passes it over and
+        # takes the goto's sealed reply (asked again until the rogue heard one: discovery on a loaded machine)
+        rogue_calls = [0]
+
+        def rogue(request: Any, response: Any) -> Any:
+            rogue_calls[0] += 1
+            response.accepted, response.status = True, "goal for 'Mallory'"
+            return response
+
+        rogue_server = peer.create_service(GoToPerson, f"{GOTO}/go_to", rogue)
+        for _ in range(5):
+            code, out, err = finished(cli("--send", "Alice", "--key", str(key_path)))
+            assert code == 0 and f"{GOTO}: goal for 'Alice'" in out and "Mallory" not in out, (code, out, err)
+            if rogue_calls[0]:
+                break
+        assert rogue_calls[0], "the rogue server never heard a request"
+        peer.destroy_service(rogue_server)
         n = len(goals)
         assert spin_until(executor, lambda: goals_for(ALICE_Y, n), 30.0), [_person_y(g) for g in goals[n:]]
         # a late reader with the key: the latched sealed status names the target
         code, out, err = finished(cli("--status", "--key", str(key_path)))
         assert code == 0 and "goal for 'Alice'" in out, (code, out, err)
 
-        assert spin_until(executor, lambda: diagnostics.get("go_to_refused") == "5", 30.0), diagnostics
+        # and the keyless --send (a copy the client sent again while only the rogue had answered: a replay)
+        assert spin_until(executor, lambda: int(diagnostics.get("go_to_refused", 0)) >= 5, 30.0), diagnostics
         assert not plain_status and not peer.get_publishers_info_by_topic(f"{GOTO}/status")
         assert not status.refused, status.refused
         assert goto.poll() is None, logs()
