@@ -29,6 +29,7 @@ DEFAULT_GOTO = "/face_reid_goto"
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 _HINT = "is face-reid-goto running on this ROS_DOMAIN_ID, and secured exactly when --key is given?"
 _SEAL_AGE_S = 30.0  # a sealed reply or status stamped further than this from this host's clock is not taken
+_DRAIN_S = 0.5  # --status: the newest of the lines that arrive this long after the first
 STATUS_PURPOSE = "status"  # a secured goto's sealed status: not tracks, not a request or a reply
 
 
@@ -140,6 +141,9 @@ def _read_status(node: Any, key_path: str, goto: str, timeout_s: float) -> str:
         if time.monotonic() > deadline:
             raise TimeoutError(f"no status from {goto} within {timeout_s:g} s ({_HINT})")
         rclpy.spin_once(node, timeout_sec=0.1)
+    drained = time.monotonic() + _DRAIN_S  # an unsecured goto's latched history comes oldest first
+    while time.monotonic() < drained:
+        rclpy.spin_once(node, timeout_sec=0.05)
     return lines[-1]
 
 

@@ -155,8 +155,11 @@ def test_a_keyless_peer_cannot_steer_a_secured_goto_nor_read_its_target(ros_doma
                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
         def finished(proc: subprocess.Popen[str]) -> tuple[int, str, str]:
-            assert spin_until(executor, lambda: proc.poll() is not None, 120.0)  # the tracks go on meanwhile
+            done = spin_until(executor, lambda: proc.poll() is not None, 120.0)  # the tracks go on meanwhile
+            if not done:
+                proc.kill()
             out, err = proc.communicate()
+            assert done, (out, err)
             return proc.returncode, out, err
 
         code, out, err = finished(cli("--send", "Bob"))
@@ -195,6 +198,53 @@ def test_a_keyless_peer_cannot_steer_a_secured_goto_nor_read_its_target(ros_doma
         procs.stop(goto)
     log = (tmp_path / "goto.log").read_text()
     assert log.count("secured: no /face_reid_goto/target topic") == 1, log[-3000:]
+
+
+def test_the_client_drives_an_unsecured_goto_in_clear(ros_domain_id: int, ros_context, tmp_path: Path) -> None:
+    """Without --key face-reid-goto --send / --status use an unsecured goto's plain ~/go_to and ~/status."""
+    goto = procs.start(["-m", "face_reid_master.ros.goto_node", "--ros-args", "-p", "names_service:=''"],
+                       ros_domain_id, tmp_path / "goto.log")
+    ctx = ros_context()
+    peer = Node("peer", context=ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(peer)
+    tracks_pub = peer.create_publisher(NamedTrackArray, "/tracks_named", 10)
+    k = [0]
+
+    def publish_tracks() -> None:
+        k[0] += 1
+        tracks_pub.publish(_tracks(k[0]))
+
+    peer.create_timer(0.1, publish_tracks)
+    lines: list[str] = []
+    StatusReader(peer, lines.append, "", GOTO)
+
+    def cli(*args: str) -> tuple[int, str, str]:
+        proc = subprocess.Popen([sys.executable, "-m", "face_reid_master.ros.goto_node", *args, "--timeout-s", "60"],
+                                cwd=REPO_ROOT, env=procs.ros_env(ros_domain_id), stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        done = spin_until(executor, lambda: proc.poll() is not None, 120.0)
+        if not done:
+            proc.kill()
+        out, err = proc.communicate()
+        assert done, (out, err)
+        return proc.returncode, out, err
+
+    try:
+        assert spin_until(executor, lambda: any(s.startswith("no target") for s in lines), START_S), (
+            lines, (tmp_path / "goto.log").read_text()[-3000:])
+        code, out, err = cli("--send", "Bob")
+        assert code == 0 and f"{GOTO}: goal for 'Bob'" in out, (code, out, err)
+        code, out, err = cli("--send", "Nobody")
+        assert code == 1 and "not accepted: refused 'Nobody': unknown name" in err, (code, out, err)
+        assert spin_until(executor, lambda: "refused 'Nobody'" in lines[-1], 30.0), lines[-3:]
+        code, out, err = cli("--status")
+        assert code == 0 and "refused 'Nobody': unknown name" in out, (code, out, err)
+        assert goto.poll() is None
+    finally:
+        executor.shutdown()
+        peer.destroy_node()
+        procs.stop(goto)
 
 
 # ------------------------------------------------------------------------------------------ in-process
