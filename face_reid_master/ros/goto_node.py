@@ -8,12 +8,20 @@ Publishes geometry_msgs/PoseStamped goals on /goal_pose (what nav2's navigator t
 and one line per goal or refusal on ``~/status`` (std_msgs/String). Known names also come from the master's
 ``~/list_faces``, so that a learned person who is away is "not tracked" rather than "unknown name". A refusal
 does not cancel a goal the navigator already has (a nav2 action cancel is the robot application's call).
+
+Secured (a network key): only a holder of the key may set the target, and the target's name goes out only sealed.
+No ``~/target`` topic (a String cannot carry a seal); ``~/go_to`` does only a request sealed with the key for this
+node (others are refused, plainly, and counted: ``go_to_refused``) and answers it sealed; the status goes out
+sealed on ``~/status_sealed`` (face_reid_msgs/Sealed, purpose "status", sender this node's name; re-sealed every
+``_STATUS_RESEAL_S`` so that a late reader finds a fresh one) and nothing on ``~/status``. The goals stay plain: the
+navigation stack takes a PoseStamped (a position, no name). Clients: :mod:`face_reid_master.ros.goto_client`.
 """
 
 from __future__ import annotations
 
 import math
 import sys
+import time
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped
@@ -24,7 +32,7 @@ from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import DiagnosticLevel, DiagnosticReport
 from face_reid_camera.common.param_table import ParamSpec, ParamTable, config_from_values, config_specs
 from face_reid_camera.common.ros.lifecycle import ManagedNode, run_node
-from face_reid_camera.common.sealing import load_network_key
+from face_reid_camera.common.sealing import Sealer, SealError, load_network_key
 from face_reid_master.records import STATE_CONFIRMED, STATE_LOST, STATE_TENTATIVE, NamedTrackRecord
 from face_reid_master.robot.frames import PlanarTransform, load_world_to_map
 from face_reid_master.robot.standoff_goal import (
@@ -34,15 +42,22 @@ from face_reid_master.robot.standoff_goal import (
     StandoffGoalConfig,
 )
 from face_reid_master.ros.convert import track_from_msg
+from face_reid_master.ros.goto_client import STATUS_PURPOSE
 from face_reid_master.ros.tracks_in import TracksSubscription
+from face_reid_msgs.msg import Sealed as SealedMsg
 from face_reid_msgs.srv import GoToPerson, ListFaces
 
 NODE_NAME = "face_reid_goto"
 USAGE = """usage: face-reid-goto [NAME] [--ros-args -p world_to_map_path:=world_to_map.yaml -p name:=value ...]
 
+       face-reid-goto --send NAME [--key KEY] [--node /face_reid_goto]   (a running goto's ~/go_to)
+       face-reid-goto --status [--key KEY] [--node /face_reid_goto]      (its current status line)
+
 Sends the robot to the named person: goals (geometry_msgs/PoseStamped, map frame) on /goal_pose, a stand-off
 distance in front of the person and facing them, re-issued as they move; one status line per goal or refusal
 on ~/status. NAME (or the target_name parameter, the ~/go_to service, the ~/target topic) picks the person.
+With network_key_path: no ~/target topic, ~/go_to takes only requests sealed with the key (--send ... --key),
+and the status is sealed on ~/status_sealed (--status --key reads it).
 Parameters (`ros2 param describe` lists them):
 """
 
@@ -53,9 +68,11 @@ _NODE_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("tracks_topic", "/tracks_named", "The master's face_reid_msgs/NamedTrackArray."),
     ParamSpec("network_key_path", "",
               "The camera network's key file: only tracks sealed with it (on <tracks_topic>_sealed, what a secured "
-              "master publishes) are taken, and the node offers no lifecycle or parameter services (transitions "
-              "through ~/change_state_sealed: face-reid-state) ('' = unsecured: plain tracks, which any participant "
-              "could forge, and the standard services, open to the DDS domain).",
+              "master publishes) are taken, the target only from a ~/go_to request sealed with it (no ~/target "
+              "topic: face-reid-goto --send NAME --key KEY), the status is published sealed (~/status_sealed), and "
+              "the node offers no lifecycle or parameter services (transitions through ~/change_state_sealed: "
+              "face-reid-state) ('' = unsecured: plain tracks, which any participant could forge, a target anyone "
+              "can set, a status anyone can read, and the standard services, open to the DDS domain).",
               read_only=True),
     ParamSpec("goal_topic", "/goal_pose", "Where the goals (geometry_msgs/PoseStamped, map frame) are published."),
     ParamSpec("world_to_map_path", "",
@@ -81,6 +98,7 @@ TABLE = ParamTable(NODE_NAME, (*_NODE_PARAMS, *config_specs(StandoffGoalConfig))
 
 _MAX_STATUS_CHARS = 400
 _NAMES_REPLY_AGE_S = 30.0  # a sealed names reply stamped further than this from this host's clock is not taken
+_STATUS_RESEAL_S = 10.0  # a secured goto seals its (latched) status again this often: a late reader gets a fresh one
 
 
 def tracks_from_msg(msg: Any) -> tuple[list[NamedTrackRecord], int]:
@@ -117,7 +135,7 @@ class GotoNode(ManagedNode):
         self._names_future: Any = None
         self._names_asked_s = -math.inf
         self._names_loaded = False
-        self.counts = {"tracks_msgs": 0, "goals": 0, "refusals": 0, "requests": 0}
+        self.counts = {"tracks_msgs": 0, "goals": 0, "refusals": 0, "requests": 0, "go_to_refused": 0}
         self.rejected: dict[str, int] = {}
         self._subs: list[Any] = []
         self._tracks_sub: TracksSubscription | None = None
@@ -130,6 +148,9 @@ class GotoNode(ManagedNode):
         self._names_sealer: Any = None  # with a network key: names requests sealed, replies opened
         self._names_opener: Any = None
         self._names_request: Any = None  # the request of the call in flight (its reply is sealed for it)
+        self._status_sealer: Sealer | None = None  # with a network key: the status goes out sealed
+        self._status_sealed_s = -math.inf  # when the status was last sealed (monotonic)
+        self._said_secured = False
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
@@ -142,8 +163,10 @@ class GotoNode(ManagedNode):
         self.core = StandoffGoal(config_from_values(StandoffGoalConfig, values), transform)
         target = self._cli_target if self._cli_target is not None else str(values["target_name"])
         self.core.set_target(target)  # a bad name fails the start with its reason
-        if values["network_key_path"]:
-            load_network_key(str(values["network_key_path"]))  # a missing or unsafe key file fails the start
+        self._status_sealer = None
+        if values["network_key_path"]:  # a missing or unsafe key file fails the start
+            key = load_network_key(str(values["network_key_path"]))
+            self._status_sealer = Sealer(key, self.get_fully_qualified_name(), STATUS_PURPOSE)
         self.values = values
         self.log(f"goto: target {shown(self.core.target, 64) if self.core.target else '(none)'}, goals in frame "
                  f"{self.map_frame!r} (world->map x={transform.x_m:g} y={transform.y_m:g} "
@@ -156,13 +179,24 @@ class GotoNode(ManagedNode):
         latched = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.goal_pub = self.create_publisher(PoseStamped, str(values["goal_topic"]), reliable)
-        self.status_pub = self.create_publisher(String, "~/status", latched)
+        secured = self._status_sealer is not None
+        # sealed: only the current line is kept for a late reader (older seals would not open: too old)
+        current = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.status_pub = (self.create_publisher(SealedMsg, "~/status_sealed", current) if secured else
+                           self.create_publisher(String, "~/status", latched))
         self._tracks_sub = TracksSubscription(self, self._on_tracks, str(values["tracks_topic"]),
                                               str(values["network_key_path"]), reliable,
                                               on_refused=lambda reason, message: self._reject(f"tracks_{reason}",
                                                                                               message))
-        self._subs = [self.create_subscription(String, "~/target", self._on_target, reliable)]
-        self._service = self.create_service(GoToPerson, "~/go_to", self._on_go_to)
+        if secured:  # a String cannot carry a seal: the target only through the sealed ~/go_to
+            self._subs = []
+            self._service = self.create_service(GoToPerson, "~/go_to", self._on_go_to_sealed)
+            self._own_timers.append(self.create_steady_timer(_STATUS_RESEAL_S, self._reseal_status))
+            self._say_secured()
+        else:
+            self._subs = [self.create_subscription(String, "~/target", self._on_target, reliable)]
+            self._service = self.create_service(GoToPerson, "~/go_to", self._on_go_to)
         if values["robot_pose_topic"]:
             self._subs.append(self.create_subscription(PoseStamped, str(values["robot_pose_topic"]),
                                                        self._on_robot_pose, reliable))
@@ -227,6 +261,38 @@ class GotoNode(ManagedNode):
         response.status = self._last_status if self.core is not None else "not active"
         return response
 
+    def _on_go_to_sealed(self, request: Any, response: Any) -> Any:
+        """A secured goto's ~/go_to: only a request sealed with the network key for this node is done, and its
+        reply is sealed for it; any other is refused with the reason (plain: nothing else) and counted."""
+        from face_reid_camera.common.ros.sealed import open_request, reply_is_sealed, seal_response
+
+        fqn, error = self.get_fully_qualified_name(), None
+        try:
+            inner = open_request(self._control_opener, request, fqn, time.time())
+        except SealError as exc:
+            error = exc
+            self.counts["requests"] += 1
+            self.counts["go_to_refused"] += 1
+            response.accepted, response.status = False, f"refused: {exc}"
+            self.log_throttled("go_to_refused", f"go_to: {response.status}", self.counts["go_to_refused"], warn=True)
+        else:
+            self._on_go_to(inner, response)
+        if not reply_is_sealed(error):  # not a key holder's fresh request to this node: why, and nothing else
+            return response
+        return seal_response(self._control_sealer, response, fqn, request)
+
+    def _say_secured(self) -> None:
+        """Once per process: what a secured goto takes and publishes, and what stays plain."""
+        if self._said_secured:
+            return
+        self._said_secured = True
+        self.get_logger().info(
+            f"secured: no {self.resolve_topic_name('~/target')} topic (a std_msgs/String cannot carry a seal): the "
+            f"target is set only through {self.resolve_service_name('~/go_to')} with a request sealed with the "
+            "network key for this node (face-reid-goto --send NAME --key KEY), replies sealed; the status is "
+            f"published sealed on {self.resolve_topic_name('~/status_sealed')}; the goals on "
+            f"{self.values['goal_topic']} stay plain (the navigation stack's PoseStamped: a position, no name)")
+
     def _request(self, name: str) -> Decision | None:
         """A new target from the service or the topic: the decision for it at once (None: the name is refused)."""
         self.counts["requests"] += 1
@@ -266,6 +332,10 @@ class GotoNode(ManagedNode):
     def _waiting_line(self) -> str:
         """The status without a target: no goals, and where a name is taken from (logged once when it starts so)."""
         go_to, topic = self.resolve_service_name("~/go_to"), self.resolve_topic_name("~/target")
+        if self._status_sealer is not None:
+            return (f"no target: no goals; waiting for a name on the {go_to} service (face_reid_msgs/srv/GoToPerson, "
+                    "sealed with the network key: face-reid-goto --send NAME --key KEY), or start with "
+                    "face-reid-goto NAME")
         return (f"no target: no goals; waiting for a name on the {go_to} service (face_reid_msgs/srv/GoToPerson) or "
                 f"the {topic} topic (std_msgs/msg/String), or start with face-reid-goto NAME")
 
@@ -285,8 +355,23 @@ class GotoNode(ManagedNode):
         if (line == self._last_status and not force) or self.status_pub is None:
             return
         self._last_status = line
-        self.status_pub.publish(String(data=line))
+        self._publish_status(line)
         self.log_throttled("status", line, level="info", every_s=1.0, private=True)  # names the target
+
+    def _publish_status(self, line: str) -> None:
+        if self._status_sealer is None:
+            self.status_pub.publish(String(data=line))
+            return
+        from face_reid_camera.common.ros.sealed import seal_message
+
+        self.status_pub.publish(seal_message(self._status_sealer, String(data=line)))
+        self._status_sealed_s = time.monotonic()
+
+    def _reseal_status(self) -> None:
+        """The latched sealed status sealed again when it is getting old: a reader opens only recent seals."""
+        if self.status_pub is not None and self._last_status and (
+                time.monotonic() - self._status_sealed_s >= _STATUS_RESEAL_S / 2):
+            self._publish_status(self._last_status)
 
     # ------------------------------------------------------------------ known names
     def _seal_names(self, service: str, key_path: str) -> None:
@@ -357,8 +442,9 @@ class GotoNode(ManagedNode):
         core = self.core
         values: dict[str, str] = {k: str(v) for k, v in self.counts.items()}
         values.update({f"rejected_{k}": str(v) for k, v in sorted(self.rejected.items())})
-        values["target"] = shown(core.target, 64) if core is not None else ""
-        values["status"] = self._last_status
+        if self._status_sealer is None:  # secured: the target's name and goals only sealed (~/status_sealed)
+            values["target"] = shown(core.target, 64) if core is not None else ""
+            values["status"] = self._last_status
         values["tracks_skipped_not_finite"] = str(core.tracks_skipped_not_finite if core is not None else 0)
         values.update({k: str(v) for k, v in self.control_values().items()})  # ~/change_state_sealed
         return DiagnosticReport(self.get_name(), self.get_fully_qualified_name(),
@@ -376,6 +462,10 @@ def target_from_args(argv: list[str]) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point."""
     args = list(sys.argv if argv is None else argv)
+    if {"--send", "--status"} & set(args[1:]):  # a client of a running goto, not the node
+        from face_reid_master.ros.goto_client import main as client_main
+
+        return client_main(args[1:])
     target = target_from_args(args)
     return run_node("face-reid-goto", USAGE, TABLE, lambda: GotoNode(target), args)
 
