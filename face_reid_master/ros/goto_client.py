@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from face_reid_camera.common.ros.service_call import call_service
+from face_reid_camera.common.ros.service_call import SealedCaller, call_service
 
 __all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "STATUS_PURPOSE", "GoToReply", "StatusReader",
            "main", "send_go_to"]
@@ -55,23 +55,11 @@ def send_go_to(node: Any, name: str, key_path: str = "", goto: str = DEFAULT_GOT
     if not key_path:
         reply = call_service(node, GoToPerson, f"{goto}/go_to", request, timeout_s, _HINT)
         return GoToReply(bool(reply.accepted), str(reply.status))
-    from face_reid_camera.common.ros.sealed import open_response, seal_request
-    from face_reid_camera.common.sealing import Opener, Sealer, SealError, load_network_key
+    from face_reid_camera.common.sealing import load_network_key
 
-    key = load_network_key(key_path)
-    request = seal_request(Sealer(key, f"{PROG}-{time.time_ns() % 10**9}"), request, goto)
-    opener = Opener(key, "replies", _SEAL_AGE_S)
-    passed_over = [0]
-
-    def genuine(reply: Any) -> Any:
-        try:
-            return open_response(opener, reply, goto, request)
-        except SealError:  # a plain or forged reply: not the goto's own
-            passed_over[0] += 1
-            return None
-
-    reply = call_service(node, GoToPerson, f"{goto}/go_to", request, timeout_s, _HINT, genuine)
-    return GoToReply(bool(reply.accepted), str(reply.status), passed_over[0])
+    caller = SealedCaller(node, load_network_key(key_path), PROG, _HINT)
+    reply = caller.call(GoToPerson, goto, "go_to", request, timeout_s)
+    return GoToReply(bool(reply.accepted), str(reply.status), caller.passed_over)
 
 
 class StatusReader:

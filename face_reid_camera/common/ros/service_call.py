@@ -80,7 +80,8 @@ def _wait_again(client: Any, sequence: int) -> Any:
 class SealedCaller:
     """Calls services of secured nodes for one tool: each request sealed with the network ``key`` for its node,
     only that node's reply sealed for the request taken (a plain or forged one, e.g. from a server without the
-    key on the same name, is reported once on stderr and passed over: the call waits on for the genuine one)."""
+    key on the same name, is reported once on stderr and passed over: the call waits on for the genuine one;
+    :attr:`passed_over` counts them for the last call)."""
 
     node: Any
     key: bytes
@@ -92,6 +93,7 @@ class SealedCaller:
 
         self._sealer = Sealer(self.key, f"{self.prog}-{time.time_ns() % 10**9}")
         self._opener = Opener(self.key, "replies", REPLY_AGE_S)
+        self.passed_over = 0
 
     def call(self, srv_type: Any, target: str, service: str, request: Any, timeout_s: float) -> Any:
         """The reply (opened) of ``target``'s service ``service`` (e.g. ``change_state_sealed``) to ``request``;
@@ -101,16 +103,16 @@ class SealedCaller:
 
         name = f"{target}/{service}"
         sealed = seal_request(self._sealer, request, target)
-        passed_over: list[str] = []
+        self.passed_over = 0
 
         def genuine(reply: Any) -> Any:
             try:
                 return open_response(self._opener, reply, target, sealed)
             except SealError as exc:
-                if not passed_over:  # once: a rogue server answers every copy
+                if not self.passed_over:  # once: a rogue server answers every copy
                     print(f"{self.prog}: {name}: unauthenticated reply from a server without the key ({exc}): "
                           "ignored, waiting for the node's own", file=sys.stderr, flush=True)
-                passed_over.append(exc.code)
+                self.passed_over += 1
                 return None
 
         return call_service(self.node, srv_type, name, sealed, timeout_s, self.hint, genuine)
