@@ -31,7 +31,7 @@ from face_reid_master.core.admission import FrameAdmission
 from face_reid_master.core.config import MasterConfig
 from face_reid_master.core.detections import DetectionReader, Detections, degenerate_rows
 from face_reid_master.core.face_memory import FaceMemory
-from face_reid_master.core.records import FrameOutcome, MasterStats
+from face_reid_master.core.records import FrameOutcome, MasterStats, PublicId
 from face_reid_master.core.static_clutter import StaticClutter
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
@@ -39,9 +39,10 @@ from face_reid_master.identity.confidence_map import ConfidenceMap, default_conf
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
-from face_reid_master.identity.records import IdentityEventKind
+from face_reid_master.identity.records import IdentityEvent, IdentityEventKind
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
 from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
+from face_reid_master.tracking.interface import MultiCameraTracker, TrackerId
 from face_reid_master.tracking.records import FrameStatus, TrackState
 from face_reid_master.tracking.tracker import Tracker
 
@@ -79,13 +80,17 @@ class MasterCore:
         gallery: Mapping[str, NDArray[np.floating]] | None = None,
         body_metric: BodyMetricModel | None = None,
         confidence_map: ConfidenceMap | None = None,
+        tracker: MultiCameraTracker | None = None,
     ) -> None:
-        self.config = cfg = config or MasterConfig()
+        cfg = config or MasterConfig()
+        if tracker is not None:  # an injected tracker's own configuration is the one read (admission, timeouts)
+            cfg = dataclasses.replace(cfg, tracker=tracker.config)
+        self.config = cfg
         # what a decision's raw posterior is worth, measured on development scenarios (the published confidence)
         self.confidence_map = confidence_map if confidence_map is not None else default_confidence_map()
         self.stats = MasterStats()
         self._notices: list[str] = []  # things the node should log once, handed out with the next FrameOutcome
-        self.tracker = Tracker(cfg.tracker)
+        self.tracker: MultiCameraTracker = tracker if tracker is not None else Tracker(cfg.tracker)
         if body_metric is None and cfg.body_appearance_tracking:
             body_metric = default_body_metric()
         self.body_metric = body_metric if cfg.body_appearance_tracking else None
@@ -168,8 +173,7 @@ class MasterCore:
             self._restart_tracking(now_s)
         stamp = admission.stamp_s
         detections = self.reader.read(frame)
-        update = self.tracker.update_arrays(detections.positions, detections.stds, detections.heights, stamp,
-                                            frame.camera_id, detections.appearance, resync_backward=now_s is None)
+        update = self.tracker.update_frame(detections, stamp, frame.camera_id, resync_backward=now_s is None)
         if update.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             self.stats.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({update.status.value})", "tracker_late")
@@ -214,7 +218,7 @@ class MasterCore:
                     self.identity.add_body_observations(track_id, row[None, :], stamp, camera_id,
                                                         detections.heights[det: det + 1])
 
-    def finish_frames(self) -> list[Any]:
+    def finish_frames(self) -> list[IdentityEvent]:
         """The identity step on what the frames applied since the last step queued (their track events were told
         as each frame was applied; one step at the newest stamp), then face saving; returns the identity events.
         A no-op when nothing waits (process_frame without ``defer_identity`` calls it itself)."""
@@ -272,7 +276,7 @@ class MasterCore:
             self.clutter.forget(track_id)
 
     def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
-                       recovered: Iterable[int] = ()) -> list[Any]:
+                       recovered: Iterable[int] = ()) -> list[IdentityEvent]:
         """One identity update after the given track events; returns its events with published track ids."""
         self._track_events(deleted, stamp, lost, recovered)
         kept = []
@@ -302,10 +306,10 @@ class MasterCore:
         self._split[track_id] = (self.tracker.reserve_id(), stamp)
         self._face_obs[track_id] = 0
 
-    def public_id(self, track_id: int) -> int:
+    def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
         split = self._split.get(track_id)
-        return track_id if split is None else split[0]
+        return PublicId(track_id if split is None else split[0])
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map

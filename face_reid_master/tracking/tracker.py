@@ -33,6 +33,7 @@ from face_reid_master.tracking.appearance import AppearanceGallery, appearance_d
 from face_reid_master.tracking.association import Associator, Matches
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.history import FilterStep, TrackHistory, insert_late, record_updates
+from face_reid_master.tracking.interface import FrameDetections
 from face_reid_master.tracking.lifecycle import EPS_S, birth_candidates, expired, transitions
 from face_reid_master.tracking.records import (
     Detection,
@@ -120,6 +121,13 @@ class Tracker:
         else:
             positions, stds, heights = np.zeros((0, 2)), np.zeros(0), np.zeros(0)
         return self.update_arrays(positions, stds, heights, stamp_s, camera_id)
+
+    def update_frame(self, detections: FrameDetections, stamp_s: float, camera_id: str, *,
+                     resync_backward: bool = True) -> UpdateResult:
+        """The :class:`~face_reid_master.tracking.interface.MultiCameraTracker` entry: :meth:`update_arrays` on
+        a frame's detection arrays."""
+        d = detections
+        return self.update_arrays(d.positions, d.stds, d.heights, stamp_s, camera_id, d.appearance, resync_backward)
 
     def update_arrays(
         self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str,
