@@ -112,9 +112,6 @@ class MasterCore:
         self.memory = FaceMemory(cfg, self.stats, self.identity, self.people, store, self._notices)
         self.clutter = StaticClutter(cfg.static_clutter_after_s, cfg.static_clutter_radius_m)
         self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
-        self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed (since its last split)
-        self._split: dict[int, tuple[int, float]] = {}  # tracker id -> (published id, since s) after a swap
-        self._gone: list[int] = []  # tracks deleted since the last identity step (their split ids go after it)
         # what the next identity step decides on beyond the identity layer's own queue: the newest stamp applied
         # since the last step (None: nothing waits) and the tracks given a face observation meanwhile
         self._undecided_stamp: float | None = None
@@ -207,7 +204,7 @@ class MasterCore:
                 continue
             emb, eye_px = face
             if self.identity.add_validated_observations(track_id, emb[None, :], stamp, eye_px, camera_id):
-                self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
+                self.identity.tracks.entries[track_id].face_observations += 1
                 self._touched.add(track_id)
                 self.stats.embeddings_used += 1
         appearance = detections.appearance
@@ -264,15 +261,14 @@ class MasterCore:
     # ------------------------------------------------------------------------------ decide
     def _track_events(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
                       recovered: Iterable[int] = ()) -> None:
-        """The tracker's lost / recovered / deleted tracks of one update, told to the face table."""
+        """The tracker's lost / recovered / deleted tracks of one update, told to the identity layer (a deleted
+        track's record goes at the next identity step, after its last evidence)."""
         for track_id in lost:
             self.identity.track_lost(track_id)
         for track_id in recovered:
             self.identity.track_recovered(track_id)
         for track_id in deleted:
             self.identity.track_deleted(track_id, stamp)
-            self._face_obs.pop(track_id, None)
-            self._gone.append(track_id)
             self.clutter.forget(track_id)
 
     def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
@@ -295,21 +291,21 @@ class MasterCore:
             if ev.kind == IdentityEventKind.SWAPPED:
                 self.stats.faces_released_swapped += 1
                 self._split_track(ev.track_id, stamp)
-        for track_id in self._gone:
-            self._split.pop(track_id, None)
-        self._gone.clear()
+        self.identity.tracks.retired.clear()  # the records of the tracks deleted at this step are read: they go
         return kept
 
     def _split_track(self, track_id: int, stamp: float) -> None:
         """A swapped track is someone else from now on: it is published under a new id, so that no consumer
         carries the person it was over to the one it has become (its old id ends here)."""
-        self._split[track_id] = (self.tracker.reserve_id(), stamp)
-        self._face_obs[track_id] = 0
+        track = self.identity.tracks.record(track_id)
+        assert track is not None, "a SWAPPED event names a track of this step"
+        track.public_id, track.public_since_s = self.tracker.reserve_id(), stamp
+        track.face_observations = 0
 
     def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
-        split = self._split.get(track_id)
-        return PublicId(track_id if split is None else split[0])
+        track = self.identity.tracks.record(track_id)
+        return PublicId(track_id if track is None else track.public_id)
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
@@ -364,12 +360,15 @@ class MasterCore:
         out = []
         snaps = [s for s in self.tracker.snapshots(at_s, include_tentative=self.config.publish_tentative)
                  if s.state != TrackState.DELETED]
-        clutter = self.clutter.among(snaps, self._face_obs)
+        records = self.identity.tracks.entries
+        clutter = self.clutter.among(snaps, records)
         self.static_clutter_tracks = len(clutter)
         for snap in snaps:
             if snap.track_id in clutter:
                 continue
             fid = self.identity.face_id_of(snap.track_id) or 0
+            track = records.get(snap.track_id)
+            since = None if track is None else track.public_since_s
             out.append(
                 NamedTrackRecord(
                     track_id=self.public_id(snap.track_id),
@@ -377,14 +376,13 @@ class MasterCore:
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=self.published_confidence(snap.track_id),
                     identity_evidence=self.identity.evidence_of(snap.track_id),
-                    face_observations=self._face_obs.get(snap.track_id, 0),
+                    face_observations=0 if track is None else track.face_observations,
                     position_xy=snap.position_xy,
                     velocity_xy=snap.velocity_xy,
                     covariance=snap.covariance,
                     height_m=float(snap.height_m),
                     state=int(snap.state),
-                    first_seen_s=float(self._split[snap.track_id][1] if snap.track_id in self._split
-                                       else snap.created_s),
+                    first_seen_s=float(snap.created_s if since is None else since),
                     last_seen_s=float(snap.last_seen_s),
                     cameras=tuple(sorted(snap.cameras)),
                 )

@@ -29,7 +29,15 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
-from face_reid_master.identity.entries import Chunk, FaceEntry, TrackEntry, checked_observations, eye_rows, rows_of
+from face_reid_master.identity.entries import (
+    BodyChunk,
+    Chunk,
+    FaceEntry,
+    TrackRecord,
+    checked_observations,
+    eye_rows,
+    rows_of,
+)
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.lent_faces import LentFaces
@@ -130,9 +138,8 @@ class IdentityManagerBase:
         without body evidence or for a deleted track."""
         if self._bodies is None or self.tracks.gone(track_id):
             return
-        self._bodies.queue(track_id, embeddings, stamp_s, source, heights)
+        self.tracks.queue_bodies(track_id, BodyChunk(embeddings, stamp_s, source, heights))
         self.stats.body_observations += embeddings.shape[0]
-        self.tracks.seen(track_id, stamp_s, latest=False)
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
@@ -165,6 +172,7 @@ class IdentityManagerBase:
         then by body), then handle deaths."""
         stamp = check_stamp(stamp_s)
         self.stats.steps += 1
+        self.tracks.retired.clear()
         events: list[IdentityEvent] = []
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
@@ -216,7 +224,7 @@ class IdentityManagerBase:
         if unassigned[0]:
             self._ingest_unassigned(*unassigned)
 
-    def _learn_identified(self, track: TrackEntry, chunks: list[Chunk], obs: F32Array,
+    def _learn_identified(self, track: TrackRecord, chunks: list[Chunk], obs: F32Array,
                           keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
                           ) -> tuple[int | None, list[Chunk], F32Array | None]:
         """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
@@ -247,7 +255,7 @@ class IdentityManagerBase:
         once seen, overrules it)."""
         bodies = self._bodies
         assert bodies is not None
-        bodies.observe(self.tracks.entries, list(self.faces.entries))
+        bodies.observe(self.tracks.take_bodies(), list(self.faces.entries))
         events = []
         for tid, fid, p in bodies.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
@@ -255,7 +263,7 @@ class IdentityManagerBase:
                 events.append(self._apply_body_decision(track, fid, p, stamp))
         return events
 
-    def _apply_body_decision(self, track: TrackEntry, fid: int, confidence: float, stamp: float) -> IdentityEvent:
+    def _apply_body_decision(self, track: TrackRecord, fid: int, confidence: float, stamp: float) -> IdentityEvent:
         """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
         self._give_face(track, fid, confidence, stamp, "body", new=False)
         self.stats.assigned_by_body += 1
@@ -336,7 +344,7 @@ class IdentityManagerBase:
             track.face_id, track.confidence, track.n_observations = None, 0.0, 0
             track.votes.clear()
             track.inconsistent.clear()
-            self.tracks.pending.pop(track.track_id, None)
+            self.tracks.drop_faces(track)
         self.faces.forget(fid)
         if self.body_evidence is not None:
             self.body_evidence.forget_face(fid)
@@ -372,7 +380,7 @@ class IdentityManagerBase:
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
 
-    def _give_face(self, track: TrackEntry, fid: int, confidence: float, stamp: float, evidence: str,
+    def _give_face(self, track: TrackRecord, fid: int, confidence: float, stamp: float, evidence: str,
                    new: bool) -> None:
         """The track carries face ``fid`` from now on (a known face leaves face_list, taken from a LOST track that
         lent it); the bodies it gathered join the face's gallery."""
@@ -382,11 +390,11 @@ class IdentityManagerBase:
             self.faces.make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
-        self._on_track_identified(track.track_id)
+        self._on_track_identified(track)
         track.face_id, track.confidence, track.evidence, track.new_face = fid, float(confidence), evidence, new
         self._move_track_bodies(track.track_id, fid)
 
-    def _release_swapped(self, track: TrackEntry, stamp: float, since: float) -> IdentityEvent:
+    def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
@@ -407,7 +415,7 @@ class IdentityManagerBase:
         if track.face_id is None:
             if track.slot is not None:
                 self._bank.free_slot(track.slot)
-            self._on_track_forgotten(tid)
+            self._on_track_forgotten(track)
             return None
         if not self._lent.returned(track.face_id, tid):  # a lent face is in face_list already
             self.faces.make_available(track.face_id)
@@ -425,7 +433,7 @@ class IdentityManagerBase:
         """(track id, face id or 0 = new person, confidence) for every unassigned track decided now."""
         raise NotImplementedError
 
-    def _current_confidence(self, track: TrackEntry) -> float:
+    def _current_confidence(self, track: TrackRecord) -> float:
         """Confidence of an unassigned track's leading hypothesis, in [0, 1]."""
         raise NotImplementedError
 
@@ -435,9 +443,9 @@ class IdentityManagerBase:
     def _on_faces_unavailable(self, column_indices: list[int]) -> None:
         """Faces at these 0-based positions of face_list are leaving it."""
 
-    def _on_track_identified(self, track_id: int) -> None:
+    def _on_track_identified(self, track: TrackRecord) -> None:
         """An unassigned track got a face id (its table row goes away)."""
 
-    def _on_track_forgotten(self, track_id: int) -> None:
+    def _on_track_forgotten(self, track: TrackRecord) -> None:
         """An unassigned track died."""
 

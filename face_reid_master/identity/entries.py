@@ -1,4 +1,4 @@
-"""What the identity manager keeps per learned face and per live track, and the observations it queues."""
+"""What the master keeps per learned face and per live track (one record each), and the observations it queues."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Chunk", "FaceEntry", "TrackEntry", "Vote", "checked_observations", "eye_rows", "rows_of"]
+__all__ = [
+    "BodyChunk", "Chunk", "FaceEntry", "TrackRecord", "Vote", "checked_observations", "eye_rows", "rows_of",
+]
 
 FloatArray = npt.NDArray[np.float64]
 F32Array = npt.NDArray[np.float32]
@@ -45,11 +47,14 @@ class Chunk(NamedTuple):
     source: str
 
 
-@dataclass
-class TrackEntry:
-    """A live track of track_list, as seen by the identity layer (read by the classification methods)."""
+@dataclass(eq=False)
+class TrackRecord:
+    """Everything the master keeps about one live track, in one place (track_list of Algorithm 1 holds them;
+    :meth:`~face_reid_master.identity.track_list.TrackList.remove` drops it whole). Keyed by the tracker's id;
+    the tracker keeps the kinematics under that id (the handle), the master publishes the track as
+    ``public_id``."""
 
-    track_id: int
+    track_id: int  # the tracker's id: the kinematics handle (face_reid_master.tracking.interface.TrackerId)
     slot: int | None = None  # bank slot buffering observed features while unassigned (track.face_images)
     n_observations: int = 0
     first_seen_s: float = 0.0
@@ -60,6 +65,26 @@ class TrackEntry:
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
     evidence: str = ""  # identified: "face", "body" (no face seen yet) or "both" (body, then its face agreed)
     new_face: bool = False  # identified: its decision created the face (a person not known before)
+    face_chunks: list[Chunk] = field(default_factory=list)  # face observations waiting for the next step
+    body_queue: list[BodyChunk] = field(default_factory=list)  # body observations waiting for the next step
+    bayes_row: int = 0  # Bayes method: its row of the posterior table while unassigned (0: none)
+    public_id: int = 0  # the id it is published under (core.records.PublicId): track_id until a swap split it
+    public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
+    face_observations: int = 0  # face embeddings the master used since it got its public id
+
+    def __post_init__(self) -> None:
+        if not self.public_id:
+            self.public_id = self.track_id
+
+
+class BodyChunk(NamedTuple):
+    """Body observations of one track queued for the identity step: embeddings (k, r), stamp, camera and head
+    heights (k,; None = unknown)."""
+
+    embeddings: F32Array
+    stamp_s: float
+    source: str
+    heights: FloatArray | None
 
 
 def rows_of(chunks: list[Chunk]) -> F32Array:
