@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -36,6 +36,7 @@ from face_reid_master.core.static_clutter import StaticClutter
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.confidence_map import ConfidenceMap, default_confidence_map
+from face_reid_master.identity.evidence import EvidenceSource
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
@@ -81,6 +82,7 @@ class MasterCore:
         body_metric: BodyMetricModel | None = None,
         confidence_map: ConfidenceMap | None = None,
         tracker: MultiCameraTracker | None = None,
+        evidence_sources: Sequence[EvidenceSource] = (),
     ) -> None:
         cfg = config or MasterConfig()
         if tracker is not None:  # an injected tracker's own configuration is the one read (admission, timeouts)
@@ -100,7 +102,7 @@ class MasterCore:
         # naming needs a threshold only once there are predefined people (add_person checks it too)
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
-        self.identity = self._identity_manager(model)
+        self.identity = self._identity_manager(model, evidence_sources)
         dim = space_dim(cfg.embedding_space)
         self.people = PredefinedPeople(
             {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
@@ -118,8 +120,9 @@ class MasterCore:
         self._touched: set[int] = set()
         self._last_stamp = -math.inf
 
-    def _identity_manager(self, model: FaceLikelihood) -> IdentityManagerBase:
-        """Algorithm 1 with the configured method (bayes: with body evidence where bodies are used)."""
+    def _identity_manager(self, model: FaceLikelihood, sources: Sequence[EvidenceSource]) -> IdentityManagerBase:
+        """Algorithm 1 with the configured method (bayes: with body evidence where bodies are used) and the
+        given further cues."""
         cfg = self.config
         dim = space_dim(cfg.embedding_space)
         if cfg.method == "threshold":
@@ -127,7 +130,7 @@ class MasterCore:
                 "threshold", distance_threshold=self.threshold_distance, n_votes=cfg.threshold_votes,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=self.threshold_distance if cfg.learn_only_consistent_features else None,
-                release_after_inconsistent=cfg.release_after_inconsistent,
+                release_after_inconsistent=cfg.release_after_inconsistent, evidence_sources=sources,
             )
         body_evidence = None
         if self.body_metric is not None and cfg.body_identity:
@@ -146,7 +149,7 @@ class MasterCore:
             max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
             feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
-            lend_lost_faces=cfg.lend_lost_faces,
+            lend_lost_faces=cfg.lend_lost_faces, evidence_sources=sources,
         )
 
     @property
@@ -178,7 +181,7 @@ class MasterCore:
         self.stats.detections_rejected_position += len(update.rejected_detections)
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
-        self._observe(update.associations, detections, stamp, frame.camera_id)
+        self._observe(update.associations, detections, stamp, frame)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
         self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)
         events = () if defer_identity else tuple(self.finish_frames())
@@ -195,9 +198,10 @@ class MasterCore:
         self._last_stamp = -math.inf
 
     def _observe(self, associations: list[tuple[int, int]], detections: Detections, stamp: float,
-                 camera_id: str) -> None:
-        """The associated detections' faces and bodies as identity evidence (the tracks a face was added to are
-        remembered for face saving after the identity step)."""
+                 frame: CameraFrameRecord) -> None:
+        """The associated detections' faces, then each further cue's observations (the body, ...), as identity
+        evidence (the tracks a face was added to are remembered for face saving after the identity step)."""
+        camera_id = frame.camera_id
         for track_id, det in associations:
             face = detections.faces.get(det)
             if face is None:
@@ -207,13 +211,12 @@ class MasterCore:
                 self.identity.tracks.entries[track_id].face_observations += 1
                 self._touched.add(track_id)
                 self.stats.embeddings_used += 1
-        appearance = detections.appearance
-        if appearance is not None and self.identity.body_evidence is not None:
+        for source in self.identity.sources:
             for track_id, det in associations:
-                row = appearance[det]
-                if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
-                    self.identity.add_body_observations(track_id, row[None, :], stamp, camera_id,
-                                                        detections.heights[det: det + 1])
+                values = source.read(frame.people[detections.person_index[det]], det, detections)
+                if values is not None:
+                    self.identity.add_cue_observations(source.kind, track_id, values, stamp, camera_id,
+                                                       detections.heights[det: det + 1])
 
     def finish_frames(self) -> list[IdentityEvent]:
         """The identity step on what the frames applied since the last step queued (their track events were told

@@ -21,7 +21,7 @@ tracks never need distances to other faces.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -30,7 +30,6 @@ from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
 from face_reid_master.identity.entries import (
-    BodyChunk,
     Chunk,
     FaceEntry,
     TrackRecord,
@@ -38,6 +37,7 @@ from face_reid_master.identity.entries import (
     eye_rows,
     rows_of,
 )
+from face_reid_master.identity.evidence import CueChunk, Evidence, EvidenceSource
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.lent_faces import LentFaces
@@ -82,10 +82,17 @@ class IdentityManagerBase:
         release_after_inconsistent: int = 0,
         body_evidence: BodyEvidence | None = None,
         lend_lost_faces: bool = False,
+        evidence_sources: Sequence[EvidenceSource] = (),
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
-        self._bodies = None if body_evidence is None else BodyIdentification(body_evidence)
         self.body_evidence = body_evidence
+        # the cues besides the face, in the order they decide (the body first)
+        self.sources: list[EvidenceSource] = [] if body_evidence is None else [BodyIdentification(body_evidence)]
+        self.sources.extend(evidence_sources)
+        self._source_kinds = {s.kind for s in self.sources}
+        if len(self._source_kinds) != len(self.sources) or Evidence.FACE in self._source_kinds:
+            raise ValueError(f"evidence sources need distinct kinds other than the face, got "
+                             f"{[s.kind for s in self.sources]}")
         self.lend_lost_faces = bool(lend_lost_faces)
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
@@ -136,10 +143,18 @@ class IdentityManagerBase:
         """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) and head
         ``heights`` (k, m; None = unknown) seen by camera ``source`` for the next :meth:`step`; ignored
         without body evidence or for a deleted track."""
-        if self._bodies is None or self.tracks.gone(track_id):
+        self.add_cue_observations(Evidence.BODY, track_id, embeddings, stamp_s, source, heights)
+
+    def add_cue_observations(self, kind: str, track_id: int, values: F32Array, stamp_s: float, source: str = "",
+                             heights: FloatArray | None = None) -> None:
+        """Queue observations (k, r) of cue ``kind`` (an evidence source's, validated by the caller) on a track,
+        with head ``heights`` (k,; None = unknown) seen by camera ``source``, for the next :meth:`step`; ignored
+        without that source or for a deleted track."""
+        if kind not in self._source_kinds or self.tracks.gone(track_id):
             return
-        self.tracks.queue_bodies(track_id, BodyChunk(embeddings, stamp_s, source, heights))
-        self.stats.body_observations += embeddings.shape[0]
+        self.tracks.queue_cue(kind, track_id, CueChunk(values, stamp_s, source, heights))
+        if kind == Evidence.BODY:
+            self.stats.body_observations += values.shape[0]
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
@@ -177,8 +192,8 @@ class IdentityManagerBase:
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
-        if self._bodies is not None:
-            events.extend(self._body_step(stamp))
+        for source in self.sources:
+            events.extend(self._cue_step(source, stamp))
         events.extend(self._side_events)
         self._side_events = []
         deaths, self.tracks.deaths = self.tracks.deaths, {}
@@ -245,50 +260,44 @@ class IdentityManagerBase:
                 return None, swapped, obs
             if obs.shape[0] == 0:
                 return face.slot, chunks, None
-        if track.evidence == "body" and obs.shape[0]:
-            track.evidence = "both"  # its own face agrees with the body decision
+        if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
+            track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
         return face.slot, chunks, obs
 
-    def _body_step(self, stamp: float) -> list[IdentityEvent]:
-        """Bodies of identified tracks join their face's gallery; faceless tracks gather body evidence against
-        every learned face and are given one of face_list when that evidence is strong enough (their own face,
-        once seen, overrules it)."""
-        bodies = self._bodies
-        assert bodies is not None
-        bodies.observe(self.tracks.take_bodies(), list(self.faces.entries))
+    def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
+        """One cue's observations: an identified track's describe its face's person; faceless tracks gather
+        evidence against every learned face and are given one of face_list when it is strong enough (their own
+        face, once seen, overrules it)."""
+        source.observe(self.tracks.take_cue(source.kind), list(self.faces.entries))
         events = []
-        for tid, fid, p in bodies.decide(self.faces.available, stamp, self._faces_alike):
+        for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
-                events.append(self._apply_body_decision(track, fid, p, stamp))
+                events.append(self._apply_cue_decision(track, fid, p, stamp, source.kind))
         return events
 
-    def _apply_body_decision(self, track: TrackRecord, fid: int, confidence: float, stamp: float) -> IdentityEvent:
-        """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
-        self._give_face(track, fid, confidence, stamp, "body", new=False)
-        self.stats.assigned_by_body += 1
+    def _apply_cue_decision(self, track: TrackRecord, fid: int, confidence: float, stamp: float,
+                            evidence: str) -> IdentityEvent:
+        """A faceless track is face ``fid``'s person by another cue: it carries the face (no features to add)."""
+        self._give_face(track, fid, confidence, stamp, evidence, new=False)
+        if evidence == Evidence.BODY:
+            self.stats.assigned_by_body += 1
         return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
-                             evidence="body")
-
-    def _move_track_bodies(self, tid: int, fid: int) -> None:
-        """The bodies a track gathered before its decision join its face's gallery."""
-        if self._bodies is not None:
-            self._bodies.move_track_bodies(tid, fid)
+                             evidence=evidence)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are learned ``face``'s person: closer than the body evidence's
         ``alike_face_distance`` (default: half the decision distance)."""
-        assert self.body_evidence is not None
-        limit = self.body_evidence.alike_face_distance
+        limit = None if self.body_evidence is None else self.body_evidence.alike_face_distance
         return self.faces.alike(face, others, 0.5 * self.feature_gate_distance
                                 if limit is None and self.feature_gate_distance is not None else limit)
 
     # ------------------------------------------------------------------------------ queries
     def evidence_of(self, track_id: int) -> str:
-        """What identified a live track: "face", "body", "both" (a body decision its face then confirmed), or
-        "" (unidentified / unknown track)."""
+        """What identified a live track (:class:`~.evidence.Evidence`: the face, a cue, both a cue and then its
+        face), or "" (unidentified / unknown track)."""
         track = self.tracks.entries.get(track_id)
-        return "" if track is None or track.face_id is None else track.evidence
+        return Evidence.NONE if track is None or track.face_id is None else track.evidence
 
     def decided_new(self, track_id: int) -> bool:
         """Whether a live identified track's decision created its face (False otherwise)."""
@@ -346,8 +355,8 @@ class IdentityManagerBase:
             track.inconsistent.clear()
             self.tracks.drop_faces(track)
         self.faces.forget(fid)
-        if self.body_evidence is not None:
-            self.body_evidence.forget_face(fid)
+        for source in self.sources:
+            source.forget_face(fid)
         self.stats.faces_forgotten += 1
         return True
 
@@ -375,7 +384,7 @@ class IdentityManagerBase:
             face.n_observations += track.n_observations
             kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
-        self._give_face(track, fid, confidence, stamp, "face", new=kind == IdentityEventKind.NEW_FACE)
+        self._give_face(track, fid, confidence, stamp, Evidence.FACE, new=kind == IdentityEventKind.NEW_FACE)
         track.slot = None
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
@@ -392,7 +401,8 @@ class IdentityManagerBase:
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track)
         track.face_id, track.confidence, track.evidence, track.new_face = fid, float(confidence), evidence, new
-        self._move_track_bodies(track.track_id, fid)
+        for source in self.sources:  # what the track's other cues gathered describes the face's person now
+            source.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
@@ -407,8 +417,8 @@ class IdentityManagerBase:
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
-        if self._bodies is not None:
-            self._bodies.forget_track(tid)
+        for source in self.sources:
+            source.forget_track(tid)
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None

@@ -9,12 +9,14 @@ evidence is strong enough. A track's own face, once seen, overrules its body.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from face_reid_master.identity.body_evidence import BodyEvidence
-from face_reid_master.identity.entries import BodyChunk, TrackRecord
+from face_reid_master.identity.entries import TrackRecord
+from face_reid_master.identity.evidence import CueChunk, Evidence
 
 __all__ = ["BodyIdentification"]
 
@@ -23,19 +25,33 @@ FloatArray = npt.NDArray[np.float64]
 
 
 class BodyIdentification:
-    """The body evidence fed at each identity step with the bodies the tracks' records queued (see the module
-    doc)."""
+    """The body cue as an :class:`~face_reid_master.identity.evidence.EvidenceSource`: the body evidence fed at
+    each identity step with the bodies the tracks' records queued (see the module doc)."""
+
+    kind = Evidence.BODY
 
     def __init__(self, evidence: BodyEvidence) -> None:
         if not isinstance(evidence, BodyEvidence):
             raise ValueError(f"body_evidence must be a BodyEvidence or None, got {type(evidence).__name__}")
         self.evidence = evidence
 
+    def read(self, person: object, detection: int, detections: Any) -> F32Array | None:
+        """The detection's body embedding (1, r) in the metric's space (None: the body was not described)."""
+        appearance = detections.appearance
+        if appearance is None:
+            return None
+        row = appearance[detection]
+        return row[None, :] if np.isfinite(row[0]) else None  # NaN rows: not described
+
     def forget_track(self, track_id: int) -> None:
         """The track was deleted: its evidence goes (its queued bodies went with its record)."""
         self.evidence.forget_track(track_id)
 
-    def observe(self, queued: list[tuple[TrackRecord, list[BodyChunk]]], face_ids: list[int]) -> None:
+    def forget_face(self, face_id: int) -> None:
+        """The face was forgotten: its bodies go."""
+        self.evidence.forget_face(face_id)
+
+    def observe(self, queued: list[tuple[TrackRecord, list[CueChunk]]], face_ids: list[int]) -> None:
         """The queued bodies: an identified track's join its face's gallery; a faceless track's (one not
         buffering face observations) are compared with the recent bodies of every face in ``face_ids``."""
         for track, parts in queued:
@@ -51,7 +67,7 @@ class BodyIdentification:
         """(track id, face id, posterior) of the faceless tracks their bodies decide now (faces of face_list)."""
         return self.evidence.decide(available, stamp, alike)
 
-    def move_track_bodies(self, track_id: int, face_id: int) -> None:
+    def track_identified(self, track_id: int, face_id: int) -> None:
         """The bodies a track gathered before its decision join its face's gallery."""
         emb, newest, heights = self.evidence.track_bodies(track_id)
         if emb.shape[0]:

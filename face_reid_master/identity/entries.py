@@ -8,8 +8,10 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from face_reid_master.identity.evidence import CueChunk, Evidence
+
 __all__ = [
-    "BodyChunk", "Chunk", "FaceEntry", "TrackRecord", "Vote", "checked_observations", "eye_rows", "rows_of",
+    "Chunk", "FaceEntry", "TrackRecord", "Vote", "checked_observations", "eye_rows", "rows_of",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -63,10 +65,10 @@ class TrackRecord:
     confidence: float = 0.0
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
-    evidence: str = ""  # identified: "face", "body" (no face seen yet) or "both" (body, then its face agreed)
+    evidence: str = Evidence.NONE  # identified: what decided it (an evidence.Evidence or another cue's kind)
     new_face: bool = False  # identified: its decision created the face (a person not known before)
     face_chunks: list[Chunk] = field(default_factory=list)  # face observations waiting for the next step
-    body_queue: list[BodyChunk] = field(default_factory=list)  # body observations waiting for the next step
+    cue_queue: dict[str, list[CueChunk]] = field(default_factory=dict)  # other cues' observations, per cue kind
     bayes_row: int = 0  # Bayes method: its row of the posterior table while unassigned (0: none)
     public_id: int = 0  # the id it is published under (core.records.PublicId): track_id until a swap split it
     public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
@@ -75,16 +77,6 @@ class TrackRecord:
     def __post_init__(self) -> None:
         if not self.public_id:
             self.public_id = self.track_id
-
-
-class BodyChunk(NamedTuple):
-    """Body observations of one track queued for the identity step: embeddings (k, r), stamp, camera and head
-    heights (k,; None = unknown)."""
-
-    embeddings: F32Array
-    stamp_s: float
-    source: str
-    heights: FloatArray | None
 
 
 def rows_of(chunks: list[Chunk]) -> F32Array:

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from collections import OrderedDict
 
-from face_reid_master.identity.entries import BodyChunk, Chunk, TrackRecord
+from face_reid_master.identity.entries import Chunk, TrackRecord
+from face_reid_master.identity.evidence import CueChunk
 
 __all__ = ["TrackList"]
 
@@ -27,7 +28,7 @@ class TrackList:
         self.deaths: dict[int, float] = {}  # track id -> stamp the tracker dropped it
         self.retired: dict[int, TrackRecord] = {}  # removed at the last step (read for their events, then cleared)
         self._face_queued: dict[int, TrackRecord] = {}  # in queueing order: the step learns them in that order
-        self._body_queued: dict[int, TrackRecord] = {}
+        self._cue_queued: dict[str, dict[int, TrackRecord]] = {}  # per cue kind, likewise
         self._dead: OrderedDict[int, float] = OrderedDict()
 
     def gone(self, track_id: int) -> bool:
@@ -54,11 +55,12 @@ class TrackList:
         track.face_chunks.append(chunk)
         self._face_queued.setdefault(track_id, track)
 
-    def queue_bodies(self, track_id: int, chunk: BodyChunk) -> None:
-        """Body observations of the track for the next step (they do not move its last sighting)."""
+    def queue_cue(self, kind: str, track_id: int, chunk: CueChunk) -> None:
+        """Observations of cue ``kind`` (not the face) on the track for the next step (they do not move its last
+        sighting)."""
         track = self.seen(track_id, chunk.stamp_s, latest=False)
-        track.body_queue.append(chunk)
-        self._body_queued.setdefault(track_id, track)
+        track.cue_queue.setdefault(kind, []).append(chunk)
+        self._cue_queued.setdefault(kind, {}).setdefault(track_id, track)
 
     def drop_faces(self, track: TrackRecord) -> None:
         """The track's queued face observations go (they were meant for a face that was forgotten)."""
@@ -77,14 +79,10 @@ class TrackList:
             pending[tid], track.face_chunks = track.face_chunks, []
         return pending
 
-    def take_bodies(self) -> list[tuple[TrackRecord, list[BodyChunk]]]:
-        """The queued body observations per track, in queueing order; the queues are emptied."""
-        queued, self._body_queued = self._body_queued, {}
-        out = []
-        for track in queued.values():
-            out.append((track, track.body_queue))
-            track.body_queue = []
-        return out
+    def take_cue(self, kind: str) -> list[tuple[TrackRecord, list[CueChunk]]]:
+        """The queued observations of cue ``kind`` per track, in queueing order; those queues are emptied."""
+        queued = self._cue_queued.pop(kind, {})
+        return [(track, track.cue_queue.pop(kind)) for track in queued.values()]
 
     def remove(self, track_id: int, stamp: float) -> TrackRecord | None:
         """The track is gone for good (its death handled): its record goes with everything in it (kept in
@@ -93,7 +91,8 @@ class TrackList:
         while len(self._dead) > self.MEMORY:
             self._dead.popitem(last=False)
         self._face_queued.pop(track_id, None)
-        self._body_queued.pop(track_id, None)
+        for queued in self._cue_queued.values():
+            queued.pop(track_id, None)
         track = self.entries.pop(track_id, None)
         if track is not None:
             self.retired[track_id] = track
