@@ -37,7 +37,7 @@ from face_reid_master.identity.entries import (
     eye_rows,
     rows_of,
 )
-from face_reid_master.identity.evidence import CueChunk, Evidence, EvidenceSource
+from face_reid_master.identity.evidence import CueChunk, Cues, Evidence, EvidenceSource
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.lent_faces import LentFaces
@@ -87,12 +87,8 @@ class IdentityManagerBase:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
         self.body_evidence = body_evidence
         # the cues besides the face, in the order they decide (the body first)
-        self.sources: list[EvidenceSource] = [] if body_evidence is None else [BodyIdentification(body_evidence)]
-        self.sources.extend(evidence_sources)
-        self._source_kinds = {s.kind for s in self.sources}
-        if len(self._source_kinds) != len(self.sources) or Evidence.FACE in self._source_kinds:
-            raise ValueError(f"evidence sources need distinct kinds other than the face, got "
-                             f"{[s.kind for s in self.sources]}")
+        body: list[EvidenceSource] = [] if body_evidence is None else [BodyIdentification(body_evidence)]
+        self.sources = Cues(body + list(evidence_sources))  # the cues besides the face, the body first
         self.lend_lost_faces = bool(lend_lost_faces)
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
@@ -150,7 +146,7 @@ class IdentityManagerBase:
         """Queue observations (k, r) of cue ``kind`` (an evidence source's, validated by the caller) on a track,
         with head ``heights`` (k,; None = unknown) seen by camera ``source``, for the next :meth:`step`; ignored
         without that source or for a deleted track."""
-        if kind not in self._source_kinds or self.tracks.gone(track_id):
+        if kind not in self.sources.kinds or self.tracks.gone(track_id):
             return
         self.tracks.queue_cue(kind, track_id, CueChunk(values, stamp_s, source, heights))
         if kind == Evidence.BODY:
@@ -176,9 +172,7 @@ class IdentityManagerBase:
         if track is None or track.face_id != fid:
             return
         confidence = track.confidence
-        track.face_id, track.confidence, track.evidence = None, 0.0, ""
-        track.votes.clear()
-        track.n_observations = 0
+        track.unassign()
         self.stats.lent_faces_taken += 1
         self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
 
@@ -297,7 +291,7 @@ class IdentityManagerBase:
         """What identified a live track (:class:`~.evidence.Evidence`: the face, a cue, both a cue and then its
         face), or "" (unidentified / unknown track)."""
         track = self.tracks.entries.get(track_id)
-        return Evidence.NONE if track is None or track.face_id is None else track.evidence
+        return "" if track is None or track.face_id is None else str(track.evidence)  # plain str: published
 
     def decided_new(self, track_id: int) -> bool:
         """Whether a live identified track's decision created its face (False otherwise)."""
@@ -350,13 +344,11 @@ class IdentityManagerBase:
             lender.face_id, lender.confidence = None, 0.0  # a LOST track lent it: it holds nothing now
         track = None if face.track_id is None else self.tracks.entries.get(face.track_id)
         if track is not None and track.face_id == fid:
-            track.face_id, track.confidence, track.n_observations = None, 0.0, 0
-            track.votes.clear()
+            track.unassign()
             track.inconsistent.clear()
             self.tracks.drop_faces(track)
         self.faces.forget(fid)
-        for source in self.sources:
-            source.forget_face(fid)
+        self.sources.forget_face(fid)
         self.stats.faces_forgotten += 1
         return True
 
@@ -400,25 +392,20 @@ class IdentityManagerBase:
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track)
-        track.face_id, track.confidence, track.evidence, track.new_face = fid, float(confidence), evidence, new
-        for source in self.sources:  # what the track's other cues gathered describes the face's person now
-            source.track_identified(track.track_id, fid)
+        track.give(fid, confidence, evidence, new)
+        self.sources.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
         self.faces.make_available(fid)
-        track.face_id = None
-        track.confidence = 0.0
-        track.votes.clear()
-        track.n_observations = 0
+        track.unassign()
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
-        for source in self.sources:
-            source.forget_track(tid)
+        self.sources.forget_track(tid)
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None

@@ -8,15 +8,14 @@ evidence is strong enough. A track's own face, once seen, overrules its body.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from face_reid_master.identity.body_evidence import BodyEvidence
-from face_reid_master.identity.entries import TrackRecord
-from face_reid_master.identity.evidence import CueChunk, Evidence
+from face_reid_master.identity.evidence import CueChunk, Evidence, TrackView
 
 __all__ = ["BodyIdentification"]
 
@@ -51,7 +50,7 @@ class BodyIdentification:
         """The face was forgotten: its bodies go."""
         self.evidence.forget_face(face_id)
 
-    def observe(self, queued: list[tuple[TrackRecord, list[CueChunk]]], face_ids: list[int]) -> None:
+    def observe(self, queued: Sequence[tuple[TrackView, list[CueChunk]]], face_ids: list[int]) -> None:
         """The queued bodies: an identified track's join its face's gallery; a faceless track's (one not
         buffering face observations) are compared with the recent bodies of every face in ``face_ids``."""
         for track, parts in queued:

@@ -78,6 +78,16 @@ class TrackRecord:
         if not self.public_id:
             self.public_id = self.track_id
 
+    def give(self, face_id: int, confidence: float, evidence: str, new: bool) -> None:
+        """The track carries face ``face_id`` from now on, decided by ``evidence`` (``new``: it created it)."""
+        self.face_id, self.confidence, self.evidence, self.new_face = face_id, float(confidence), evidence, new
+
+    def unassign(self) -> None:
+        """The track holds no face any more: it is classified afresh from its next observations."""
+        self.face_id, self.confidence, self.evidence = None, 0.0, Evidence.NONE
+        self.votes.clear()
+        self.n_observations = 0
+
 
 def rows_of(chunks: list[Chunk]) -> F32Array:
     """The embeddings of a track's queued chunks, stacked."""

@@ -17,16 +17,13 @@ a constant of its own module.
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-if TYPE_CHECKING:
-    from face_reid_master.identity.entries import TrackRecord
-
-__all__ = ["CueChunk", "Evidence", "EvidenceSource"]
+__all__ = ["CueChunk", "Cues", "Evidence", "EvidenceSource", "TrackView"]
 
 F32Array = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
@@ -51,6 +48,14 @@ class CueChunk(NamedTuple):
     heights: FloatArray | None
 
 
+class TrackView(Protocol):
+    """What a cue reads of a track's record (:class:`~face_reid_master.identity.entries.TrackRecord`)."""
+
+    track_id: int
+    face_id: int | None  # None: not identified
+    slot: int | None  # not None: the track shows a face and is being classified by it
+
+
 class EvidenceSource(Protocol):
     """A cue that recognises the person of a learned face on a track that shows no face (see the module doc)."""
 
@@ -60,7 +65,7 @@ class EvidenceSource(Protocol):
         """Its observation (1, r) on one associated detection (``person``: the frame's PersonRecord; row
         ``detection`` of the validated frame ``detections``); None: not observed."""
 
-    def observe(self, queued: list[tuple[TrackRecord, list[CueChunk]]], face_ids: list[int]) -> None:
+    def observe(self, queued: Sequence[tuple[TrackView, list[CueChunk]]], face_ids: list[int]) -> None:
         """The observations queued since the last step: an identified track's describe its face's person, a
         faceless track's are weighed against the learned faces ``face_ids``."""
 
@@ -77,3 +82,30 @@ class EvidenceSource(Protocol):
 
     def forget_face(self, face_id: int) -> None:
         """The face was forgotten."""
+
+
+class Cues:
+    """The registry of the cues besides the face, in the order they decide (the body first): each kind once."""
+
+    def __init__(self, sources: list[EvidenceSource]) -> None:
+        self.sources = sources
+        self.kinds = frozenset(s.kind for s in sources)
+        if len(self.kinds) != len(sources) or Evidence.FACE in self.kinds or Evidence.BOTH in self.kinds:
+            raise ValueError(f"evidence sources need distinct kinds other than face / both, got "
+                             f"{[s.kind for s in sources]}")
+
+    def __iter__(self) -> Iterator[EvidenceSource]:
+        return iter(self.sources)
+
+    def track_identified(self, track_id: int, face_id: int) -> None:
+        """What the track's cues gathered describes face ``face_id``'s person now."""
+        for source in self.sources:
+            source.track_identified(track_id, face_id)
+
+    def forget_track(self, track_id: int) -> None:
+        for source in self.sources:
+            source.forget_track(track_id)
+
+    def forget_face(self, face_id: int) -> None:
+        for source in self.sources:
+            source.forget_face(face_id)

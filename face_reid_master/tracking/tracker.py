@@ -160,7 +160,7 @@ class Tracker:
         associations = list(zip(self._tab.ids[rows].tolist(), cols.tolist(), strict=True))
         created, created_cols, suppressed, dropped = self._initiate(matched, positions, r2, heights, stamp, camera_id)
         if appearance is not None:
-            self._remember_looks(appearance, rows, cols, created, created_cols)
+            self._tab.remember_looks(appearance, rows, cols, created_cols)
         associations.extend(zip(created, created_cols, strict=True))
         self._clock.follow(stamp)
         confirmed, lost, recovered, deleted = self._tick()
@@ -304,17 +304,6 @@ class Tracker:
         near_last = (((z[None, :, :] - z_a[:, None, :]) ** 2).sum(axis=2) < (reach * reach)[:, None]).any(axis=1)
         return np.flatnonzero(near_pred | near_last)
 
-    def _remember_looks(self, appearance: NDArray[np.float32], rows: IndexArray, cols: IndexArray,
-                        created: list[int], created_cols: list[int]) -> None:
-        """Add each described detection's embedding to the gallery of the track it joined or started."""
-        described = np.isfinite(appearance).all(axis=1)
-        pairs = [(i, col) for i, col in zip(rows.tolist(), cols.tolist(), strict=True) if described[col]]
-        if created:  # new tracks were appended: their rows are the last ones
-            first = self._tab.ids.shape[0] - len(created)
-            pairs += [(first + k, col) for k, col in enumerate(created_cols) if described[col]]
-        for i, col in pairs:
-            self._tab.looks[i].add(appearance[col])
-
     def _update_matched(
         self,
         matched: _Matched,
@@ -360,16 +349,8 @@ class Tracker:
                 tab.t[i], tab.zmeas[i], tab.x[i], tab.P[i] = head.stamp_s, head.z, head.x, head.P
         if (self._tab.state[rows] == _LOST).any():
             self._quiet_until = -math.inf  # recovered at the next tick
-        self._tab.last_seen[rows] = np.maximum(self._tab.last_seen[rows], stamp)
-        self._tab.created[rows] = np.minimum(self._tab.created[rows], stamp)
-        self._tab.hits[rows] += 1
+        self._tab.detected(rows, heights[cols], stamp, camera_id)
         self._stats.detections_associated += int(rows.shape[0])
-        for i, h in zip(rows.tolist(), heights[cols].tolist(), strict=True):
-            hist = self._tab.hist[i]
-            if hist.cameras.get(camera_id, -math.inf) < stamp:
-                hist.cameras[camera_id] = stamp
-            if h == h and stamp >= hist.height_stamp_s:  # finite (not NaN)
-                hist.height_m, hist.height_stamp_s = h, stamp
 
     def _initiate(
         self,

@@ -4,15 +4,14 @@ message field a subclass of PersonRecord adds) handed to MasterCore decides who 
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from face_reid_master.core import MasterConfig, MasterCore
-from face_reid_master.identity.entries import TrackRecord
-from face_reid_master.identity.evidence import CueChunk, EvidenceSource
+from face_reid_master.identity.evidence import CueChunk, EvidenceSource, TrackView
 from face_reid_master.identity.records import IdentityEventKind
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.tracking.config import TrackerConfig
@@ -44,7 +43,7 @@ class BadgeEvidence:
         badge = getattr(person, "badge", 0)
         return np.array([[badge]], np.float32) if badge else None
 
-    def observe(self, queued: list[tuple[TrackRecord, list[CueChunk]]], face_ids: list[int]) -> None:
+    def observe(self, queued: Sequence[tuple[TrackView, list[CueChunk]]], face_ids: list[int]) -> None:
         for track, chunks in queued:
             for chunk in chunks:
                 for badge in chunk.values[:, 0].astype(int).tolist():
