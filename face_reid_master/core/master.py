@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -31,17 +31,19 @@ from face_reid_master.core.admission import FrameAdmission
 from face_reid_master.core.config import MasterConfig
 from face_reid_master.core.detections import DetectionReader, Detections, degenerate_rows
 from face_reid_master.core.face_memory import FaceMemory
-from face_reid_master.core.records import FrameOutcome, MasterStats
+from face_reid_master.core.records import FrameOutcome, MasterStats, PublicId
 from face_reid_master.core.static_clutter import StaticClutter
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.confidence_map import ConfidenceMap, default_confidence_map
+from face_reid_master.identity.evidence import EvidenceSource
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.methods import make_identity_manager
 from face_reid_master.identity.predefined_people import PredefinedPeople
-from face_reid_master.identity.records import IdentityEventKind
+from face_reid_master.identity.records import IdentityEvent, IdentityEventKind
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
 from face_reid_master.records import CameraFrameRecord, NamedTrackRecord
+from face_reid_master.tracking.interface import MultiCameraTracker, TrackerId
 from face_reid_master.tracking.records import FrameStatus, TrackState
 from face_reid_master.tracking.tracker import Tracker
 
@@ -79,13 +81,18 @@ class MasterCore:
         gallery: Mapping[str, NDArray[np.floating]] | None = None,
         body_metric: BodyMetricModel | None = None,
         confidence_map: ConfidenceMap | None = None,
+        tracker: MultiCameraTracker | None = None,
+        evidence_sources: Sequence[EvidenceSource] = (),
     ) -> None:
-        self.config = cfg = config or MasterConfig()
+        cfg = config or MasterConfig()
+        if tracker is not None:  # an injected tracker's own configuration is the one read (admission, timeouts)
+            cfg = dataclasses.replace(cfg, tracker=tracker.config)
+        self.config = cfg
         # what a decision's raw posterior is worth, measured on development scenarios (the published confidence)
         self.confidence_map = confidence_map if confidence_map is not None else default_confidence_map()
         self.stats = MasterStats()
         self._notices: list[str] = []  # things the node should log once, handed out with the next FrameOutcome
-        self.tracker = Tracker(cfg.tracker)
+        self.tracker: MultiCameraTracker = tracker if tracker is not None else Tracker(cfg.tracker)
         if body_metric is None and cfg.body_appearance_tracking:
             body_metric = default_body_metric()
         self.body_metric = body_metric if cfg.body_appearance_tracking else None
@@ -95,7 +102,7 @@ class MasterCore:
         # naming needs a threshold only once there are predefined people (add_person checks it too)
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
-        self.identity = self._identity_manager(model)
+        self.identity = self._identity_manager(model, evidence_sources)
         dim = space_dim(cfg.embedding_space)
         self.people = PredefinedPeople(
             {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
@@ -107,17 +114,15 @@ class MasterCore:
         self.memory = FaceMemory(cfg, self.stats, self.identity, self.people, store, self._notices)
         self.clutter = StaticClutter(cfg.static_clutter_after_s, cfg.static_clutter_radius_m)
         self.static_clutter_tracks = 0  # tracks held back as static clutter at the last tracks() call
-        self._face_obs: dict[int, int] = {}  # track id -> face embeddings observed (since its last split)
-        self._split: dict[int, tuple[int, float]] = {}  # tracker id -> (published id, since s) after a swap
-        self._gone: list[int] = []  # tracks deleted since the last identity step (their split ids go after it)
         # what the next identity step decides on beyond the identity layer's own queue: the newest stamp applied
         # since the last step (None: nothing waits) and the tracks given a face observation meanwhile
         self._undecided_stamp: float | None = None
         self._touched: set[int] = set()
         self._last_stamp = -math.inf
 
-    def _identity_manager(self, model: FaceLikelihood) -> IdentityManagerBase:
-        """Algorithm 1 with the configured method (bayes: with body evidence where bodies are used)."""
+    def _identity_manager(self, model: FaceLikelihood, sources: Sequence[EvidenceSource]) -> IdentityManagerBase:
+        """Algorithm 1 with the configured method (bayes: with body evidence where bodies are used) and the
+        given further cues."""
         cfg = self.config
         dim = space_dim(cfg.embedding_space)
         if cfg.method == "threshold":
@@ -125,7 +130,7 @@ class MasterCore:
                 "threshold", distance_threshold=self.threshold_distance, n_votes=cfg.threshold_votes,
                 max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
                 feature_gate_distance=self.threshold_distance if cfg.learn_only_consistent_features else None,
-                release_after_inconsistent=cfg.release_after_inconsistent,
+                release_after_inconsistent=cfg.release_after_inconsistent, evidence_sources=sources,
             )
         body_evidence = None
         if self.body_metric is not None and cfg.body_identity:
@@ -144,7 +149,7 @@ class MasterCore:
             max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
             feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
-            lend_lost_faces=cfg.lend_lost_faces,
+            lend_lost_faces=cfg.lend_lost_faces, evidence_sources=sources,
         )
 
     @property
@@ -168,8 +173,7 @@ class MasterCore:
             self._restart_tracking(now_s)
         stamp = admission.stamp_s
         detections = self.reader.read(frame)
-        update = self.tracker.update_arrays(detections.positions, detections.stds, detections.heights, stamp,
-                                            frame.camera_id, detections.appearance, resync_backward=now_s is None)
+        update = self.tracker.update_frame(detections, stamp, frame.camera_id, resync_backward=now_s is None)
         if update.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             self.stats.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({update.status.value})", "tracker_late")
@@ -177,7 +181,7 @@ class MasterCore:
         self.stats.detections_rejected_position += len(update.rejected_detections)
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
-        self._observe(update.associations, detections, stamp, frame.camera_id)
+        self._observe(update.associations, detections, stamp, frame)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
         self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)
         events = () if defer_identity else tuple(self.finish_frames())
@@ -194,27 +198,27 @@ class MasterCore:
         self._last_stamp = -math.inf
 
     def _observe(self, associations: list[tuple[int, int]], detections: Detections, stamp: float,
-                 camera_id: str) -> None:
-        """The associated detections' faces and bodies as identity evidence (the tracks a face was added to are
-        remembered for face saving after the identity step)."""
+                 frame: CameraFrameRecord) -> None:
+        """The associated detections' faces, then each further cue's observations (the body, ...), as identity
+        evidence (the tracks a face was added to are remembered for face saving after the identity step)."""
+        camera_id = frame.camera_id
         for track_id, det in associations:
             face = detections.faces.get(det)
             if face is None:
                 continue
             emb, eye_px = face
             if self.identity.add_validated_observations(track_id, emb[None, :], stamp, eye_px, camera_id):
-                self._face_obs[track_id] = self._face_obs.get(track_id, 0) + 1
+                self.identity.tracks.entries[track_id].face_observations += 1
                 self._touched.add(track_id)
                 self.stats.embeddings_used += 1
-        appearance = detections.appearance
-        if appearance is not None and self.identity.body_evidence is not None:
+        for source in self.identity.sources:
             for track_id, det in associations:
-                row = appearance[det]
-                if np.isfinite(row[0]):  # a described body of the metric's space (NaN rows: none)
-                    self.identity.add_body_observations(track_id, row[None, :], stamp, camera_id,
-                                                        detections.heights[det: det + 1])
+                values = source.read(frame.people[detections.person_index[det]], det, detections)
+                if values is not None:
+                    self.identity.add_cue_observations(source.kind, track_id, values, stamp, camera_id,
+                                                       detections.heights[det: det + 1])
 
-    def finish_frames(self) -> list[Any]:
+    def finish_frames(self) -> list[IdentityEvent]:
         """The identity step on what the frames applied since the last step queued (their track events were told
         as each frame was applied; one step at the newest stamp), then face saving; returns the identity events.
         A no-op when nothing waits (process_frame without ``defer_identity`` calls it itself)."""
@@ -260,19 +264,18 @@ class MasterCore:
     # ------------------------------------------------------------------------------ decide
     def _track_events(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
                       recovered: Iterable[int] = ()) -> None:
-        """The tracker's lost / recovered / deleted tracks of one update, told to the face table."""
+        """The tracker's lost / recovered / deleted tracks of one update, told to the identity layer (a deleted
+        track's record goes at the next identity step, after its last evidence)."""
         for track_id in lost:
             self.identity.track_lost(track_id)
         for track_id in recovered:
             self.identity.track_recovered(track_id)
         for track_id in deleted:
             self.identity.track_deleted(track_id, stamp)
-            self._face_obs.pop(track_id, None)
-            self._gone.append(track_id)
             self.clutter.forget(track_id)
 
     def _identity_step(self, deleted: Iterable[int], stamp: float, lost: Iterable[int] = (),
-                       recovered: Iterable[int] = ()) -> list[Any]:
+                       recovered: Iterable[int] = ()) -> list[IdentityEvent]:
         """One identity update after the given track events; returns its events with published track ids."""
         self._track_events(deleted, stamp, lost, recovered)
         kept = []
@@ -291,21 +294,21 @@ class MasterCore:
             if ev.kind == IdentityEventKind.SWAPPED:
                 self.stats.faces_released_swapped += 1
                 self._split_track(ev.track_id, stamp)
-        for track_id in self._gone:
-            self._split.pop(track_id, None)
-        self._gone.clear()
+        self.identity.tracks.retired.clear()  # the records of the tracks deleted at this step are read: they go
         return kept
 
     def _split_track(self, track_id: int, stamp: float) -> None:
         """A swapped track is someone else from now on: it is published under a new id, so that no consumer
         carries the person it was over to the one it has become (its old id ends here)."""
-        self._split[track_id] = (self.tracker.reserve_id(), stamp)
-        self._face_obs[track_id] = 0
+        track = self.identity.tracks.record(track_id)
+        assert track is not None, "a SWAPPED event names a track of this step"
+        track.public_id, track.public_since_s = self.tracker.reserve_id(), stamp
+        track.face_observations = 0
 
-    def public_id(self, track_id: int) -> int:
+    def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
-        split = self._split.get(track_id)
-        return track_id if split is None else split[0]
+        track = self.identity.tracks.record(track_id)
+        return PublicId(track_id if track is None else track.public_id)
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
@@ -360,12 +363,15 @@ class MasterCore:
         out = []
         snaps = [s for s in self.tracker.snapshots(at_s, include_tentative=self.config.publish_tentative)
                  if s.state != TrackState.DELETED]
-        clutter = self.clutter.among(snaps, self._face_obs)
+        records = self.identity.tracks.entries
+        clutter = self.clutter.among(snaps, records)
         self.static_clutter_tracks = len(clutter)
         for snap in snaps:
             if snap.track_id in clutter:
                 continue
             fid = self.identity.face_id_of(snap.track_id) or 0
+            track = records.get(snap.track_id)
+            since = None if track is None else track.public_since_s
             out.append(
                 NamedTrackRecord(
                     track_id=self.public_id(snap.track_id),
@@ -373,14 +379,13 @@ class MasterCore:
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=self.published_confidence(snap.track_id),
                     identity_evidence=self.identity.evidence_of(snap.track_id),
-                    face_observations=self._face_obs.get(snap.track_id, 0),
+                    face_observations=0 if track is None else track.face_observations,
                     position_xy=snap.position_xy,
                     velocity_xy=snap.velocity_xy,
                     covariance=snap.covariance,
                     height_m=float(snap.height_m),
                     state=int(snap.state),
-                    first_seen_s=float(self._split[snap.track_id][1] if snap.track_id in self._split
-                                       else snap.created_s),
+                    first_seen_s=float(snap.created_s if since is None else since),
                     last_seen_s=float(snap.last_seen_s),
                     cameras=tuple(sorted(snap.cameras)),
                 )

@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import NewType
 
-__all__ = ["FrameOutcome", "MasterStats"]
+from face_reid_master.identity.records import IdentityEvent
+from face_reid_master.tracking.interface import TrackerId
+
+__all__ = ["FrameOutcome", "MasterStats", "PublicId"]
+
+PublicId = NewType("PublicId", int)  # a track as the master publishes it: the tracker's id until a swap splits it
 
 
 @dataclass
@@ -53,13 +58,15 @@ class MasterStats:
 @dataclass(frozen=True)
 class FrameOutcome:
     """What :meth:`MasterCore.process_frame` did with one frame (``reason`` and its short ``code``, e.g.
-    ``stale_stamp``, when rejected: the node counts rejections by code)."""
+    ``stale_stamp``, when rejected: the node counts rejections by code). Track ids are the tracker's
+    (:data:`TrackerId`; ``MasterCore.public_id`` gives the published one) except in ``identity_events``, whose
+    ``track_id`` is the published :data:`PublicId`."""
 
     accepted: bool
     reason: str = ""
     code: str = ""
-    track_of_person: dict[int, int] = field(default_factory=dict)  # index in frame.people -> tracker id (public_id)
-    tracks_created: tuple[int, ...] = ()
-    tracks_deleted: tuple[int, ...] = ()
-    identity_events: tuple[Any, ...] = ()
+    track_of_person: dict[int, TrackerId] = field(default_factory=dict)  # index in frame.people -> tracker id
+    tracks_created: tuple[TrackerId, ...] = ()
+    tracks_deleted: tuple[TrackerId, ...] = ()
+    identity_events: tuple[IdentityEvent, ...] = ()  # track_id: the PublicId
     notices: tuple[str, ...] = ()  # things the node should log once (e.g. a camera of another embedder space)

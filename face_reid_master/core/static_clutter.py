@@ -46,10 +46,11 @@ class StaticClutter:
         self._birth.pop(track_id, None)
         self._moved.discard(track_id)
 
-    def among(self, snaps: list[Any], face_observations: Mapping[int, int]) -> set[int]:
-        """The ids of the track snapshots that are static clutter now (tracks with face observations never are)."""
+    def among(self, snaps: list[Any], records: Mapping[int, Any]) -> set[int]:
+        """The ids of the track snapshots that are static clutter now (``records``: track id -> its record; tracks
+        whose record counts face observations never are)."""
         if not self.after_s:
             return set()
         return {snap.track_id for snap in snaps if snap.track_id in self._birth
-                and face_observations.get(snap.track_id, 0) == 0
+                and getattr(records.get(snap.track_id), "face_observations", 0) == 0
                 and snap.stamp_s - self._birth[snap.track_id][2] >= self.after_s}

@@ -21,7 +21,7 @@ tracks never need distances to other faces.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -29,7 +29,15 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
-from face_reid_master.identity.entries import Chunk, FaceEntry, TrackEntry, checked_observations, eye_rows, rows_of
+from face_reid_master.identity.entries import (
+    Chunk,
+    FaceEntry,
+    TrackRecord,
+    checked_observations,
+    eye_rows,
+    rows_of,
+)
+from face_reid_master.identity.evidence import CueChunk, Cues, Evidence, EvidenceSource
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.lent_faces import LentFaces
@@ -74,10 +82,13 @@ class IdentityManagerBase:
         release_after_inconsistent: int = 0,
         body_evidence: BodyEvidence | None = None,
         lend_lost_faces: bool = False,
+        evidence_sources: Sequence[EvidenceSource] = (),
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
-        self._bodies = None if body_evidence is None else BodyIdentification(body_evidence)
         self.body_evidence = body_evidence
+        # the cues besides the face, in the order they decide (the body first)
+        body: list[EvidenceSource] = [] if body_evidence is None else [BodyIdentification(body_evidence)]
+        self.sources = Cues(body + list(evidence_sources))  # the cues besides the face, the body first
         self.lend_lost_faces = bool(lend_lost_faces)
         if feature_gate_distance is not None:
             feature_gate_distance = check_real(
@@ -128,11 +139,18 @@ class IdentityManagerBase:
         """Queue a track's body-appearance embeddings (k, r) (finite, validated by the caller) and head
         ``heights`` (k, m; None = unknown) seen by camera ``source`` for the next :meth:`step`; ignored
         without body evidence or for a deleted track."""
-        if self._bodies is None or self.tracks.gone(track_id):
+        self.add_cue_observations(Evidence.BODY, track_id, embeddings, stamp_s, source, heights)
+
+    def add_cue_observations(self, kind: str, track_id: int, values: F32Array, stamp_s: float, source: str = "",
+                             heights: FloatArray | None = None) -> None:
+        """Queue observations (k, r) of cue ``kind`` (an evidence source's, validated by the caller) on a track,
+        with head ``heights`` (k,; None = unknown) seen by camera ``source``, for the next :meth:`step`; ignored
+        without that source or for a deleted track."""
+        if kind not in self.sources.kinds or self.tracks.gone(track_id):
             return
-        self._bodies.queue(track_id, embeddings, stamp_s, source, heights)
-        self.stats.body_observations += embeddings.shape[0]
-        self.tracks.seen(track_id, stamp_s, latest=False)
+        self.tracks.queue_cue(kind, track_id, CueChunk(values, stamp_s, source, heights))
+        if kind == Evidence.BODY:
+            self.stats.body_observations += values.shape[0]
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
@@ -154,9 +172,7 @@ class IdentityManagerBase:
         if track is None or track.face_id != fid:
             return
         confidence = track.confidence
-        track.face_id, track.confidence, track.evidence = None, 0.0, ""
-        track.votes.clear()
-        track.n_observations = 0
+        track.unassign()
         self.stats.lent_faces_taken += 1
         self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
 
@@ -165,12 +181,13 @@ class IdentityManagerBase:
         then by body), then handle deaths."""
         stamp = check_stamp(stamp_s)
         self.stats.steps += 1
+        self.tracks.retired.clear()
         events: list[IdentityEvent] = []
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
-        if self._bodies is not None:
-            events.extend(self._body_step(stamp))
+        for source in self.sources:
+            events.extend(self._cue_step(source, stamp))
         events.extend(self._side_events)
         self._side_events = []
         deaths, self.tracks.deaths = self.tracks.deaths, {}
@@ -216,7 +233,7 @@ class IdentityManagerBase:
         if unassigned[0]:
             self._ingest_unassigned(*unassigned)
 
-    def _learn_identified(self, track: TrackEntry, chunks: list[Chunk], obs: F32Array,
+    def _learn_identified(self, track: TrackRecord, chunks: list[Chunk], obs: F32Array,
                           keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
                           ) -> tuple[int | None, list[Chunk], F32Array | None]:
         """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
@@ -237,50 +254,44 @@ class IdentityManagerBase:
                 return None, swapped, obs
             if obs.shape[0] == 0:
                 return face.slot, chunks, None
-        if track.evidence == "body" and obs.shape[0]:
-            track.evidence = "both"  # its own face agrees with the body decision
+        if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
+            track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
         return face.slot, chunks, obs
 
-    def _body_step(self, stamp: float) -> list[IdentityEvent]:
-        """Bodies of identified tracks join their face's gallery; faceless tracks gather body evidence against
-        every learned face and are given one of face_list when that evidence is strong enough (their own face,
-        once seen, overrules it)."""
-        bodies = self._bodies
-        assert bodies is not None
-        bodies.observe(self.tracks.entries, list(self.faces.entries))
+    def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
+        """One cue's observations: an identified track's describe its face's person; faceless tracks gather
+        evidence against every learned face and are given one of face_list when it is strong enough (their own
+        face, once seen, overrules it)."""
+        source.observe(self.tracks.take_cue(source.kind), list(self.faces.entries))
         events = []
-        for tid, fid, p in bodies.decide(self.faces.available, stamp, self._faces_alike):
+        for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
-                events.append(self._apply_body_decision(track, fid, p, stamp))
+                events.append(self._apply_cue_decision(track, fid, p, stamp, source.kind))
         return events
 
-    def _apply_body_decision(self, track: TrackEntry, fid: int, confidence: float, stamp: float) -> IdentityEvent:
-        """A faceless track is face ``fid``'s person by their body: it carries the face (no features to add)."""
-        self._give_face(track, fid, confidence, stamp, "body", new=False)
-        self.stats.assigned_by_body += 1
+    def _apply_cue_decision(self, track: TrackRecord, fid: int, confidence: float, stamp: float,
+                            evidence: str) -> IdentityEvent:
+        """A faceless track is face ``fid``'s person by another cue: it carries the face (no features to add)."""
+        self._give_face(track, fid, confidence, stamp, evidence, new=False)
+        if evidence == Evidence.BODY:
+            self.stats.assigned_by_body += 1
         return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
-                             evidence="body")
-
-    def _move_track_bodies(self, tid: int, fid: int) -> None:
-        """The bodies a track gathered before its decision join its face's gallery."""
-        if self._bodies is not None:
-            self._bodies.move_track_bodies(tid, fid)
+                             evidence=evidence)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are learned ``face``'s person: closer than the body evidence's
         ``alike_face_distance`` (default: half the decision distance)."""
-        assert self.body_evidence is not None
-        limit = self.body_evidence.alike_face_distance
+        limit = None if self.body_evidence is None else self.body_evidence.alike_face_distance
         return self.faces.alike(face, others, 0.5 * self.feature_gate_distance
                                 if limit is None and self.feature_gate_distance is not None else limit)
 
     # ------------------------------------------------------------------------------ queries
     def evidence_of(self, track_id: int) -> str:
-        """What identified a live track: "face", "body", "both" (a body decision its face then confirmed), or
-        "" (unidentified / unknown track)."""
+        """What identified a live track (:class:`~.evidence.Evidence`: the face, a cue, both a cue and then its
+        face), or "" (unidentified / unknown track)."""
         track = self.tracks.entries.get(track_id)
-        return "" if track is None or track.face_id is None else track.evidence
+        return "" if track is None or track.face_id is None else str(track.evidence)  # plain str: published
 
     def decided_new(self, track_id: int) -> bool:
         """Whether a live identified track's decision created its face (False otherwise)."""
@@ -333,13 +344,11 @@ class IdentityManagerBase:
             lender.face_id, lender.confidence = None, 0.0  # a LOST track lent it: it holds nothing now
         track = None if face.track_id is None else self.tracks.entries.get(face.track_id)
         if track is not None and track.face_id == fid:
-            track.face_id, track.confidence, track.n_observations = None, 0.0, 0
-            track.votes.clear()
+            track.unassign()
             track.inconsistent.clear()
-            self.tracks.pending.pop(track.track_id, None)
+            self.tracks.drop_faces(track)
         self.faces.forget(fid)
-        if self.body_evidence is not None:
-            self.body_evidence.forget_face(fid)
+        self.sources.forget_face(fid)
         self.stats.faces_forgotten += 1
         return True
 
@@ -367,12 +376,12 @@ class IdentityManagerBase:
             face.n_observations += track.n_observations
             kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
-        self._give_face(track, fid, confidence, stamp, "face", new=kind == IdentityEventKind.NEW_FACE)
+        self._give_face(track, fid, confidence, stamp, Evidence.FACE, new=kind == IdentityEventKind.NEW_FACE)
         track.slot = None
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
 
-    def _give_face(self, track: TrackEntry, fid: int, confidence: float, stamp: float, evidence: str,
+    def _give_face(self, track: TrackRecord, fid: int, confidence: float, stamp: float, evidence: str,
                    new: bool) -> None:
         """The track carries face ``fid`` from now on (a known face leaves face_list, taken from a LOST track that
         lent it); the bodies it gathered join the face's gallery."""
@@ -382,32 +391,28 @@ class IdentityManagerBase:
             self.faces.make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
-        self._on_track_identified(track.track_id)
-        track.face_id, track.confidence, track.evidence, track.new_face = fid, float(confidence), evidence, new
-        self._move_track_bodies(track.track_id, fid)
+        self._on_track_identified(track)
+        track.give(fid, confidence, evidence, new)
+        self.sources.track_identified(track.track_id, fid)
 
-    def _release_swapped(self, track: TrackEntry, stamp: float, since: float) -> IdentityEvent:
+    def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
         """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
         self.faces.make_available(fid)
-        track.face_id = None
-        track.confidence = 0.0
-        track.votes.clear()
-        track.n_observations = 0
+        track.unassign()
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
-        if self._bodies is not None:
-            self._bodies.forget_track(tid)
+        self.sources.forget_track(tid)
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None
         if track.face_id is None:
             if track.slot is not None:
                 self._bank.free_slot(track.slot)
-            self._on_track_forgotten(tid)
+            self._on_track_forgotten(track)
             return None
         if not self._lent.returned(track.face_id, tid):  # a lent face is in face_list already
             self.faces.make_available(track.face_id)
@@ -425,7 +430,7 @@ class IdentityManagerBase:
         """(track id, face id or 0 = new person, confidence) for every unassigned track decided now."""
         raise NotImplementedError
 
-    def _current_confidence(self, track: TrackEntry) -> float:
+    def _current_confidence(self, track: TrackRecord) -> float:
         """Confidence of an unassigned track's leading hypothesis, in [0, 1]."""
         raise NotImplementedError
 
@@ -435,9 +440,9 @@ class IdentityManagerBase:
     def _on_faces_unavailable(self, column_indices: list[int]) -> None:
         """Faces at these 0-based positions of face_list are leaving it."""
 
-    def _on_track_identified(self, track_id: int) -> None:
+    def _on_track_identified(self, track: TrackRecord) -> None:
         """An unassigned track got a face id (its table row goes away)."""
 
-    def _on_track_forgotten(self, track_id: int) -> None:
+    def _on_track_forgotten(self, track: TrackRecord) -> None:
         """An unassigned track died."""
 

@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
-from face_reid_master.identity.entries import TrackEntry
+from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood
@@ -102,15 +102,14 @@ class BayesIdentityManager(IdentityManagerBase):
         self._log_c = math.log(self.likelihood.new_person_scale_c)
         self._table = np.zeros((1, 1))  # row 0 / column 0 slack; P[0, 0] unused (0)
         self._counts = np.zeros((1, 1), dtype=np.int64)
-        self._rows: list[int] = []  # track ids of rows 1..N
-        self._row_of: dict[int, int] = {}
+        self._rows: list[TrackRecord] = []  # the tracks of rows 1..N (each record knows its bayes_row)
         self._dirty = False
         self._converged = True
 
     # ------------------------------------------------------------------------------ queries
     def posterior_table(self) -> tuple[FloatArray, list[int], list[int]]:
         """(copy of the table, track ids of rows 1..N, face ids of columns 1..M)."""
-        return self._table.copy(), list(self._rows), list(self.faces.available)
+        return self._table.copy(), [t.track_id for t in self._rows], list(self.faces.available)
 
     @property
     def is_normalised(self) -> bool:
@@ -122,39 +121,38 @@ class BayesIdentityManager(IdentityManagerBase):
         return self._counts.copy()
 
     def posterior_of(self, track_id: int) -> dict[int, float]:
-        row = self._row_of.get(track_id)
-        if row is None:
+        track = self.tracks.entries.get(track_id)
+        row = 0 if track is None else track.bayes_row
+        if not row:
             return {}
         p = self._table[row]
         out = {0: float(p[0])}
         out.update({fid: float(v) for fid, v in zip(self.faces.available, p[1:], strict=True)})
         return out
 
-    def _current_confidence(self, track: TrackEntry) -> float:
-        row = self._row_of.get(track.track_id)
-        return 0.0 if row is None else float(self._table[row].max())
+    def _current_confidence(self, track: TrackRecord) -> float:
+        row = track.bayes_row
+        return float(self._table[row].max()) if row else 0.0
 
     # ------------------------------------------------------------------------------ table structure
-    def _reindex_rows(self) -> None:
-        self._row_of = {tid: i + 1 for i, tid in enumerate(self._rows)}
-
-    def _add_row(self, track_id: int) -> None:
+    def _add_row(self, track: TrackRecord) -> None:
         m1 = self._table.shape[1]
         self._table = np.vstack([self._table, np.full((1, m1), self.prior_probability)])
         self._counts = np.vstack([self._counts, np.zeros((1, m1), dtype=np.int64)])
-        self._rows.append(track_id)
-        self._row_of[track_id] = len(self._rows)
+        self._rows.append(track)
+        track.bayes_row = len(self._rows)
         self._dirty = True
 
-    def _remove_rows(self, track_ids: list[int]) -> None:
-        idx = [self._row_of[t] for t in track_ids if t in self._row_of]
-        if not idx:
+    def _remove_row(self, track: TrackRecord) -> None:
+        row = track.bayes_row
+        if not row:
             return
-        self._table = np.delete(self._table, idx, axis=0)
-        self._counts = np.delete(self._counts, idx, axis=0)
-        drop = set(track_ids)
-        self._rows = [t for t in self._rows if t not in drop]
-        self._reindex_rows()
+        self._table = np.delete(self._table, row, axis=0)
+        self._counts = np.delete(self._counts, row, axis=0)
+        del self._rows[row - 1]
+        track.bayes_row = 0
+        for i in range(row - 1, len(self._rows)):
+            self._rows[i].bayes_row = i + 1
         self._dirty = True
 
     def _on_face_available(self, face_id: int) -> None:
@@ -169,21 +167,22 @@ class BayesIdentityManager(IdentityManagerBase):
         self._counts = np.delete(self._counts, cols, axis=1)
         self._dirty = True
 
-    def _on_track_identified(self, track_id: int) -> None:
-        self._remove_rows([track_id])
+    def _on_track_identified(self, track: TrackRecord) -> None:
+        self._remove_row(track)
 
-    def _on_track_forgotten(self, track_id: int) -> None:
-        self._remove_rows([track_id])
+    def _on_track_forgotten(self, track: TrackRecord) -> None:
+        self._remove_row(track)
 
     # ------------------------------------------------------------------------------ inference
     def _ingest_unassigned(self, track_ids: list[int], observations: list[F32Array],
                            eye_px: list[FloatArray]) -> None:
-        for tid in track_ids:
-            if tid not in self._row_of:
-                self._add_row(tid)
+        records = [self.tracks.entries[tid] for tid in track_ids]
+        for track in records:
+            if not track.bayes_row:
+                self._add_row(track)
         obs = np.concatenate(observations) if len(observations) > 1 else observations[0]
         sizes = np.array([o.shape[0] for o in observations])
-        rows = np.array([self._row_of[t] for t in track_ids])
+        rows = np.array([t.bayes_row for t in records])
         m = len(self.faces.available)
         log_ev = np.empty((len(track_ids), m + 1))
         log_ev[:, 0] = sizes * self._log_c  # column 0: c per observation (ratio form, see module doc)
@@ -241,6 +240,6 @@ class BayesIdentityManager(IdentityManagerBase):
         for r in ok:
             col = int(best[r])
             face = 0 if col == 0 else self.faces.available[col - 1]
-            decisions.append((self._rows[r], face, float(p[r])))
+            decisions.append((self._rows[r].track_id, face, float(p[r])))
         return decisions
 

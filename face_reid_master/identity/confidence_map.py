@@ -23,6 +23,7 @@ from typing import Any
 
 from face_reid_camera.common.model_files import read_model_json, unusable_model
 from face_reid_camera.common.resources import model_path
+from face_reid_master.identity.evidence import Evidence
 
 __all__ = ["CONFIDENCE_MAP_FILE", "DECISIONS", "ConfidenceMap", "decision_key", "default_confidence_map",
            "load_confidence_map", "save_confidence_map"]
@@ -34,8 +35,9 @@ DECISIONS = ("face_known", "face_new", "body")
 
 
 def decision_key(evidence: str, new_face: bool) -> str:
-    """The map's kind of a decision by ``evidence`` ("face", "body", "both") that did / did not create a face."""
-    if evidence == "body":
+    """The map's kind of a decision by ``evidence`` (an :class:`~.evidence.Evidence`) that did / did not create a
+    face: a cue other than the face decides among learned faces as the body does ("body")."""
+    if evidence not in (Evidence.FACE, Evidence.BOTH):
         return "body"
     return "face_new" if new_face else "face_known"
 

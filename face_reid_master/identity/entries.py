@@ -1,4 +1,4 @@
-"""What the identity manager keeps per learned face and per live track, and the observations it queues."""
+"""What the master keeps per learned face and per live track (one record each), and the observations it queues."""
 
 from __future__ import annotations
 
@@ -8,7 +8,11 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Chunk", "FaceEntry", "TrackEntry", "Vote", "checked_observations", "eye_rows", "rows_of"]
+from face_reid_master.identity.evidence import CueChunk, Evidence
+
+__all__ = [
+    "Chunk", "FaceEntry", "TrackRecord", "Vote", "checked_observations", "eye_rows", "rows_of",
+]
 
 FloatArray = npt.NDArray[np.float64]
 F32Array = npt.NDArray[np.float32]
@@ -45,11 +49,14 @@ class Chunk(NamedTuple):
     source: str
 
 
-@dataclass
-class TrackEntry:
-    """A live track of track_list, as seen by the identity layer (read by the classification methods)."""
+@dataclass(eq=False)
+class TrackRecord:
+    """Everything the master keeps about one live track, in one place (track_list of Algorithm 1 holds them;
+    :meth:`~face_reid_master.identity.track_list.TrackList.remove` drops it whole). Keyed by the tracker's id;
+    the tracker keeps the kinematics under that id (the handle), the master publishes the track as
+    ``public_id``."""
 
-    track_id: int
+    track_id: int  # the tracker's id: the kinematics handle (face_reid_master.tracking.interface.TrackerId)
     slot: int | None = None  # bank slot buffering observed features while unassigned (track.face_images)
     n_observations: int = 0
     first_seen_s: float = 0.0
@@ -58,8 +65,28 @@ class TrackEntry:
     confidence: float = 0.0
     votes: list[Vote] = field(default_factory=list)  # threshold baseline only
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
-    evidence: str = ""  # identified: "face", "body" (no face seen yet) or "both" (body, then its face agreed)
+    evidence: str = Evidence.NONE  # identified: what decided it (an evidence.Evidence or another cue's kind)
     new_face: bool = False  # identified: its decision created the face (a person not known before)
+    face_chunks: list[Chunk] = field(default_factory=list)  # face observations waiting for the next step
+    cue_queue: dict[str, list[CueChunk]] = field(default_factory=dict)  # other cues' observations, per cue kind
+    bayes_row: int = 0  # Bayes method: its row of the posterior table while unassigned (0: none)
+    public_id: int = 0  # the id it is published under (core.records.PublicId): track_id until a swap split it
+    public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
+    face_observations: int = 0  # face embeddings the master used since it got its public id
+
+    def __post_init__(self) -> None:
+        if not self.public_id:
+            self.public_id = self.track_id
+
+    def give(self, face_id: int, confidence: float, evidence: str, new: bool) -> None:
+        """The track carries face ``face_id`` from now on, decided by ``evidence`` (``new``: it created it)."""
+        self.face_id, self.confidence, self.evidence, self.new_face = face_id, float(confidence), evidence, new
+
+    def unassign(self) -> None:
+        """The track holds no face any more: it is classified afresh from its next observations."""
+        self.face_id, self.confidence, self.evidence = None, 0.0, Evidence.NONE
+        self.votes.clear()
+        self.n_observations = 0
 
 
 def rows_of(chunks: list[Chunk]) -> F32Array:

@@ -8,7 +8,7 @@ another track took it.
 
 from __future__ import annotations
 
-from face_reid_master.identity.entries import TrackEntry
+from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.face_list import FaceList
 
 __all__ = ["LentFaces"]
@@ -22,7 +22,7 @@ class LentFaces:
         self.enabled = enabled
         self.lender: dict[int, int] = {}
 
-    def lend(self, track: TrackEntry | None) -> None:
+    def lend(self, track: TrackRecord | None) -> None:
         """The tracker lost ``track``: its face goes back to face_list, lent."""
         fid = None if track is None else track.face_id
         if not self.enabled or track is None or fid is None or fid in self.lender or fid in self.faces.available:
@@ -30,7 +30,7 @@ class LentFaces:
         self.faces.make_available(fid)
         self.lender[fid] = track.track_id
 
-    def give_back(self, track: TrackEntry | None) -> None:
+    def give_back(self, track: TrackRecord | None) -> None:
         """The LOST ``track`` was detected again: it takes its face back if nobody took it."""
         fid = None if track is None else track.face_id
         if track is not None and fid is not None and self.lender.get(fid) == track.track_id:

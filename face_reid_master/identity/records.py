@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int
+from face_reid_master.identity.evidence import Evidence
 
 __all__ = ["MAX_FACE_ID", "IdentityEvent", "IdentityEventKind", "IdentityStats", "LearnedFace", "check_face_id"]
 
@@ -47,7 +48,7 @@ class IdentityEvent:
     stamp_s: float
     confidence: float  # posterior (Bayes) or vote fraction (threshold) when the decision was made
     since_s: float | None = None  # SWAPPED: stamp of the first observation that was not the face's person
-    evidence: str = "face"  # ASSIGNED_KNOWN / NEW_FACE: what decided it, "face" or "body"
+    evidence: str = Evidence.FACE  # ASSIGNED_KNOWN / NEW_FACE: what decided it (the face or another cue's kind)
 
 
 @dataclass

@@ -17,7 +17,7 @@ from itertools import accumulate
 import numpy as np
 import numpy.typing as npt
 
-from face_reid_master.identity.entries import Chunk, TrackEntry
+from face_reid_master.identity.entries import Chunk, TrackRecord
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityStats
 
@@ -59,7 +59,7 @@ class SwapGuard:
         ends = list(accumulate(counts))
         return {tid: keep[end - n:end] for tid, n, end in zip(ident, counts, ends, strict=True)}
 
-    def swapped(self, track: TrackEntry, chunks: list[Chunk], keep: npt.NDArray[np.bool_]) -> list[Chunk] | None:
+    def swapped(self, track: TrackRecord, chunks: list[Chunk], keep: npt.NDArray[np.bool_]) -> list[Chunk] | None:
         """Follow the identified track's run of inconsistent observations; once it is
         ``release_after`` long, the chunks from the run's start on (None: no swap)."""
         k = self.release_after

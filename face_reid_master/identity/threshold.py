@@ -10,7 +10,7 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
-from face_reid_master.identity.entries import TrackEntry, Vote
+from face_reid_master.identity.entries import TrackRecord, Vote
 
 __all__ = ["ThresholdIdentityManager"]
 
@@ -58,7 +58,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
                     votes.append(Vote(0, float(dmin[r])))
             pos += o.shape[0]
 
-    def _tally(self, track: TrackEntry) -> tuple[int, float]:
+    def _tally(self, track: TrackRecord) -> tuple[int, float]:
         """(winner: face id or 0 = new, vote fraction) over votes for faces still in face_list."""
         available = set(self.faces.available)
         counts: dict[int, list[float]] = {}
@@ -76,7 +76,7 @@ class ThresholdIdentityManager(IdentityManagerBase):
                 return fid, -neg_n / total
         return 0, n_new / total
 
-    def _current_confidence(self, track: TrackEntry) -> float:
+    def _current_confidence(self, track: TrackRecord) -> float:
         _, fraction = self._tally(track)
         return fraction
 

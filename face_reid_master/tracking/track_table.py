@@ -7,6 +7,7 @@ keeps rows of every column at once, so a new field is one declaration below.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -62,6 +63,31 @@ class TrackTable:
             old = getattr(self, f.name)
             setattr(self, f.name, [v for v, k in zip(old, flags, strict=True) if k] if isinstance(old, list)
                     else old[rows])
+
+    def detected(self, rows: NDArray[np.intp], heights: NDArray[np.float64], stamp: float, camera_id: str) -> None:
+        """The tracks of ``rows`` were detected at ``stamp`` by ``camera_id`` with head ``heights`` (NaN:
+        unknown): their sightings, hit counts, cameras and newest heights follow."""
+        self.last_seen[rows] = np.maximum(self.last_seen[rows], stamp)
+        self.created[rows] = np.minimum(self.created[rows], stamp)
+        self.hits[rows] += 1
+        for i, h in zip(rows.tolist(), heights.tolist(), strict=True):
+            hist = self.hist[i]
+            if hist.cameras.get(camera_id, -math.inf) < stamp:
+                hist.cameras[camera_id] = stamp
+            if h == h and stamp >= hist.height_stamp_s:  # finite (not NaN)
+                hist.height_m, hist.height_stamp_s = h, stamp
+
+    def remember_looks(self, appearance: NDArray[np.float32], rows: NDArray[np.intp], cols: NDArray[np.intp],
+                       created_cols: list[int]) -> None:
+        """Add each described detection's embedding (row ``col`` of ``appearance``) to the gallery of the track it
+        joined (``rows`` / ``cols``) or started (``created_cols``: the tracks just appended, in order)."""
+        described = np.isfinite(appearance).all(axis=1)
+        pairs = [(i, col) for i, col in zip(rows.tolist(), cols.tolist(), strict=True) if described[col]]
+        if created_cols:  # new tracks were appended: their rows are the last ones
+            first = self.ids.shape[0] - len(created_cols)
+            pairs += [(first + k, col) for k, col in enumerate(created_cols) if described[col]]
+        for i, col in pairs:
+            self.looks[i].add(appearance[col])
 
     def snapshots(self, x: NDArray[np.float64], P: NDArray[np.float64], stamps: NDArray[np.float64],
                   window_start: float, include_tentative: bool) -> list[TrackSnapshot]:

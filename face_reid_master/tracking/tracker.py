@@ -33,6 +33,7 @@ from face_reid_master.tracking.appearance import AppearanceGallery, appearance_d
 from face_reid_master.tracking.association import Associator, Matches
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.history import FilterStep, TrackHistory, insert_late, record_updates
+from face_reid_master.tracking.interface import FrameDetections
 from face_reid_master.tracking.lifecycle import EPS_S, birth_candidates, expired, transitions
 from face_reid_master.tracking.records import (
     Detection,
@@ -121,6 +122,13 @@ class Tracker:
             positions, stds, heights = np.zeros((0, 2)), np.zeros(0), np.zeros(0)
         return self.update_arrays(positions, stds, heights, stamp_s, camera_id)
 
+    def update_frame(self, detections: FrameDetections, stamp_s: float, camera_id: str, *,
+                     resync_backward: bool = True) -> UpdateResult:
+        """The :class:`~face_reid_master.tracking.interface.MultiCameraTracker` entry: :meth:`update_arrays` on
+        a frame's detection arrays."""
+        d = detections
+        return self.update_arrays(d.positions, d.stds, d.heights, stamp_s, camera_id, d.appearance, resync_backward)
+
     def update_arrays(
         self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str,
         appearance: NDArray[np.float32] | None = None, resync_backward: bool = True,
@@ -152,7 +160,7 @@ class Tracker:
         associations = list(zip(self._tab.ids[rows].tolist(), cols.tolist(), strict=True))
         created, created_cols, suppressed, dropped = self._initiate(matched, positions, r2, heights, stamp, camera_id)
         if appearance is not None:
-            self._remember_looks(appearance, rows, cols, created, created_cols)
+            self._tab.remember_looks(appearance, rows, cols, created_cols)
         associations.extend(zip(created, created_cols, strict=True))
         self._clock.follow(stamp)
         confirmed, lost, recovered, deleted = self._tick()
@@ -296,17 +304,6 @@ class Tracker:
         near_last = (((z[None, :, :] - z_a[:, None, :]) ** 2).sum(axis=2) < (reach * reach)[:, None]).any(axis=1)
         return np.flatnonzero(near_pred | near_last)
 
-    def _remember_looks(self, appearance: NDArray[np.float32], rows: IndexArray, cols: IndexArray,
-                        created: list[int], created_cols: list[int]) -> None:
-        """Add each described detection's embedding to the gallery of the track it joined or started."""
-        described = np.isfinite(appearance).all(axis=1)
-        pairs = [(i, col) for i, col in zip(rows.tolist(), cols.tolist(), strict=True) if described[col]]
-        if created:  # new tracks were appended: their rows are the last ones
-            first = self._tab.ids.shape[0] - len(created)
-            pairs += [(first + k, col) for k, col in enumerate(created_cols) if described[col]]
-        for i, col in pairs:
-            self._tab.looks[i].add(appearance[col])
-
     def _update_matched(
         self,
         matched: _Matched,
@@ -352,16 +349,8 @@ class Tracker:
                 tab.t[i], tab.zmeas[i], tab.x[i], tab.P[i] = head.stamp_s, head.z, head.x, head.P
         if (self._tab.state[rows] == _LOST).any():
             self._quiet_until = -math.inf  # recovered at the next tick
-        self._tab.last_seen[rows] = np.maximum(self._tab.last_seen[rows], stamp)
-        self._tab.created[rows] = np.minimum(self._tab.created[rows], stamp)
-        self._tab.hits[rows] += 1
+        self._tab.detected(rows, heights[cols], stamp, camera_id)
         self._stats.detections_associated += int(rows.shape[0])
-        for i, h in zip(rows.tolist(), heights[cols].tolist(), strict=True):
-            hist = self._tab.hist[i]
-            if hist.cameras.get(camera_id, -math.inf) < stamp:
-                hist.cameras[camera_id] = stamp
-            if h == h and stamp >= hist.height_stamp_s:  # finite (not NaN)
-                hist.height_m, hist.height_stamp_s = h, stamp
 
     def _initiate(
         self,
