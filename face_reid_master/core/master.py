@@ -85,7 +85,8 @@ class MasterCore:
         self.confidence_map = confidence_map if confidence_map is not None else default_confidence_map()
         self.stats = MasterStats()
         self._notices: list[str] = []  # things the node should log once, handed out with the next FrameOutcome
-        self.tracker = Tracker(cfg.tracker)
+        self.admission = FrameAdmission(cfg, self.stats)  # judges every stamp once: the tracker gets its clock
+        self.tracker = Tracker(cfg.tracker, clock=self.admission.tracker_clock)
         if body_metric is None and cfg.body_appearance_tracking:
             body_metric = default_body_metric()
         self.body_metric = body_metric if cfg.body_appearance_tracking else None
@@ -102,7 +103,6 @@ class MasterCore:
             name_threshold=self.name_threshold or 1.0, min_face_features=cfg.min_face_features_for_name,
             embedding_dim=dim,
         )
-        self.admission = FrameAdmission(cfg, self.stats)
         self.reader = DetectionReader(cfg, self.stats, model, self.body_metric, self._notices)
         self.memory = FaceMemory(cfg, self.stats, self.identity, self.people, store, self._notices)
         self.clutter = StaticClutter(cfg.static_clutter_after_s, cfg.static_clutter_radius_m)
@@ -169,7 +169,7 @@ class MasterCore:
         stamp = admission.stamp_s
         detections = self.reader.read(frame)
         update = self.tracker.update_arrays(detections.positions, detections.stds, detections.heights, stamp,
-                                            frame.camera_id, detections.appearance, resync_backward=now_s is None)
+                                            frame.camera_id, detections.appearance, admitted=admission.tracker)
         if update.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             self.stats.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({update.status.value})", "tracker_late")

@@ -28,7 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import check_real, check_stamp
-from face_reid_master.tracking.admission import Clock
+from face_reid_camera.common.stamp_admission import ClockVerdict, StampClock
+from face_reid_master.tracking.admission import Clock, as_admission
 from face_reid_master.tracking.appearance import AppearanceGallery, appearance_distances
 from face_reid_master.tracking.association import Associator, Matches
 from face_reid_master.tracking.config import TrackerConfig
@@ -72,7 +73,9 @@ class Tracker:
     ``max_detection_delay_s``), read :meth:`snapshots` to publish.  Not thread-safe.
     """
 
-    def __init__(self, config: TrackerConfig | None = None) -> None:
+    def __init__(self, config: TrackerConfig | None = None, clock: StampClock | None = None) -> None:
+        """``clock``: the clock of the gate that judges stamps before this tracker (MasterCore's), which then hands
+        its verdicts to :meth:`update_arrays`; None: the tracker judges stamps with a clock of its own."""
         if config is None:
             config = TrackerConfig()
         if not isinstance(config, TrackerConfig):
@@ -80,7 +83,7 @@ class Tracker:
         self._cfg = config
         self._model = config.motion_model
         self._associate = Associator(config)
-        self._clock = Clock(config)
+        self._clock = Clock(config) if clock is None else clock
         self._stats = TrackerStats()
         self._next_id = 1
         self._clear_arrays()
@@ -124,6 +127,7 @@ class Tracker:
     def update_arrays(
         self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str,
         appearance: NDArray[np.float32] | None = None, resync_backward: bool = True,
+        admitted: ClockVerdict | None = None,
     ) -> UpdateResult:
         """Fuse one camera frame seen by ``camera_id`` at ``stamp_s`` (seconds).
 
@@ -132,10 +136,11 @@ class Tracker:
         body-appearance embeddings in the learned metric's space (NaN rows = not described; None = none).
         ``resync_backward`` False: a run of late frames is refused, never taken for a clock jump back (which
         deletes every track). Detection indices in the result are rows of these arrays.  ValueError on a
-        non-finite stamp.
+        non-finite stamp. ``admitted``: the verdict of the gate that judged ``stamp_s`` against this tracker's
+        clock (given at construction): it is not judged again.
         """
         stamp = check_stamp(stamp_s)
-        status, resync, deleted_by_reset = self._admit(stamp, resync_backward)
+        status, resync, deleted_by_reset = self._admit(stamp, resync_backward, admitted)
         if status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             return UpdateResult(stamp, camera_id, status)
         stats = self._stats
@@ -225,9 +230,16 @@ class Tracker:
         return self._tab.snapshots(x, P, t_out, window_start, include_tentative)
 
     # ------------------------------------------------------------------ steps of update_arrays
-    def _admit(self, stamp: float, resync_backward: bool = True) -> tuple[FrameStatus, bool, tuple[int, ...]]:
-        """Admit the stamp (admission.Clock), count it; on a backward clock jump delete everything."""
-        verdict = self._clock.admit(stamp, resync_backward)
+    def _admit(self, stamp: float, resync_backward: bool = True, admitted: ClockVerdict | None = None,
+               ) -> tuple[FrameStatus, bool, tuple[int, ...]]:
+        """The stamp's verdict (the gate's ``admitted``, else judged by this tracker's clock), counted; on a
+        backward clock jump delete everything."""
+        if admitted is None:
+            verdict = as_admission(self._clock.admit(stamp, resync_backward))
+        else:  # judged at the edge against this clock: it holds still (a late one is behind it, a re-base only)
+            verdict = as_admission(admitted)
+            assert verdict.status is not FrameStatus.APPLIED_LATE or (self._clock.now is not None
+                                                                      and stamp < self._clock.now)
         stats = self._stats
         if verdict.status is FrameStatus.REJECTED_FUTURE:
             stats.frames_rejected_future += 1
