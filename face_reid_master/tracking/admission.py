@@ -15,7 +15,7 @@ from face_reid_camera.common.stamp_admission import ClockVerdict, StampClock
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.records import FrameStatus
 
-__all__ = ["Admission", "Clock", "as_admission"]
+__all__ = ["Admission", "Clock", "as_admission", "verdict_on"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,3 +48,12 @@ class Clock(StampClock):
 
     def __init__(self, config: TrackerConfig) -> None:
         super().__init__(config.max_detection_delay_s, config.max_future_stamp_s, config.clock_resync_frames)
+
+
+def verdict_on(clock: StampClock, stamp: float, resync_backward: bool, admitted: ClockVerdict | None) -> Admission:
+    """The tracker's verdict on ``stamp``: the gate's ``admitted`` (judged at the edge against ``clock``: not judged
+    again, only the invariant that a late verdict is behind the clock is asserted), else ``clock`` judges it."""
+    if admitted is None:
+        return as_admission(clock.admit(stamp, resync_backward))
+    assert admitted.status != "applied_late" or (clock.now is not None and stamp < clock.now)
+    return as_admission(admitted)

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import check_real, check_stamp
 from face_reid_camera.common.stamp_admission import ClockVerdict, StampClock
-from face_reid_master.tracking.admission import Clock, as_admission
+from face_reid_master.tracking.admission import Clock, verdict_on
 from face_reid_master.tracking.appearance import AppearanceGallery, appearance_distances
 from face_reid_master.tracking.association import Associator, Matches
 from face_reid_master.tracking.config import TrackerConfig
@@ -74,8 +74,7 @@ class Tracker:
     """
 
     def __init__(self, config: TrackerConfig | None = None, clock: StampClock | None = None) -> None:
-        """``clock``: the clock of the gate that judges stamps before this tracker (MasterCore's), which then hands
-        its verdicts to :meth:`update_arrays`; None: the tracker judges stamps with a clock of its own."""
+        """``clock``: the clock of the gate that judges stamps before this tracker (None: one of its own)."""
         if config is None:
             config = TrackerConfig()
         if not isinstance(config, TrackerConfig):
@@ -232,14 +231,9 @@ class Tracker:
     # ------------------------------------------------------------------ steps of update_arrays
     def _admit(self, stamp: float, resync_backward: bool = True, admitted: ClockVerdict | None = None,
                ) -> tuple[FrameStatus, bool, tuple[int, ...]]:
-        """The stamp's verdict (the gate's ``admitted``, else judged by this tracker's clock), counted; on a
-        backward clock jump delete everything."""
-        if admitted is None:
-            verdict = as_admission(self._clock.admit(stamp, resync_backward))
-        else:  # judged at the edge against this clock: it holds still (a late one is behind it, a re-base only)
-            verdict = as_admission(admitted)
-            assert verdict.status is not FrameStatus.APPLIED_LATE or (self._clock.now is not None
-                                                                      and stamp < self._clock.now)
+        """The stamp's verdict (the gate's ``admitted``, else this tracker's clock judges), counted; on a backward
+        clock jump delete everything."""
+        verdict = verdict_on(self._clock, stamp, resync_backward, admitted)
         stats = self._stats
         if verdict.status is FrameStatus.REJECTED_FUTURE:
             stats.frames_rejected_future += 1
