@@ -74,7 +74,6 @@ class Tracker:
     """
 
     def __init__(self, config: TrackerConfig | None = None, clock: StampClock | None = None) -> None:
-        """``clock``: the clock of the gate that judges stamps before this tracker (None: one of its own)."""
         if config is None:
             config = TrackerConfig()
         if not isinstance(config, TrackerConfig):
@@ -135,8 +134,7 @@ class Tracker:
         body-appearance embeddings in the learned metric's space (NaN rows = not described; None = none).
         ``resync_backward`` False: a run of late frames is refused, never taken for a clock jump back (which
         deletes every track). Detection indices in the result are rows of these arrays.  ValueError on a
-        non-finite stamp. ``admitted``: the verdict of the gate that judged ``stamp_s`` against this tracker's
-        clock (given at construction): it is not judged again.
+        non-finite stamp. ``admitted``: the verdict of the gate owning this tracker's ``clock``: not judged again.
         """
         stamp = check_stamp(stamp_s)
         status, resync, deleted_by_reset = self._admit(stamp, resync_backward, admitted)
@@ -229,10 +227,9 @@ class Tracker:
         return self._tab.snapshots(x, P, t_out, window_start, include_tentative)
 
     # ------------------------------------------------------------------ steps of update_arrays
-    def _admit(self, stamp: float, resync_backward: bool = True, admitted: ClockVerdict | None = None,
-               ) -> tuple[FrameStatus, bool, tuple[int, ...]]:
-        """The stamp's verdict (the gate's ``admitted``, else this tracker's clock judges), counted; on a backward
-        clock jump delete everything."""
+    def _admit(self, stamp: float, resync_backward: bool, admitted: ClockVerdict | None) -> tuple[FrameStatus, bool,
+                                                                                                 tuple[int, ...]]:
+        """The stamp's verdict (admission.verdict_on), counted; on a backward clock jump delete everything."""
         verdict = verdict_on(self._clock, stamp, resync_backward, admitted)
         stats = self._stats
         if verdict.status is FrameStatus.REJECTED_FUTURE:
