@@ -288,10 +288,11 @@ class CameraNode(ManagedNode):
         if intr is None:
             self._reject("no_camera_info", "no CameraInfo received yet: frame dropped")
             return
-        max_age = float(self.values["max_frame_age_s"])
         now_s = self.now_s()
-        if max_age > 0 and now_s - stamp_s > max_age:
-            self._reject("stale", f"frame {now_s - stamp_s:.3f} s old (> max_frame_age_s {max_age}): dropped")
+        sync = self._sync
+        if sync is not None and sync.gate.expired(stamp_s, now_s):  # past the deadline its admission set
+            self._reject("stale", f"frame {now_s - stamp_s:.3f} s old (> max_frame_age_s {sync.gate.max_age_s}): "
+                         "dropped")
             return
         if depth.shape != (intr.height, intr.width):
             self._reject("size_mismatch",

@@ -92,7 +92,10 @@ class MasterCore:
         self.confidence_map = confidence_map if confidence_map is not None else default_confidence_map()
         self.stats = MasterStats()
         self._notices: list[str] = []  # things the node should log once, handed out with the next FrameOutcome
-        self.tracker: MultiCameraTracker = tracker if tracker is not None else Tracker(cfg.tracker)
+        # judges every stamp once, against the tracker's clock (the project's tracker is given the gate's)
+        self.admission = FrameAdmission(cfg, self.stats, tracker.clock if tracker is not None else None)
+        self.tracker: MultiCameraTracker = (tracker if tracker is not None
+                                            else Tracker(cfg.tracker, clock=self.admission.tracker_clock))
         if body_metric is None and cfg.body_appearance_tracking:
             body_metric = default_body_metric()
         self.body_metric = body_metric if cfg.body_appearance_tracking else None
@@ -109,7 +112,6 @@ class MasterCore:
             name_threshold=self.name_threshold or 1.0, min_face_features=cfg.min_face_features_for_name,
             embedding_dim=dim,
         )
-        self.admission = FrameAdmission(cfg, self.stats)
         self.reader = DetectionReader(cfg, self.stats, model, self.body_metric, self._notices)
         self.memory = FaceMemory(cfg, self.stats, self.identity, self.people, store, self._notices)
         self.clutter = StaticClutter(cfg.static_clutter_after_s, cfg.static_clutter_radius_m)
@@ -173,7 +175,7 @@ class MasterCore:
             self._restart_tracking(now_s)
         stamp = admission.stamp_s
         detections = self.reader.read(frame)
-        update = self.tracker.update_frame(detections, stamp, frame.camera_id, resync_backward=now_s is None)
+        update = self.tracker.update_frame(detections, stamp, frame.camera_id, admitted=admission.tracker)
         if update.status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             self.stats.frames_rejected_tracker_late += 1
             return FrameOutcome(False, f"tracker rejected the frame ({update.status.value})", "tracker_late")

@@ -2,8 +2,9 @@
 
 ``Publisher.publish(bytes)`` sends them as they are, without the rosidl objects rclpy would build, convert and
 serialize on every cycle; subscribers get the same message (the tests compare with rclpy's ``serialize_message``).
-Layout: plain CDR, little endian (the encoding Fast DDS gives ROS 2 messages), each primitive aligned to its size
-from the end of the 4-byte encapsulation header.
+Layout: plain CDR, little endian (the encoding Fast DDS gives ROS 2 messages), each struct and padding derived from
+the one definition of the message (:mod:`face_reid_camera.common.msg_layout`); the values are packed in its field
+order.
 """
 
 from __future__ import annotations
@@ -16,50 +17,35 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.msg_layout import (
+    ENCAPSULATION_LE,
+    NAMED_TRACK,
+    NAMED_TRACK_ARRAY,
+    first_alignment,
+    packing,
+)
 from face_reid_camera.common.stamps import seconds_to_stamp
 from face_reid_master.records import NamedTrackRecord
 
 __all__ = ["tracks_to_cdr"]
 
-_HEADER = b"\x00\x01\x00\x00"  # encapsulation: CDR, little endian; options 0
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 _U64 = 0xFFFF_FFFF_FFFF_FFFF
 _F8 = np.dtype("<f8")
+_TRACK_ALIGN = first_alignment(NAMED_TRACK)  # each NamedTrack starts aligned to its first field (a uint64: 8)
+
+
+@lru_cache(maxsize=64)
+def _head_layout(frame_id: int) -> struct.Struct:
+    """The packing of the NamedTrackArray's header and its tracks' count, for a frame id of this byte length."""
+    return packing(NAMED_TRACK_ARRAY, (frame_id, 0))
 
 
 @lru_cache(maxsize=1024)
 def _track_layout(name: int, evidence: int, cameras: tuple[int, ...]) -> struct.Struct:
-    """The packing of one NamedTrack whose strings encode to these byte lengths, from an 8-aligned start (its first
-    field is a uint64): the paddings depend only on them."""
-    parts = ["<QQ"]
-    offset = 16
-
-    def pad(size: int) -> None:
-        nonlocal offset
-        if gap := -offset % size:
-            parts.append(f"{gap}x")
-            offset += gap
-
-    def string(length: int) -> None:  # uint32 length with the NUL, the bytes, the NUL (struct pads "s" with it)
-        nonlocal offset
-        pad(4)
-        parts.append(f"I{length + 1}s")
-        offset += 4 + length + 1
-
-    string(name)
-    pad(4)
-    parts.append("fI")  # identity_confidence, face_observations
-    offset += 8
-    string(evidence)
-    pad(8)
-    parts.append("6d128sfB")  # position, velocity (x y z), covariance, height_m, state
-    offset += 48 + 128 + 5
-    pad(4)
-    parts.append("iIiII")  # first_seen, last_seen, number of cameras
-    offset += 20
-    for length in cameras:
-        string(length)
-    return struct.Struct("".join(parts))
+    """The packing of one NamedTrack whose strings encode to these byte lengths, from an aligned start: the
+    paddings depend only on them."""
+    return packing(NAMED_TRACK, (name, evidence, len(cameras), *cameras))
 
 
 def _float32(value: float) -> float:
@@ -95,14 +81,13 @@ def tracks_to_cdr(tracks: Sequence[NamedTrackRecord], stamp_s: float, frame_id: 
     """The serialized face_reid_msgs/NamedTrackArray of ``tracks`` stamped ``stamp_s`` in ``frame_id``: the same
     message as :func:`face_reid_master.ros.convert.tracks_to_msg` gives."""
     frame = _utf8(frame_id)
-    head = struct.pack(f"<iII{len(frame) + 1}s", *_stamp(stamp_s), len(frame) + 1, frame)
-    head += bytes(-len(head) % 4) + struct.pack("<I", len(tracks))
-    pieces = [_HEADER, head]
+    head = _head_layout(len(frame)).pack(*_stamp(stamp_s), len(frame) + 1, frame, len(tracks))
+    pieces = [ENCAPSULATION_LE, head]
     offset = len(head)  # from the end of the encapsulation header
     for tr in tracks:
         name, evidence = _utf8(tr.name), _utf8(tr.identity_evidence)
         cameras = [_utf8(c) for c in tr.cameras]
-        if gap := -offset % 8:
+        if gap := -offset % _TRACK_ALIGN:
             pieces.append(bytes(gap))
             offset += gap
         layout = _track_layout(len(name), len(evidence), tuple(len(c) for c in cameras))

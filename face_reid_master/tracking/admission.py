@@ -1,20 +1,21 @@
-"""Admission of frame stamps against the tracker clock (the newest accepted stamp; no wall clock).
+"""The tracker's view of stamp admission: its clock and verdicts, from the one gate that judges stamps.
 
-Frames up to ``max_detection_delay_s`` older than the clock are applied late; older ones, and frames
-more than ``max_future_stamp_s`` ahead, are rejected.  ``clock_resync_frames`` consecutive
-rejections in the same direction are taken as a clock jump (cameras restarted after an idle period,
-or a bag replay looping back) and the clock follows.
+The rules (frames up to ``max_detection_delay_s`` older than the clock are applied late; older ones, and frames
+more than ``max_future_stamp_s`` ahead, are refused; ``clock_resync_frames`` consecutive refusals in one direction
+re-base the clock) live in :class:`~face_reid_camera.common.stamp_admission.StampClock`. Inside MasterCore the
+frame's stamp is judged once at its edge (core.admission) and the tracker is handed that verdict and the gate's
+clock; a Tracker used alone judges each stamp with its own clock, by the same rules.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from face_reid_camera.common.stamp_admission import ClockVerdict, StampClock
 from face_reid_master.tracking.config import TrackerConfig
-from face_reid_master.tracking.lifecycle import EPS_S
 from face_reid_master.tracking.records import FrameStatus
 
-__all__ = ["Admission", "Clock"]
+__all__ = ["Admission", "Clock", "as_admission", "verdict_on"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,54 +32,28 @@ class Admission:
         return self.status in (FrameStatus.APPLIED, FrameStatus.APPLIED_LATE)
 
 
-_APPLIED = Admission(FrameStatus.APPLIED)
-_APPLIED_LATE = Admission(FrameStatus.APPLIED_LATE)
-_REJECTED_LATE = Admission(FrameStatus.REJECTED_LATE)
-_REJECTED_FUTURE = Admission(FrameStatus.REJECTED_FUTURE)
-_RESYNC_FORWARD = Admission(FrameStatus.APPLIED, resync=True)
-_RESYNC_BACKWARD = Admission(FrameStatus.APPLIED, resync=True, reset=True)
+_VERDICTS: dict[ClockVerdict, Admission] = {}
 
 
-class Clock:
-    """The tracker clock and the run of rejected stamps that may re-base it."""
+def as_admission(verdict: ClockVerdict) -> Admission:
+    """The tracker's Admission of a gate's ClockVerdict (the same status, resync and reset)."""
+    admission = _VERDICTS.get(verdict)
+    if admission is None:
+        admission = _VERDICTS[verdict] = Admission(FrameStatus(verdict.status), verdict.resync, verdict.reset)
+    return admission
+
+
+class Clock(StampClock):
+    """The tracker clock and the run of refused stamps that may re-base it, configured from a TrackerConfig."""
 
     def __init__(self, config: TrackerConfig) -> None:
-        self._max_delay_s = config.max_detection_delay_s
-        self._max_future_s = config.max_future_stamp_s
-        self._resync_frames = config.clock_resync_frames
-        self.now: float | None = None  # newest accepted stamp (None before the first frame)
-        self._reject_run = 0
-        self._reject_dir = 0  # +1 future, -1 late
+        super().__init__(config.max_detection_delay_s, config.max_future_stamp_s, config.clock_resync_frames)
 
-    def admit(self, stamp: float, resync_backward: bool = True) -> Admission:
-        """Classify ``stamp``; does not move the clock (see :meth:`follow`). ``resync_backward`` False: late
-        stamps never re-base the clock (the caller checks stamps against a clock of its own: a camera that
-        lags is refused, it cannot make the tracker start afresh)."""
-        if self.now is None:
-            self._reject_run = 0
-            return _APPLIED
-        if stamp > self.now + self._max_future_s + EPS_S:
-            direction = 1
-        elif stamp < self.now - self._max_delay_s - EPS_S:
-            direction = -1
-        else:
-            self._reject_run = 0
-            return _APPLIED_LATE if stamp < self.now else _APPLIED
-        self._reject_run = self._reject_run + 1 if direction == self._reject_dir else 1
-        self._reject_dir = direction
-        if self._resync_frames and self._reject_run >= self._resync_frames and (direction > 0 or resync_backward):
-            self._reject_run = 0
-            # forward: an idle gap, time simply passed (lifecycle timeouts apply normally);
-            # backward: time went back, start afresh
-            return _RESYNC_FORWARD if direction > 0 else _RESYNC_BACKWARD
-        return _REJECTED_FUTURE if direction > 0 else _REJECTED_LATE
 
-    def follow(self, stamp: float) -> None:
-        """Move the clock to ``stamp`` if that is newer."""
-        if self.now is None or stamp > self.now:
-            self.now = stamp
-
-    def reset(self) -> None:
-        """Forget the clock (and the run of rejections)."""
-        self.now = None
-        self._reject_run = 0
+def verdict_on(clock: StampClock, stamp: float, resync_backward: bool, admitted: ClockVerdict | None) -> Admission:
+    """The tracker's verdict on ``stamp``: the gate's ``admitted`` (judged at the edge against ``clock``: not judged
+    again, only the invariant that a late verdict is behind the clock is asserted), else ``clock`` judges it."""
+    if admitted is None:
+        return as_admission(clock.admit(stamp, resync_backward))
+    assert admitted.status != "applied_late" or (clock.now is not None and stamp < clock.now)
+    return as_admission(admitted)

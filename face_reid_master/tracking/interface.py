@@ -20,6 +20,7 @@ from typing import NewType, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.stamp_admission import ClockVerdict, StampClock
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.records import TrackerStats, TrackSnapshot, UpdateResult
 
@@ -48,9 +49,15 @@ class MultiCameraTracker(Protocol):
     def stats(self) -> TrackerStats:
         """Its counters (a copy)."""
 
+    @property
+    def clock(self) -> StampClock:
+        """Its clock (the newest applied stamp), which the core's stamp gate judges each frame against before
+        :meth:`update_frame` (the verdict is handed over as ``admitted``)."""
+
     def update_frame(self, detections: FrameDetections, stamp_s: float, camera_id: str, *,
-                     resync_backward: bool = True) -> UpdateResult:
-        """Fuse one camera frame; associations are (TrackerId, detection row); lost / recovered / deleted ids."""
+                     resync_backward: bool = True, admitted: ClockVerdict | None = None) -> UpdateResult:
+        """Fuse one camera frame; associations are (TrackerId, detection row); lost / recovered / deleted ids.
+        ``admitted``: the stamp's verdict already given by the core's stamp gate (not judged again)."""
 
     def advance(self, stamp_s: float) -> UpdateResult:
         """Move time to ``stamp_s`` without detections (timeouts: lost / deleted tracks)."""

@@ -28,7 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.checks import check_real, check_stamp
-from face_reid_master.tracking.admission import Clock
+from face_reid_camera.common.stamp_admission import ClockVerdict, StampClock
+from face_reid_master.tracking.admission import Clock, verdict_on
 from face_reid_master.tracking.appearance import AppearanceGallery, appearance_distances
 from face_reid_master.tracking.association import Associator, Matches
 from face_reid_master.tracking.config import TrackerConfig
@@ -73,7 +74,7 @@ class Tracker:
     ``max_detection_delay_s``), read :meth:`snapshots` to publish.  Not thread-safe.
     """
 
-    def __init__(self, config: TrackerConfig | None = None) -> None:
+    def __init__(self, config: TrackerConfig | None = None, clock: StampClock | None = None) -> None:
         if config is None:
             config = TrackerConfig()
         if not isinstance(config, TrackerConfig):
@@ -81,7 +82,7 @@ class Tracker:
         self._cfg = config
         self._model = config.motion_model
         self._associate = Associator(config)
-        self._clock = Clock(config)
+        self._clock = Clock(config) if clock is None else clock
         self._stats = TrackerStats()
         self._next_id = 1
         self._clear_arrays()
@@ -98,6 +99,11 @@ class Tracker:
     @property
     def stats(self) -> TrackerStats:
         return replace(self._stats)
+
+    @property
+    def clock(self) -> StampClock:
+        """The clock stamps are judged against (the newest applied stamp): the core's stamp gate's own."""
+        return self._clock
 
     @property
     def clock_s(self) -> float | None:
@@ -123,15 +129,17 @@ class Tracker:
         return self.update_arrays(positions, stds, heights, stamp_s, camera_id)
 
     def update_frame(self, detections: FrameDetections, stamp_s: float, camera_id: str, *,
-                     resync_backward: bool = True) -> UpdateResult:
+                     resync_backward: bool = True, admitted: ClockVerdict | None = None) -> UpdateResult:
         """The :class:`~face_reid_master.tracking.interface.MultiCameraTracker` entry: :meth:`update_arrays` on
         a frame's detection arrays."""
         d = detections
-        return self.update_arrays(d.positions, d.stds, d.heights, stamp_s, camera_id, d.appearance, resync_backward)
+        return self.update_arrays(d.positions, d.stds, d.heights, stamp_s, camera_id, d.appearance, resync_backward,
+                                  admitted)
 
     def update_arrays(
         self, positions: FloatArray, stds: FloatArray, heights: FloatArray, stamp_s: float, camera_id: str,
         appearance: NDArray[np.float32] | None = None, resync_backward: bool = True,
+        admitted: ClockVerdict | None = None,
     ) -> UpdateResult:
         """Fuse one camera frame seen by ``camera_id`` at ``stamp_s`` (seconds).
 
@@ -140,10 +148,10 @@ class Tracker:
         body-appearance embeddings in the learned metric's space (NaN rows = not described; None = none).
         ``resync_backward`` False: a run of late frames is refused, never taken for a clock jump back (which
         deletes every track). Detection indices in the result are rows of these arrays.  ValueError on a
-        non-finite stamp.
+        non-finite stamp. ``admitted``: the verdict of the gate owning this tracker's ``clock``: not judged again.
         """
         stamp = check_stamp(stamp_s)
-        status, resync, deleted_by_reset = self._admit(stamp, resync_backward)
+        status, resync, deleted_by_reset = self._admit(stamp, resync_backward, admitted)
         if status in (FrameStatus.REJECTED_LATE, FrameStatus.REJECTED_FUTURE):
             return UpdateResult(stamp, camera_id, status)
         stats = self._stats
@@ -233,9 +241,10 @@ class Tracker:
         return self._tab.snapshots(x, P, t_out, window_start, include_tentative)
 
     # ------------------------------------------------------------------ steps of update_arrays
-    def _admit(self, stamp: float, resync_backward: bool = True) -> tuple[FrameStatus, bool, tuple[int, ...]]:
-        """Admit the stamp (admission.Clock), count it; on a backward clock jump delete everything."""
-        verdict = self._clock.admit(stamp, resync_backward)
+    def _admit(self, stamp: float, resync_backward: bool, admitted: ClockVerdict | None) -> tuple[FrameStatus, bool,
+                                                                                                 tuple[int, ...]]:
+        """The stamp's verdict (admission.verdict_on), counted; on a backward clock jump delete everything."""
+        verdict = verdict_on(self._clock, stamp, resync_backward, admitted)
         stats = self._stats
         if verdict.status is FrameStatus.REJECTED_FUTURE:
             stats.frames_rejected_future += 1

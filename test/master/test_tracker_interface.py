@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from face_reid_camera.common.stamp_admission import ClockVerdict
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.tracking.config import TrackerConfig
@@ -24,15 +25,17 @@ class _CountingTracker:
         self.reset = self._inner.reset
         self.reserve_id = self._inner.reserve_id
         self.snapshots = self._inner.snapshots
+        self.clock = self._inner.clock
 
     @property
     def stats(self) -> TrackerStats:
         return self._inner.stats
 
     def update_frame(self, detections: FrameDetections, stamp_s: float, camera_id: str, *,
-                     resync_backward: bool = True) -> UpdateResult:
+                     resync_backward: bool = True, admitted: ClockVerdict | None = None) -> UpdateResult:
         self.frames += 1
-        return self._inner.update_frame(detections, stamp_s, camera_id, resync_backward=resync_backward)
+        return self._inner.update_frame(detections, stamp_s, camera_id, resync_backward=resync_backward,
+                                        admitted=admitted)
 
 
 def _frame(t: float, x: float) -> CameraFrameRecord:
