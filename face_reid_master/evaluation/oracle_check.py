@@ -4,7 +4,8 @@ A scenario made with ``face-reid-sim --oracle-evidence`` (:mod:`face_reid_master
 no two people confusable; this checks it in the space the master compares (the scenario's embeddings cut to the
 evaluated space and scaled by the likelihood's component weights): the smallest distance between two people's
 mean embeddings and between two of their observations, against the likelihood's decision distance (N_p = N_n,
-pooled and per face-size bucket) and the naming distance (docs/evaluation.md, "Oracle evidence").
+pooled and per face-size bucket) and the naming distance; and the same for the bodies (per person and day) in
+the body metric in use, against its decision distance (docs/evaluation.md, "Oracle evidence").
 """
 
 from __future__ import annotations
@@ -16,11 +17,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.embedding_spaces import extract_space
+from face_reid_master.body.metric_file import BodyFeatureMetric
+from face_reid_master.evaluation.body_rank import ScenarioBodies
 from face_reid_master.identity.size_likelihood import FaceLikelihood
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.sim.oracle import closest_pair
 
-__all__ = ["MAX_ROWS_PER_PERSON", "face_rows_by_person", "oracle_check", "separation"]
+__all__ = ["MAX_ROWS_PER_PERSON", "body_separation", "face_rows_by_person", "oracle_check", "separation"]
 
 MAX_ROWS_PER_PERSON = 400  # observations per person compared pairwise (evenly spaced; the noise is i.i.d.)
 
@@ -69,10 +72,25 @@ def separation(rows: Mapping[int, NDArray[np.floating]], max_rows: int = MAX_ROW
     }
 
 
+def body_separation(bodies: ScenarioBodies, feature: BodyFeatureMetric) -> dict[str, Any] | None:
+    """:func:`separation` of a scenario's (thinned) bodies per person and day in the body metric ``feature``
+    (its embedding: Euclidean distances are the metric's), against its decision distance; None without bodies."""
+    if not bodies.labels.size:
+        return None
+    embedded = feature.embed(bodies.wire)
+    rows = {int(k): embedded[bodies.labels == k] for k in np.unique(bodies.labels)}
+    sep = separation(rows)
+    closest = sep["min_between_observations_distance"]
+    return {"metric": feature.name, "bodies": int(bodies.labels.size), "people_days": sep.pop("people"), **sep,
+            "decision_distance": round(feature.decision_distance, 4),
+            "separated": None if closest is None else bool(closest > feature.decision_distance)}
+
+
 def oracle_check(document: Mapping[str, Any], frames: Sequence[CameraFrameRecord],
                  frame_gt_ids: Sequence[NDArray[np.integer]], likelihood: FaceLikelihood,
-                 name_distance: float | None) -> dict[str, Any] | None:
-    """The ``oracle`` block of face-reid-eval's JSON for an oracle-evidence scenario (None for real evidence)."""
+                 name_distance: float | None, bodies: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    """The ``oracle`` block of face-reid-eval's JSON for an oracle-evidence scenario (None for real evidence);
+    ``bodies``: the :func:`body_separation` of the run's bodies (None: bodies not used)."""
     if not document.get("oracle"):
         return None
     have = str(document.get("embedding_space", "dlib_resnet_v1"))
@@ -93,4 +111,5 @@ def oracle_check(document: Mapping[str, Any], frames: Sequence[CameraFrameRecord
         "name_distance": None if name_distance is None else round(float(name_distance), 4),
         "separated": None if closest is None else bool(closest > largest
                                                        and (name_distance is None or closest > name_distance)),
+        "bodies": bodies,
     }

@@ -93,3 +93,15 @@ def test_the_runner_records_which_detections_were_on_a_published_track() -> None
     assert track.published_s == log.det_stamp_s[first]
     per = evaluate_run(log, with_mot=False)["per_detection"]
     assert per["published_detections"] == 30 - first and per["undecided"] == 30 - first  # no face: undecided
+
+
+def test_oracle_separation_of_people_means_and_observations() -> None:
+    from face_reid_master.evaluation.oracle_check import separation
+
+    rows = {0: np.array([[0.0, 0.0], [0.0, 0.2]]), 1: np.array([[3.0, 0.1], [2.0, 0.1]]), 2: np.array([[0.0, 10.0]])}
+    sep = separation(rows)
+    assert sep["people"] == 3
+    assert sep["min_between_person_distance"] == 2.5 and sep["closest_people"] == [0, 1]  # means (0, .1), (2.5, .1)
+    assert sep["min_between_observations_distance"] == round(float(np.hypot(2.0, 0.1)), 4)
+    assert sep["closest_observations_people"] == [0, 1]
+    assert sep["median_within_person_distance"] == 0.1  # each row of 0 is 0.1 from its mean, of 1: 0.5, of 2: 0
