@@ -75,8 +75,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="oracle evidence, the identity logic's floor: every face embedding of a person becomes one "
                         "fixed real embedding of theirs (the medoid of their photos' embeddings, per embedder) plus "
                         "N(0, --oracle-noise) per value, and every body descriptor one fixed real descriptor of "
-                        "theirs for the day plus the same noise: no two people are confusable (recorded in "
-                        "scenario.json as \"oracle\": true)")
+                        "theirs for the day plus the same noise: no two people's faces are confusable (their clothes "
+                        "still may be; recorded in scenario.json as \"oracle\": true)")
     p.add_argument("--oracle-noise", type=float, default=ORACLE_NOISE_STD, metavar="STD",
                    help=f"--oracle-evidence: the noise's standard deviation per value (default {ORACLE_NOISE_STD:g})")
     p.add_argument("--cache", type=Path, default=None,
