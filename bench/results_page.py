@@ -34,7 +34,7 @@ projection, body metric, confidence map) was fitted on the scenario's people or 
 on: development scenarios) or `shipped` (through `models/identity_confidence.json`, as the master publishes it).
 ECE: the count-weighted gap between `identity_confidence` and the share of right decisions over posterior bins.
 **evidence** `oracle (...)`: a scenario of oracle evidence (`face-reid-sim --oracle-evidence`: every face and body
-of a person shows one fixed real vector of theirs plus N(0, 0.01) noise, so no two people are confusable), the
+of a person shows one fixed real vector of theirs plus N(0, 0.01) noise: no two people's faces are confusable), the
 identity logic's floor ([evaluation](evaluation.md#oracle-evidence)); it sits beside the same scenario with real
 evidence and is left out of the pooled calibration and the README's table. **face re-id cases recovered**: the
 re-identification cases whose track showed at least 3 faces, and the share recovered right (what a perfect

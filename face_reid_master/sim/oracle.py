@@ -1,5 +1,6 @@
 """Oracle evidence (``face-reid-sim --oracle-evidence``): every observation of a person shows one fixed real
-embedding (and body descriptor) plus a little Gaussian noise, so that no two people can be confused.
+embedding (and body descriptor) plus a little Gaussian noise, so that no two people's faces can be confused
+(two people's clothes may still look alike: their fixed descriptors are real ones).
 
 It measures the identity logic apart from the evidence: whatever a scenario with oracle evidence still gets
 wrong, no better embedder can mend (docs/evaluation.md, "Oracle evidence").
