@@ -3,7 +3,8 @@
     python bench/record_eval.py NAME SCENARIO_DIR [face-reid-eval options ...]
 
 Runs the evaluation (offline, without IDF1 / MOTA) and writes its metrics with what produced them: the
-evaluation command, the scenario's simulator settings, the commit, the date and the machine.
+evaluation command, the scenario's simulator settings (``oracle``: a scenario of oracle evidence,
+``face-reid-sim --oracle-evidence``), the commit, the date and the machine.
 ``bench/results_page.py`` turns these files into docs/results.md. An evaluation face-reid-eval refuses
 (a loaded model saw the scenario's people) is not recorded unless ``--allow-fitted`` is passed; the page
 then marks it as not a test.
@@ -29,7 +30,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 _NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 # the JSON blocks kept (the rest: per-track detail, plots, timings of this machine's run)
 _KEPT = ("scenario", "protocol", "confidence_map", "method", "table_ii", "reidentification", "first_appearance",
-         "pure_tracks", "predefined_people", "calibration", "body_metric")
+         "pure_tracks", "predefined_people", "per_detection", "calibration", "body_metric", "oracle")
 
 
 def _commit() -> str:
@@ -77,7 +78,9 @@ def record(name: str, scenario: Path, options: list[str]) -> dict[str, Any]:
         "simulation": {"faces_dir": doc.get("faces_dir"), "bodies_dir": doc.get("bodies_dir"),
                        "seed": doc.get("seed"), "level": doc.get("level"), "people": params.get("num_people"),
                        "cameras": params.get("num_cameras"), "duration_s": params.get("duration_s"),
-                       "second_day": params.get("second_day"), "color_resolution": params.get("color_resolution")},
+                       "second_day": params.get("second_day"), "color_resolution": params.get("color_resolution"),
+                       **({"oracle": True, "oracle_noise_std": params.get("oracle_noise_std")}
+                          if doc.get("oracle") else {})},
         **provenance(),
         "evidence": result.get("parameters", {}).get("evidence"),
         "result": {k: result[k] for k in _KEPT if k in result},

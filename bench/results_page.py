@@ -33,17 +33,55 @@ projection, body metric, confidence map) was fitted on the scenario's people or 
 **confidence**: what `identity_confidence` was, `raw` (the decision posteriors, what the confidence map is fitted
 on: development scenarios) or `shipped` (through `models/identity_confidence.json`, as the master publishes it).
 ECE: the count-weighted gap between `identity_confidence` and the share of right decisions over posterior bins.
+**evidence** `oracle (...)`: a scenario of oracle evidence (`face-reid-sim --oracle-evidence`: every face and body
+of a person shows one fixed real vector of theirs plus N(0, 0.01) noise: no two people's faces are confusable), the
+identity logic's floor ([evaluation](evaluation.md#oracle-evidence)); it sits beside the same scenario with real
+evidence and is left out of the pooled calibration and the README's table. **face re-id cases recovered**: the
+re-identification cases whose track showed at least 3 faces, and the share recovered right (what a perfect
+identity logic could reach). **wrong id / undecided (detections)**: of the true people's detections on a
+published track, the share shown another person's face id, and the share shown none yet (what a robot reads).
 
 """
 _COLUMNS = ("result", "faces / bodies", "people x cameras x s", "colour", "evidence", "honest", "confidence",
             "Table II right / wrong", "wrong of decided", "recover rate", "face decisions right / wrong",
             "body decisions right / wrong", "ECE", "wrong names (detections)", "strangers named (detections)",
-            "commit, date")
+            "face re-id cases recovered", "wrong id (detections)", "undecided (detections)", "commit, date")
 _TABLE_HEAD = "| " + " | ".join(_COLUMNS) + " |\n" + "|---" * len(_COLUMNS) + "|\n"
 
 
 def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100.0 * x:.1f} %"
+
+
+def _oracle(doc: dict[str, Any]) -> bool:
+    """A result of an oracle-evidence scenario (``face-reid-sim --oracle-evidence``)."""
+    return bool(doc["simulation"].get("oracle") or doc["result"].get("oracle"))
+
+
+def _evidence(doc: dict[str, Any]) -> str:
+    evidence = doc.get("evidence") or "-"
+    return f"oracle ({evidence})" if _oracle(doc) else evidence
+
+
+def _robot(res: dict[str, Any]) -> str:
+    """The columns of what a robot feels: face re-id cases recovered, wrong id and undecided per detection ('-'
+    for a result recorded before they existed)."""
+    face = res.get("reidentification", {}).get("with_face")
+    per = res.get("per_detection", {})
+    cases = f"{face['success']} of {face['tracks']} ({_pct(face['recover_rate'])})" if face else "-"
+    return f"{cases} | {_pct(per.get('wrong_identity_rate'))} | {_pct(per.get('undecided_rate'))}"
+
+
+def _separation(doc: dict[str, Any]) -> str:
+    """An oracle result's line: the closest two people against the distances the likelihood decides at."""
+    o = doc["result"].get("oracle") or {}
+    if not o:
+        return f"- `{doc['name']}`: no separation recorded"
+    return (f"- `{doc['name']}` ({o['space']}, noise {o['noise_std']}): the closest two people's observations "
+            f"{o['min_between_observations_distance']} apart (their means {o['min_between_person_distance']}; an "
+            f"observation lies a median {o['median_within_person_distance']} from its person's mean), against "
+            f"the decision distance {o['decision_distance']} and the naming distance {o['name_distance']}: "
+            f"{'no two people confusable' if o['separated'] else '**two people within the decision distance**'}")
 
 
 def _row(doc: dict[str, Any]) -> str:
@@ -60,17 +98,17 @@ def _row(doc: dict[str, Any]) -> str:
     honest = "yes" if res.get("protocol", {}).get("honest") else "**no**"
     return (f"| {doc['name']} | {Path(str(sim['faces_dir'])).name} / {bodies} | {sim['people']} x {sim['cameras']} x "
             f"{sim['duration_s']:g} (seed {sim['seed']}{', 2 days' if sim.get('second_day') else ''}) | "
-            f"{colour_text} | {doc.get('evidence') or '-'} | {honest} | {res.get('confidence_map', 'raw')} | "
+            f"{colour_text} | {_evidence(doc)} | {honest} | {res.get('confidence_map', 'raw')} | "
             f"{t2['success']} / {t2['failure']} | "
             f"{_pct(t2['failure'] / decided if decided else None)} | {t2['recover_rate']:.2f} | {ev['face']} | "
             f"{ev['body']} | {cal.get('ece', float('nan')):.3f} | {_pct(dets.get('wrong_name_rate'))} | "
-            f"{_pct(dets.get('other_named_rate'))} | {doc['commit']}, {doc['date']} |")
+            f"{_pct(dets.get('other_named_rate'))} | {_robot(res)} | {doc['commit']}, {doc['date']} |")
 
 
 def _pooled(docs: list[dict[str, Any]], evidence: str) -> str:
     """Decisions and ECE pooled over the honest test results (name test*, shipped confidence map) of one
     evidence setting: every decision of those runs in one reliability table."""
-    chosen = [d for d in docs if d["name"].startswith("test") and d.get("evidence") == evidence
+    chosen = [d for d in docs if d["name"].startswith("test") and d.get("evidence") == evidence and not _oracle(d)
               and d["result"].get("protocol", {}).get("honest") and d["result"].get("confidence_map") == "shipped"]
     n = conf = right = 0.0
     gaps: dict[int, list[float]] = {}
@@ -121,17 +159,22 @@ def page() -> str:
     rows = "\n".join(_row(d) for d in docs)
     pooled = "\n".join(_pooled(docs, e) for e in ("fused", "face"))
     commands = "\n".join(f"- `{d['name']}`: `{d['command']}`" for d in docs)
+    oracles = [d for d in docs if _oracle(d)]
+    separation = ("\n\nOracle evidence: how far apart its people were in the space the master compares (the "
+                  "likelihood's component weights applied):\n\n" + "\n".join(_separation(d) for d in oracles)
+                  if oracles else "")
     sweeps = [json.loads(p.read_text(encoding="utf-8")) for p in sorted(RESULTS.glob("choices_*.json"))]
     choices = "\n".join(_choices(d) for d in sweeps)
-    return (f"{_HEAD}{_TABLE_HEAD}{rows}\n\nAll decisions of the honest test results pooled (the identity_confidence "
-            f"the master published):\n\n{pooled}\n\nThe evaluation commands:\n\n{commands}\n"
+    return (f"{_HEAD}{_TABLE_HEAD}{rows}{separation}\n\nAll decisions of the honest test results pooled (the "
+            f"identity_confidence the master published):\n\n{pooled}\n\nThe evaluation commands:\n\n{commands}\n"
             + (f"\n## Choices made on the development scenarios\n\n{choices}" if sweeps else ""))
 
 
 def headline() -> str:
     """The README's accuracy table: the honest test results as the master publishes them, and their pooled line."""
     docs = [json.loads(p.read_text(encoding="utf-8")) for p in sorted(RESULTS.glob("eval_*.json"))]
-    tests = [d for d in docs if d["name"].startswith("test") and d["result"].get("protocol", {}).get("honest")
+    tests = [d for d in docs if d["name"].startswith("test") and not _oracle(d)
+             and d["result"].get("protocol", {}).get("honest")
              and d["result"].get("confidence_map") == "shipped"]
     rows = ["| test scenario | people x cameras, minutes | evidence | right / wrong re-identifications | wrong of "
             "decided | recover rate | calibration error (ECE) | wrong names | strangers named |",

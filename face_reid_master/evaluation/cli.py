@@ -27,6 +27,7 @@ from face_reid_master.core import MasterConfig
 from face_reid_master.evaluation.body_rank import scenario_bodies, scenario_rank1
 from face_reid_master.evaluation.gallery import GalleryInfo, default_gallery_people, scenario_gallery
 from face_reid_master.evaluation.metrics import evaluate_run, paired_reid_times
+from face_reid_master.evaluation.oracle_check import body_separation, oracle_check
 from face_reid_master.evaluation.plots import save_plots
 from face_reid_master.evaluation.protocol import ProtocolCheck, check_protocol
 from face_reid_master.evaluation.runner import DEFAULT_TICK_PERIOD_S, RunLog, progress_to, run_master
@@ -131,6 +132,8 @@ def _scenario_json(scenario: Any) -> dict[str, Any]:
         "embedding_space": doc.get("embedding_space", "dlib_resnet_v1"),
         "bodies": doc.get("body_space") is not None,
         "body_space": doc.get("body_space"),
+        **({"oracle": True, "oracle_noise_std": (doc.get("oracle_evidence") or {}).get("noise_std")}
+           if doc.get("oracle") else {}),
     }
 
 
@@ -277,6 +280,16 @@ def _body_metric_json(run: RunLog, scenario: Any, days: list[tuple[int, float, f
     return {"bodies": int(bodies.labels.size), "rank1": scenario_rank1(bodies, base.features["fused"])}
 
 
+def _oracle_bodies(run: RunLog, scenario: Any, days: list[tuple[int, float, float, list[int]]],
+                   loaded: BodyMetricModel | None) -> dict[str, Any] | None:
+    """How far apart an oracle scenario's bodies are in the fused body metric in use (None: bodies not used)."""
+    if run.body_metric is None:
+        return None
+    base = loaded or default_body_metric()
+    return body_separation(scenario_bodies(scenario.frames, scenario.frame_gt_ids, base.space, days),
+                           base.features["fused"])
+
+
 def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: GalleryInfo,
                  days: list[tuple[int, float, float, list[int]]], log: Any,
                  model: FaceLikelihood, body_metric: BodyMetricModel | None = None,
@@ -306,6 +319,11 @@ def _run_offline(args: argparse.Namespace, method: str, scenario: Any, gallery: 
     body_json = _body_metric_json(run, scenario, days, body_metric)
     if body_json is not None:
         result["body_metric"] = body_json
+    oracle = oracle_check(scenario.document, scenario.frames, scenario.frame_gt_ids, likelihood,
+                          config.name_threshold or likelihood.name_threshold,
+                          _oracle_bodies(run, scenario, days, body_metric) if scenario.document.get("oracle") else None)
+    if oracle is not None:  # an oracle-evidence scenario: how far apart its people are against the decisions
+        result["oracle"] = oracle
     if args.plot:
         t2 = time.perf_counter()
         prefix = args.plot if args.method != "both" else f"{args.plot}_{method}"

@@ -20,18 +20,22 @@ from face_reid_master.evaluation.runner import RunLog, TrackLog
 
 __all__ = [
     "PURE_TRACK_MIN_PURITY",
+    "REID_MIN_FACE_DETECTIONS",
     "TrackOutcome",
     "decision_verdict",
     "evaluate_run",
     "evaluated_tracks",
     "face_persons",
+    "identity_per_detection",
     "learned_at",
     "mot_metrics",
     "paired_reid_times",
+    "reid_with_face",
     "track_outcomes",
 ]
 
 PURE_TRACK_MIN_PURITY = 0.95  # tracks at least this pure are "pure" (impure_tracks, pure_tracks diagnostics)
+REID_MIN_FACE_DETECTIONS = 3  # a re-identification case "showed a face" with at least this many face detections
 _MOT_METRICS = ("idf1", "idp", "idr", "mota", "num_switches", "num_fragmentations", "num_false_positives",
                 "num_misses", "num_objects", "num_predictions", "mostly_tracked", "mostly_lost")
 
@@ -133,6 +137,49 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
         out.append(TrackOutcome(t.track_id, p, t.birth_s, reid, verdict, why, fid, stamp, cross_day, busy,
                                 evidence))
     return out
+
+
+def reid_with_face(outcomes: Sequence[TrackOutcome], tracks: Mapping[int, TrackLog],
+                   min_faces: int = REID_MIN_FACE_DETECTIONS) -> dict[str, Any]:
+    """The re-identification cases whose track had at least ``min_faces`` face detections, and how many were
+    recovered right: the recover rate a perfect identity logic could reach (docs/evaluation.md)."""
+    cases = [o for o in outcomes if o.reid_case and tracks[o.track_id].face_detections >= min_faces]
+    success = sum(o.outcome == "success" for o in cases)
+    return {
+        "min_face_detections": min_faces,
+        "tracks": len(cases),
+        "success": success,
+        "failure": sum(o.outcome == "failure" for o in cases),
+        "none": sum(o.outcome == "none" for o in cases),
+        "recover_rate": _ratio(success, len(cases)),
+    }
+
+
+def identity_per_detection(log: RunLog, face_person: Mapping[int, int]) -> dict[str, Any]:
+    """What a robot reads per detection: of the true people's detections on a published track, the share shown
+    another person's face id (``face_person``: a face id's person, :func:`face_persons`) and the share shown no
+    face id yet (docs/evaluation.md, "What is counted")."""
+    counted = (log.det_track >= 0) & (log.det_gt >= 0)
+    if log.det_published.size:
+        counted &= log.det_published
+    fid = log.det_face[counted]
+    gt = log.det_gt[counted]
+    owner = np.array([face_person.get(int(f), -1) for f in fid.tolist()], dtype=np.int64)
+    decided = fid > 0
+    right = int(np.count_nonzero(decided & (owner == gt)))
+    wrong = int(np.count_nonzero(decided & (owner != gt)))
+    undecided = int(np.count_nonzero(~decided))
+    n = int(fid.size)
+    return {
+        "published_detections": n,
+        "right": right,
+        "wrong_identity": wrong,
+        "undecided": undecided,
+        "right_rate": _ratio(right, n),
+        "wrong_identity_rate": _ratio(wrong, n),
+        "undecided_rate": _ratio(undecided, n),
+        "wrong_of_decided_rate": _ratio(wrong, right + wrong),
+    }
 
 
 def _mean(values: Sequence[float]) -> float | None:
@@ -280,6 +327,7 @@ def evaluate_run(
             "none": sum(o.outcome == "none" for o in cross),
             "decided_by_body": sum(o.evidence == "body" for o in cross),
         },
+        "with_face": reid_with_face(outcomes, by_id),
         "by_evidence": {e: {"success": sum(o.outcome == "success" and o.evidence == e for o in reid),
                             "failure": sum(o.outcome == "failure" and o.evidence == e for o in reid)}
                         for e in ("face", "body")},
@@ -366,6 +414,7 @@ def evaluate_run(
             "pure_tracks": _names([t for t in evaluated if t.purity >= PURE_TRACK_MIN_PURITY], gallery_people),
             "detections": _names_per_detection(log, gallery_people),
         },
+        "per_detection": identity_per_detection(log, face_persons(log)),
         "frames": log.n_frames,
         "frames_rejected": log.frames_rejected,
         "detections": int(log.det_gt.size),

@@ -62,6 +62,7 @@ class TrackLog:
     face_gt: list[tuple[float, int]] = field(default_factory=list)  # (stamp, true person) of face detections
     evidence: list[str] = field(default_factory=list)  # per assignment: "face" or "body" (what decided it)
     confidence: list[float] = field(default_factory=list)  # per assignment: identity_confidence at the decision
+    published_s: float | None = None  # first frame after which the master published it (None: never seen so)
 
     @property
     def detections(self) -> int:
@@ -111,7 +112,9 @@ class RunLog:
     suppressed duplicate or a rejected frame), ``det_face`` the track's face id right after the frame
     (0: none yet), ``det_name`` the index in ``names`` of the name its face had then (-1: none; empty =
     not recorded). ``faces``: face id -> (creation stamp, creating track id). ``days``: (day, start_s,
-    end_s, gt ids) of the scenario (used to split cross-day re-identifications).
+    end_s, gt ids) of the scenario (used to split cross-day re-identifications). ``det_published``: whether
+    the detection's track was among the published tracks right after its frame (empty = not recorded: every
+    tracked detection counts as published, e.g. a log made from published messages).
     """
 
     method: str
@@ -132,6 +135,7 @@ class RunLog:
     body_metric: BodyFeatureMetric | None = None  # the fused body metric the run embedded bodies with
     # evidence kind -> the posterior a decision of that kind had to exceed (the run's MasterConfig; empty: unknown)
     decision_thresholds: dict[str, float] = field(default_factory=dict)
+    det_published: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def __post_init__(self) -> None:
         arrays = {k: getattr(self, k) for k in ("det_frame", "det_stamp_s", "det_gt", "det_track", "det_face")}
@@ -144,6 +148,9 @@ class RunLog:
         if self.det_name.size and (self.det_name.shape != self.det_frame.shape
                                    or int(self.det_name.max()) >= len(self.names)):
             raise ValueError("RunLog.det_name must have one index into names (or -1) per detection")
+        self.det_published = np.asarray(self.det_published, dtype=bool)
+        if self.det_published.size and self.det_published.shape != self.det_frame.shape:
+            raise ValueError("RunLog.det_published must have one flag per detection (or none)")
         if not np.all(np.isfinite(self.det_stamp_s)):
             raise ValueError("RunLog.det_stamp_s contains NaN or Inf")
         if self.det_frame.size > 1 and np.any(np.diff(self.det_frame) < 0):
@@ -198,6 +205,7 @@ def run_master(
     rows_track: list[int] = []
     rows_face: list[int] = []
     rows_name: list[int] = []
+    rows_published: list[bool] = []
     name_index: dict[str, int] = {}
     rejected = 0
 
@@ -236,6 +244,19 @@ def run_master(
             if rec.state == STATE_CONFIRMED:  # not the coasting prediction of a LOST track
                 log.path.append((stamp, float(rec.position_xy[0]), float(rec.position_xy[1])))
 
+    def mark_published(tids: set[int], stamp: float) -> None:
+        """Set ``published_s`` of the frame's tracks that the master publishes now (the published list is asked
+        only while one of them has not been published yet: once confirmed, a track is published until deleted)."""
+        todo = {t for t in tids if t not in tracks or tracks[t].published_s is None}
+        if not todo:
+            return
+        for rec in core.tracks():
+            if rec.track_id in todo:
+                log = tracks.get(rec.track_id)
+                if log is None:
+                    log = tracks[rec.track_id] = TrackLog(rec.track_id, stamp, stamp)
+                log.published_s = stamp
+
     tick_index = math.floor(frames[0].stamp_s / tick_period_s) if frames else 0  # tick k at k * period
 
     def tick_until(stamp: float) -> None:
@@ -256,6 +277,7 @@ def run_master(
             rejected += 1
         identity_changes(stamp)
         track_of = outcome.track_of_person
+        mark_published({core.public_id(inner) for inner in track_of.values()}, stamp)
         for j, person in enumerate(frame.people):
             inner = track_of.get(j, -1)
             tid = core.public_id(inner) if inner >= 0 else -1
@@ -285,6 +307,7 @@ def run_master(
             rows_track.append(int(tid))
             rows_face.append(int(fid))
             rows_name.append(shown)
+            rows_published.append(tid >= 0 and tracks[tid].published_s is not None)
         if progress is not None and (i % 2000 == 0 or i == n - 1):
             progress(i + 1, n)
     if frames:  # let the last tracks time out, so that every track's end is recorded
@@ -308,6 +331,7 @@ def run_master(
         names=tuple(name_index),
         body_metric=core.body_fused,
         decision_thresholds=decision_thresholds(cfg),
+        det_published=np.array(rows_published, dtype=bool),
     )
 
 

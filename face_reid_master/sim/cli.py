@@ -4,7 +4,9 @@ Example: ``face-reid-sim --faces FACES --people 6 --cameras 3 --duration 200 --s
 The directory format is documented in :mod:`face_reid_master.sim.scenario_files`. Progress goes to stderr, the
 summary (JSON) to stdout. ``--bodies CROPS`` adds bodies (:mod:`face_reid_master.sim.bodies`): clothes from a
 folder of person crops, described with the cameras' body projection (``--body-projection``, default the
-shipped one). Exit status: 0 done, 2 bad arguments or unusable faces / crops folder, 1 other errors (e.g.
+shipped one). ``--oracle-evidence`` replaces every face embedding and body descriptor of a person by one fixed
+real vector of theirs plus a little noise (:mod:`face_reid_master.sim.oracle`): the identity logic's floor.
+Exit status: 0 done, 2 bad arguments or unusable faces / crops folder, 1 other errors (e.g.
 missing models or body projection).
 """
 
@@ -21,6 +23,7 @@ from face_reid_camera.body.projection import BODY_PROJECTION_FILE, load_body_pro
 from face_reid_camera.common.resources import model_path
 from face_reid_master.sim.bodies import BodySimConfig, InsufficientBodiesError
 from face_reid_master.sim.motion import PASSING_DISTANCE_RANGE_M, MotionConfig
+from face_reid_master.sim.oracle import ORACLE_NOISE_STD
 from face_reid_master.sim.photos import InsufficientFacesError
 from face_reid_master.sim.scenario_files import write_scenario
 from face_reid_master.sim.simulate import LEVELS, SimConfig, simulate
@@ -68,6 +71,14 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"people pass each other at least this far apart (centre to centre, metres; "
                         f"{PASSING_DISTANCE_RANGE_M[0]:g}-{PASSING_DISTANCE_RANGE_M[1]:g}, default "
                         f"{MotionConfig.passing_distance_m:g}); 0: they walk through each other")
+    p.add_argument("--oracle-evidence", action="store_true",
+                   help="oracle evidence, the identity logic's floor: every face embedding of a person becomes one "
+                        "fixed real embedding of theirs (the medoid of their photos' embeddings, per embedder) plus "
+                        "N(0, --oracle-noise) per value, and every body descriptor one fixed real descriptor of "
+                        "theirs for the day plus the same noise: no two people's faces are confusable (their clothes "
+                        "still may be; recorded in scenario.json as \"oracle\": true)")
+    p.add_argument("--oracle-noise", type=float, default=ORACLE_NOISE_STD, metavar="STD",
+                   help=f"--oracle-evidence: the noise's standard deviation per value (default {ORACLE_NOISE_STD:g})")
     p.add_argument("--cache", type=Path, default=None,
                    help="npz file caching the photo embeddings (keyed by path, mtime and size)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -105,6 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             room_size_m=_room(args.room), embedder=args.embedder, color_resolution=_resolution(args.color_resolution),
             bodies=BodySimConfig() if args.bodies is not None else None,
             motion=MotionConfig(passing_distance_m=args.passing_distance),
+            oracle_noise_std=args.oracle_noise if args.oracle_evidence else None,
         )
     except ValueError as exc:
         parser.print_usage(sys.stderr)
@@ -112,6 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if args.new_people is not None and not args.second_day:
         print("face-reid-sim: note: --new-people has no effect without --second-day", file=sys.stderr)
+    if args.oracle_noise != ORACLE_NOISE_STD and not args.oracle_evidence:
+        print("face-reid-sim: note: --oracle-noise has no effect without --oracle-evidence", file=sys.stderr)
     if args.body_projection is not None and args.bodies is None:
         print("face-reid-sim: note: --body-projection has no effect without --bodies", file=sys.stderr)
     t0 = time.perf_counter()

@@ -13,6 +13,11 @@ Bodies (``config.bodies`` and a crops folder, :mod:`~face_reid_master.sim.bodies
 identity per day (a new one on day 2) and has body measures; detections then carry body descriptors,
 visibility and geometry. Bodies draw from their own random streams: without them the files are unchanged.
 
+Oracle evidence (``oracle_noise_std``, :mod:`~face_reid_master.sim.oracle`): once the frame table is assembled,
+every face embedding and body descriptor of a person is replaced by one fixed real vector of theirs plus that
+noise (the identity logic's floor); scenario.json then has ``"oracle": true`` and ``oracle_evidence``. Only
+those arrays change: everything else is the same scenario as without it.
+
 Days: with ``second_day`` the same room and cameras are replayed ``day_gap_s`` after day 1 ends with
 ``people - new_people`` of the day-1 people (their day-2 photos) and ``new_people`` identities never seen
 on day 1.
@@ -45,6 +50,7 @@ from face_reid_master.sim.feature_level import feature_camera_day
 from face_reid_master.sim.frame_table import DetectionColumns, assemble_frames
 from face_reid_master.sim.ground_truth import sample_ground_truth
 from face_reid_master.sim.motion import MotionConfig, Trajectory, plan_trajectory
+from face_reid_master.sim.oracle import S_ORACLE, oracle_table
 from face_reid_master.sim.photos import PhotoBank
 from face_reid_master.sim.pixel_level import pixel_camera_frames
 from face_reid_master.sim.scenario_files import SimResult, scenario_document
@@ -99,6 +105,7 @@ class SimConfig:
     motion: MotionConfig = field(default_factory=MotionConfig)
     visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
     bodies: BodySimConfig | None = None  # None: no bodies (simulate needs a crops folder otherwise)
+    oracle_noise_std: float | None = None  # oracle evidence with this noise per value (None: real evidence)
 
     def __post_init__(self) -> None:
         for name, low, high in (("num_people", 1, 500), ("num_cameras", 1, 64), ("min_photos_per_identity", 1, 1000)):
@@ -144,6 +151,9 @@ class SimConfig:
                                  f"{self.color_resolution!r}")
         if not isinstance(self.motion, MotionConfig) or not isinstance(self.visibility, VisibilityConfig):
             raise ValueError("motion / visibility must be MotionConfig / VisibilityConfig instances")
+        if self.oracle_noise_std is not None and not (is_finite_number(self.oracle_noise_std)
+                                                      and 0 <= self.oracle_noise_std <= 1):
+            raise ValueError(f"oracle_noise_std must be None or in [0, 1], got {self.oracle_noise_std!r}")
         if self.bodies is not None and not isinstance(self.bodies, BodySimConfig):
             raise ValueError(f"bodies must be a BodySimConfig or None, got {type(self.bodies).__name__}")
 
@@ -163,6 +173,8 @@ class SimConfig:
         out["num_new_people"] = self.num_new_people
         if self.bodies is None:
             del out["bodies"]  # scenarios without bodies keep their files of before
+        if self.oracle_noise_std is None:
+            del out["oracle_noise_std"]  # real evidence: the files of before
         return out
 
 
@@ -272,9 +284,20 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
                                             glance_counter, log, frames_done, frames_total, bodies)
             per_camera.extend((c, stamps[c], cols) for c, cols in enumerate(cols_list))
     table = assemble_frames(per_camera, cfg.seed, None if bodies is None else (bodies.dim, bodies.parts))
+    oracle = None
+    if cfg.oracle_noise_std is not None:  # the one point where observations become oracle evidence
+        table, oracle = oracle_table(
+            table, [np.stack([p.embeddings[0] for p in ident.photos]) for ident in identities], photo_offsets,
+            bank.space, [d.start_s for d in days], cfg.oracle_noise_std, stream_rng(cfg.seed, S_ORACLE, 0),
+            stream_rng(cfg.seed, S_ORACLE, 1))
+        say(f"oracle evidence: {oracle.face_rows} face and {oracle.body_rows} body rows replaced by their person's "
+            f"fixed vector + N(0, {cfg.oracle_noise_std:g})")
     say(f"camera frames done in {time.perf_counter() - t1:.1f} s: {table.stamp_s.size} frames, "
         f"{table.det['gt_id'].size} detections, {table.face['score'].size} faces")
     gt_arrays, loss_info = sample_ground_truth(cfg, world, days, heights_all)
     document = scenario_document(cfg, bank, world, identities, photo_offsets, days, heights_all, phases, table,
                                  gt_arrays, loss_info, glance_counter[0], bodies)
+    if oracle is not None:
+        document["oracle"] = True
+        document["oracle_evidence"] = oracle.as_json()
     return SimResult(document, table, gt_arrays)
