@@ -3,7 +3,7 @@
 A camera detects each person it can see (misses at ``miss_probability``) with a noisy position (std growing
 with distance, plus a per-camera calibration bias) and a noisy height; a visible face is found with a
 probability falling off with angle and range, and carries the camera-true embedding of its glance's photo
-(:meth:`~face_reid_master.sim.photos.PhotoBank.camera_view`: one of the frame changes, down-sampled to the eye
+(:meth:`~face_reid_master.sim.photos.PhotoBank.camera_view`: the glance's frame change, down-sampled to the eye
 distance the camera's colour focal length, the range and the face's angle give, re-detected and re-embedded),
 plus a little Gaussian noise (``embedding_noise_std`` per dimension); a face whose eyes would be closer than
 ``MIN_EYE_PX`` in the image is not found. False positives
@@ -151,7 +151,10 @@ def feature_camera_day(
     has_face[fi[~seen]] = False
     fi, picks_u, face_photo, eye_px, native, levels = (a[seen] for a in (fi, picks_u, face_photo, eye_px, native,
                                                                          levels))
-    variants = np.minimum((picks_u * NUM_FRAME_CHANGES).astype(np.int16), NUM_FRAME_CHANGES - 1)
+    # one frame change per glance (its light and head roll), drawn at its first face
+    _, first, inverse = np.unique(glance_of[f_idx[fi], p_idx[fi]], return_index=True, return_inverse=True)
+    per_glance = np.minimum((picks_u[first] * NUM_FRAME_CHANGES).astype(np.int16), NUM_FRAME_CHANGES - 1)
+    variants = per_glance[inverse.reshape(-1)]
     variant_px = level_eye_px(levels, native).astype(np.float32)  # the size of the face the embedding shows
     embeddings = np.empty((fi.size, dim), dtype=np.float32)
     redetected = np.empty(fi.size, dtype=bool)

@@ -1,7 +1,7 @@
 """Face photos of a scenario and the camera's view of them: identity folders embedded with the real models.
 
 Camera-true views (:meth:`PhotoBank.camera_view`, what the simulator's frames carry): a face never shows more
-pixels than the camera's geometry gives. A frame's face is its glance's photo after one of the
+pixels than the camera's geometry gives. A frame's face is its glance's photo after the glance's one of the
 ``NUM_FRAME_CHANGES`` real image changes (as is, darker, brighter, +-8 deg roll, roll + JPEG), down-sampled
 (area) so that its eyes are at most the eye distance the camera delivers (:func:`eye_level`: the photo's
 detected landmarks give its own eye distance; the frame's eye distance, continuous, is taken down to a grid
