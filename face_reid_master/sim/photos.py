@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.common.embedding_spaces import embedder_space, space_dim
+from face_reid_camera.tools.eval_faces import HEAD_ROI_SIDE_PER_EYE_DISTANCE, head_roi_for_face
 from face_reid_master.sim.scenario_files import write_npz
 from face_reid_master.sim.visibility import glance_ids
 
@@ -67,13 +68,12 @@ _VARIANT_SPECS: tuple[dict[str, float], ...] = (
 )
 NUM_VARIANTS = len(_VARIANT_SPECS)
 _VARIANT_EYE_PX = np.array([spec.get("eye_px", np.inf) for spec in _VARIANT_SPECS])  # inf: the photo's own size
-_VARIANT_VERSION = "v3"  # bump when _VARIANT_SPECS, the views or the cached fields change: invalidates the cache
+_VARIANT_VERSION = "v4"  # bump when _VARIANT_SPECS, the views or the cached fields change: invalidates the cache
 # Camera-true views: the frame-to-frame image changes (the full-size variants 0-4), then the camera's down-sampling.
 NUM_FRAME_CHANGES = 5
 MIN_EYE_PX = 3.0  # a face whose eyes are closer than this in the image is not a face to any detector
 EYE_LEVEL_STEP = 1.06  # eye distances are taken down to MIN_EYE_PX x EYE_LEVEL_STEP^k (at most 6 % fewer pixels)
 NATIVE_LEVEL, TOO_SMALL_LEVEL = -1, -2
-_VIEW_MIN_SIDE_PX = 160  # a small view is padded (border replicated) to this size for the detector
 
 
 class InsufficientFacesError(ValueError):
@@ -382,8 +382,9 @@ class PhotoBank:
 
     def _make_view(self, photo: PhotoVariants, change: int, level: int) -> tuple[NDArray[np.float32], bool]:
         """Change the photo at full size, down-sample it (area) to the level's eye distance, JPEG if the change
-        says so, then detect (YuNet, padded to a detector-sized image) and embed; when YuNet misses the small
-        face, align on the full-size landmarks carried through the same change and scaling."""
+        says so, then detect as the camera does (YuNet on the head ROI, the photo's border replicated around it)
+        and embed; when YuNet misses the small face, align on the full-size landmarks carried through the same
+        change and scaling."""
         spec = _VARIANT_SPECS[change]
         box = np.asarray(photo.box_xywh, dtype=np.float64)
         centre = box[:2] + box[2:] / 2.0
@@ -403,15 +404,21 @@ class PhotoBank:
         scale = np.array([size[0] / w, size[1] / h])
         marks = (marks + 0.5) * scale - 0.5  # cv2.resize's pixel-centre convention
         box_small = np.concatenate([(box[:2] + 0.5) * scale - 0.5, box[2:] * scale])
-        pad_x, pad_y = max(0, (_VIEW_MIN_SIDE_PX - size[0] + 1) // 2), max(0, (_VIEW_MIN_SIDE_PX - size[1] + 1) // 2)
-        padded = cv2.copyMakeBorder(image, pad_y, pad_y, pad_x, pad_x, cv2.BORDER_REPLICATE)
+        # the camera's detection: YuNet on the head ROI (0.3 m square around the face) resized to its input
+        pad = math.ceil(HEAD_ROI_SIDE_PER_EYE_DISTANCE * target)
+        pad_x, pad_y = pad, pad
+        padded = cv2.copyMakeBorder(image, pad, pad, pad, pad, cv2.BORDER_REPLICATE)
         embedder = self.photo_embedder
-        found = embedder.embed_photo(padded)
+        centre_small = box_small[:2] + box_small[2:] / 2.0 + pad
+        roi = head_roi_for_face(centre_small, target, padded.shape[1], padded.shape[0])
+        found = embedder.detector.detect_in_rois(padded, [roi])[0]
         if found is not None:  # the same face (eyes where the scaled landmarks put them)?
-            eye_centre = np.asarray(found.landmarks[:2]).mean(axis=0) - np.array([pad_x, pad_y])
-            if np.linalg.norm(eye_centre - marks[:2].mean(axis=0)) <= 0.5 * max(target, 1.0) and \
-                    0.6 * target <= found.eye_distance_px <= 1.6 * target:
-                return np.asarray(found.embedding, dtype=np.float32), True
+            found_marks = np.asarray(found.landmarks, dtype=np.float64) - pad
+            found_eye = float(np.linalg.norm(found_marks[1] - found_marks[0]))
+            if np.linalg.norm(found_marks[:2].mean(axis=0) - marks[:2].mean(axis=0)) <= 0.5 * max(target, 1.0) \
+                    and 0.6 * target <= found_eye <= 1.6 * target:
+                view = embedder.embed_face(padded, found.box_xywh, found.landmarks, found.score)
+                return np.asarray(view.embedding, dtype=np.float32), True
         offset = np.array([pad_x, pad_y], dtype=np.float64)
         shifted = marks + offset
         box_padded = np.concatenate([box_small[:2] + offset, box_small[2:]])
