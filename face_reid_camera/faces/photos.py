@@ -72,7 +72,8 @@ class PhotoEmbedding:
     ``path``: the file (None for an in-memory image). ``embedding``: (dim,) float32, read-only (128 values;
     256 for a combined embedder).
     ``box_xywh``: (4,) float32 face box. ``score``: detector confidence. ``eye_distance_px``: distance
-    between the eye landmarks, a face-size / quality indicator.
+    between the eye landmarks, a face-size / quality indicator. ``landmarks``: (5, 2) float32 YuNet landmarks
+    (eyes, nose, mouth corners; None when not known), so the face can be re-aligned in a resized copy.
     """
 
     path: Path | None
@@ -80,6 +81,7 @@ class PhotoEmbedding:
     box_xywh: NDArray[np.float32]
     score: float
     eye_distance_px: float
+    landmarks: NDArray[np.float32] | None = None
 
     def __post_init__(self) -> None:
         emb = np.array(self.embedding, dtype=np.float32).reshape(-1)
@@ -97,6 +99,12 @@ class PhotoEmbedding:
         object.__setattr__(self, "eye_distance_px", float(self.eye_distance_px))
         if self.path is not None:
             object.__setattr__(self, "path", Path(self.path))
+        if self.landmarks is not None:
+            marks = np.array(self.landmarks, dtype=np.float32)
+            if marks.shape != (5, 2):
+                raise ValueError(f"landmarks must be (5, 2), got shape {marks.shape}")
+            marks.flags.writeable = False
+            object.__setattr__(self, "landmarks", marks)
 
 
 @dataclass
@@ -320,6 +328,14 @@ class PhotoEmbedder:
         box[:2] *= scale_xy
         box[2:] *= scale_xy
         landmarks = best.landmarks * scale_xy
+        return self.embed_face(image, box, landmarks, best.score, path)
+
+    def embed_face(self, image: NDArray[np.uint8], box_xywh: NDArray[np.floating], landmarks: NDArray[np.floating],
+                   score: float = 1.0, path: Path | None = None) -> PhotoEmbedding:
+        """Embedding of the face at known ``landmarks`` (5, 2) of a BGR image, without detecting it (e.g. a
+        resized copy of a photo whose face was detected at full size)."""
+        box = np.asarray(box_xywh, dtype=np.float32).reshape(4)
+        landmarks = np.asarray(landmarks, dtype=np.float32).reshape(5, 2)
         eye_distance_px = float(np.linalg.norm(landmarks[1] - landmarks[0]))
         parts = self.embedder.embedders if isinstance(self.embedder, CombinedEmbedder) else (self.embedder,)
         rows = []
@@ -329,7 +345,7 @@ class PhotoEmbedder:
             crop, crop_landmarks = _alignment_source(image, box, landmarks, eye_distance_px, chip_eye_px)
             rows.append(part.embed_faces(crop, [crop_landmarks])[0])
         embedding = rows[0] if len(rows) == 1 else np.concatenate(rows)
-        return PhotoEmbedding(path, embedding, box, best.score, eye_distance_px)
+        return PhotoEmbedding(path, embedding, box, score, eye_distance_px, landmarks)
 
     def embed_folder_tree(
         self, root: str | Path, progress: ProgressCallback | None = None

@@ -21,10 +21,10 @@ frame's view angle (8 sectors of 45 deg). Without orientations a glance draws on
 Feature level (:func:`feature_bodies`): the real descriptor code
 (:func:`~face_reid_camera.body.descriptor.body_descriptor`, then the shipped projection) runs on the crop
 after the camera's degradations: its light (a per-camera gain and colour cast, times the glance's level),
-its distance (the crop reduced to the rows the person spans at that range when that is fewer than the crop
-has: with 640x480 and 128-row crops never within the 6 m range, the crops having less detail than the
-camera sees), and what the camera cannot see: the crop's background (only its central columns count,
-``silhouette_width``) and the body's horizontal bands
+its distance (camera-true: the crop reduced to the rows the person spans in the colour image at that range,
+:func:`body_rows`, never taller; with 640x480 and 128-row crops that happens only beyond ~6.4 m, past the 6 m
+detection range: the crops have less detail than the camera sees), and what the camera cannot see: the crop's
+background (only its central columns count, ``silhouette_width``) and the body's horizontal bands
 (:func:`~face_reid_master.sim.visibility.body_band_visibility`) that are out of the image or behind
 someone. Frames of a glance differ as camera frames do: each shows one of a few real image changes of the
 crop (shifted, scaled, sensor noise, blur: :data:`_FRAME_VARIANTS`), plus a little Gaussian noise.
@@ -72,6 +72,7 @@ __all__ = [
     "ClothesIdentity",
     "InsufficientBodiesError",
     "assign_clothes",
+    "body_rows",
     "camera_light_gains",
     "choose_crops",
     "feature_bodies",
@@ -411,9 +412,10 @@ def feature_bodies(
     heights: NDArray[np.float64], in_room: NDArray[np.bool_], detected: NDArray[np.bool_],
     f_idx: NDArray[np.intp], p_idx: NDArray[np.intp], measured_height: NDArray[np.floating],
     range_m: NDArray[np.float64], fx_color: float, glance_gap_s: float, rng: np.random.Generator,
-    visibility_config: VisibilityConfig | None = None,
+    visibility_config: VisibilityConfig | None = None, rows_log: list[NDArray[np.int64]] | None = None,
 ) -> BodyRows:
-    """Body rows of one camera's true detections (``f_idx``, ``p_idx``) over a day (see the module doc)."""
+    """Body rows of one camera's true detections (``f_idx``, ``p_idx``) over a day (see the module doc);
+    ``rows_log`` (optional) collects the rows of every described crop and whether it was reduced."""
     cfg = bodies.config
     bank = bodies.bank
     view = view_angle_deg(camera.position[:2], xy, facing)
@@ -429,9 +431,9 @@ def feature_bodies(
     lv = level[f_idx, p_idx]
     rng_d = range_m[f_idx, p_idx]
     crop_rows = np.array([bank.crop_rows(int(i)) for i in range(len(bank.crops))], dtype=np.int64)
-    # rows the person spans in the colour image, in steps of 16 below the crop's own (never enlarged)
-    rows = np.floor(fx_color * heights[p_idx] / np.maximum(rng_d, 0.1) / 16.0).astype(np.int64) * 16
-    rows = np.minimum(np.maximum(rows, 32), crop_rows[c])
+    rows = body_rows(fx_color, heights[p_idx], rng_d, crop_rows[c])
+    if rows_log is not None:
+        rows_log.append(np.stack([rows[described], rows[described] < crop_rows[c][described]], axis=1))
     descriptor = np.zeros((n, bodies.dim), dtype=np.float32)
     variant = rng.integers(NUM_FRAME_VARIANTS, size=n)
     key = np.stack([c, lv, bits, rows, variant], axis=1)
@@ -451,6 +453,15 @@ def feature_bodies(
                                  np.asarray(measured_height, dtype=np.float64), rng_d, seen, cfg, rng)
     return BodyRows(descriptor, described, visible, part_visible, geometry, c.astype(np.int32),
                     view[f_idx, p_idx].astype(np.float32), glance[f_idx, p_idx])
+
+
+def body_rows(focal_px: float, height_m: NDArray[np.floating], range_m: NDArray[np.floating],
+              crop_rows: NDArray[np.integer]) -> NDArray[np.int64]:
+    """Rows a crop is described at: the rows the person spans in the colour image (focal x height / range), down to
+    a multiple of 16 (a cache step) from 32 rows on (at least 2), never more than the crop has (never enlarged)."""
+    span = np.asarray(focal_px * np.asarray(height_m, dtype=np.float64) / np.maximum(range_m, 0.1))
+    rows = np.where(span >= 32.0, np.floor(span / 16.0) * 16.0, np.floor(np.maximum(span, 2.0)))
+    return np.minimum(rows.astype(np.int64), np.asarray(crop_rows, dtype=np.int64))
 
 
 # the span of the body (fractions of the height below the head top) a measure needs seen: the camera's bands

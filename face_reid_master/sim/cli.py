@@ -58,8 +58,8 @@ def _parser() -> argparse.ArgumentParser:
                         "face-reid-eval --space)")
     p.add_argument("--color-resolution", type=str, default=None, metavar="WxH",
                    help="colour image size in pixels, e.g. 1920x1080 (default: the depth camera's 640x480); "
-                        "faces get proportionally more pixels (feature level: the photo variants and the eye "
-                        "distance follow)")
+                        "faces get proportionally more pixels (feature level: each face's photo is down-sampled to "
+                        "the eye distance this gives at its range and angle)")
     p.add_argument("--bodies", type=Path, default=None, metavar="DIR",
                    help="folder with one sub-folder of person crops per identity (e.g. PKU-Reid, Market-1501): "
                         "every person wears one crop identity per day (another one on day 2) and detections carry "
@@ -80,7 +80,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--oracle-noise", type=float, default=ORACLE_NOISE_STD, metavar="STD",
                    help=f"--oracle-evidence: the noise's standard deviation per value (default {ORACLE_NOISE_STD:g})")
     p.add_argument("--cache", type=Path, default=None,
-                   help="npz file caching the photo embeddings (keyed by path, mtime and size)")
+                   help="npz file caching the photo embeddings and their camera-true views (keyed by path, "
+                        "mtime and size; a view also by frame change and eye distance)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 

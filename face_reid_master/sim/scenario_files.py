@@ -16,7 +16,8 @@
   (-1 = false positive), ``det_face`` (D,) int32 row into the face arrays or -1; ``face_embedding``
   (E, dim) float32 in the space ``embedding_space`` of scenario.json (dlib_resnet_v1 when absent: 128
   values; 256 for both embedders), ``face_score``, ``face_quality`` (E,) float32, ``face_photo`` (E,) int32
-  photo index (-1 unknown), ``face_glance`` (E,) int32, ``face_variant`` (E,) int16 (-1 at pixel level),
+  photo index (-1 unknown), ``face_glance`` (E,) int32, ``face_variant`` (E,) int16 (the frame change,
+  -1 at pixel level),
   ``face_eye_px`` (E,) float32 size of the face the embedding shows (optional: 0 = unknown).
   Bodies (optional, scenarios made with ``--bodies``; :mod:`face_reid_master.sim.bodies`): ``det_body`` (D,)
   int32 row into the body arrays or -1 (false positives at feature level, undescribed detections at pixel
@@ -96,9 +97,10 @@ class SimResult:
 def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities: list[IdentityPhotos],
                       photo_offsets: list[int], days: list[Day], heights: NDArray[np.float64],
                       phases: NDArray[np.float64], table: FrameTable, gt: dict[str, NDArray[Any]],
-                      loss_info: list[dict[str, Any]], n_glances: int, bodies: BodyWorld | None = None
-                      ) -> dict[str, Any]:
-    """The ``scenario.json`` document of a simulated scenario (``bodies``: with its body keys)."""
+                      loss_info: list[dict[str, Any]], n_glances: int, bodies: BodyWorld | None = None,
+                      camera_true: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The ``scenario.json`` document of a simulated scenario (``bodies``: with its body keys; ``camera_true``:
+    what the camera's geometry gave the faces and bodies, in the summary)."""
     photos = []
     for ident, offset in zip(identities, photo_offsets, strict=True):
         for k, ph in enumerate(ident.photos):
@@ -133,6 +135,8 @@ def scenario_document(cfg: SimConfig, bank: PhotoBank, world: World, identities:
         "skipped_no_face": sorted(set(bank.skipped_no_face)),
         "identities_with_too_few_photos": sorted(set(bank.too_few_photos)),
     }
+    if camera_true is not None:
+        summary["camera_true"] = camera_true
     document = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,

@@ -4,7 +4,9 @@
 (:mod:`~face_reid_master.sim.motion`) and their photos (:mod:`~face_reid_master.sim.photos`), then makes
 the camera messages at one of two levels sharing all of these: ``feature``
 (:mod:`~face_reid_master.sim.feature_level`, fast) or ``pixel`` (:mod:`~face_reid_master.sim.pixel_level`,
-rendered frames through the real camera pipeline). The result is written by
+rendered frames through the real camera pipeline). Both are camera-true: a face or a body never shows more
+pixels than the camera's colour focal length, the range and the face's angle give (``summary.camera_true`` of
+scenario.json records the focal length and the eye distances). The result is written by
 :func:`~face_reid_master.sim.scenario_files.write_scenario`; the same seed gives byte-identical files. People keep
 ``motion.passing_distance_m`` from each other (:mod:`~face_reid_master.sim.crowd`; 0: they walk through each
 other).
@@ -46,7 +48,7 @@ from face_reid_master.sim.bodies import (
     make_measures,
 )
 from face_reid_master.sim.crowd import CrowdConfig, CrowdStats, keep_apart
-from face_reid_master.sim.feature_level import feature_camera_day
+from face_reid_master.sim.feature_level import CameraTrueLog, color_focal_px, feature_camera_day
 from face_reid_master.sim.frame_table import DetectionColumns, assemble_frames
 from face_reid_master.sim.ground_truth import sample_ground_truth
 from face_reid_master.sim.motion import MotionConfig, Trajectory, plan_trajectory
@@ -219,7 +221,7 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
 
     t0 = time.perf_counter()
     bank = bank if bank is not None else PhotoBank(faces_dir, cache_path, cfg.min_photos_per_identity, log,
-                                                   embedder=cfg.embedder)
+                                                   embedder=cfg.embedder, variants=False)
     if bank.space != embedder_space(cfg.embedder):
         raise ValueError(f"the photo bank embeds with {bank.embedder_choice!r}, the config asks for {cfg.embedder!r}")
     n_day1, n_new = cfg.num_people, cfg.num_new_people
@@ -271,13 +273,14 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
     say(f"simulating {len(days)} day(s) x {cfg.duration_s:g} s, {cfg.num_cameras} cameras at {rate:g} Hz "
         f"({frames_total} camera frames, level {cfg.level})")
     frames_done = [0]
+    camera_true = CameraTrueLog(focal_px=color_focal_px(cfg.color_resolution, world.cameras[0].intrinsics.width))
     for day in days:
         heights = heights_all[day.gt_ids]
         stamps = [camera_stamps(day.start_s, cfg.duration_s, rate, float(ph)) for ph in phases]
         if cfg.level == "feature":
             for c in range(cfg.num_cameras):
                 cols = feature_camera_day(cfg, world, c, day, stamps[c], identities, photo_offsets, heights,
-                                          camera_bias[c], glance_counter, bodies)
+                                          camera_bias[c], glance_counter, bank, bodies, camera_true)
                 per_camera.append((c, stamps[c], cols))
         else:
             cols_list = pixel_camera_frames(cfg, world, day, stamps, identities, photo_offsets, heights, bank,
@@ -294,9 +297,14 @@ def simulate(faces_dir: str | Path, config: SimConfig, cache_path: str | Path | 
             f"fixed vector + N(0, {cfg.oracle_noise_std:g})")
     say(f"camera frames done in {time.perf_counter() - t1:.1f} s: {table.stamp_s.size} frames, "
         f"{table.det['gt_id'].size} detections, {table.face['score'].size} faces")
+    if cfg.level == "feature":
+        bank.save_cache()
+        views = bank.view_stats
+        say(f"camera-true face views: {views.made} embedded now ({views.redetected} re-detected by YuNet, the rest "
+            f"aligned on the photo's scaled landmarks), {views.cached} from the cache")
     gt_arrays, loss_info = sample_ground_truth(cfg, world, days, heights_all)
     document = scenario_document(cfg, bank, world, identities, photo_offsets, days, heights_all, phases, table,
-                                 gt_arrays, loss_info, glance_counter[0], bodies)
+                                 gt_arrays, loss_info, glance_counter[0], bodies, camera_true.record(cfg.level))
     if oracle is not None:
         document["oracle"] = True
         document["oracle_evidence"] = oracle.as_json()

@@ -17,7 +17,7 @@ from conftest import copy_fixture_faces
 
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.sim.cli import main
-from face_reid_master.sim.photos import NUM_VARIANTS, InsufficientFacesError, PhotoBank
+from face_reid_master.sim.photos import NUM_FRAME_CHANGES, NUM_VARIANTS, InsufficientFacesError, PhotoBank
 from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario, write_scenario
 from face_reid_master.sim.simulate import SimConfig, simulate
 
@@ -116,11 +116,12 @@ def test_glances_reuse_one_photo_and_days_use_their_own_photos(feature_dir: Path
     gt = det_gt[has]
     cam = cams[frame_of_det[has]]
     t = stamps[frame_of_det[has]]
-    assert np.all(glance >= 0) and np.all((f_variant >= 0) & (f_variant < NUM_VARIANTS))
+    assert np.all(glance >= 0) and np.all((f_variant >= 0) & (f_variant < NUM_FRAME_CHANGES))
     multi = 0
     for g in np.unique(glance):
         sel = glance == g
         assert len(set(photo[sel])) == 1, "a glance switched photos"
+        assert len(set(f_variant[det_face[has]][sel])) == 1, "a glance switched its image change"
         assert len(set(gt[sel])) == 1 and len(set(cam[sel])) == 1
         multi += int(sel.sum() > 1)
         if sel.sum() > 1:  # consecutive frames of one camera, and not all the same embedding
@@ -300,7 +301,8 @@ def test_config_validation() -> None:
 def test_both_embedders_and_a_larger_colour_image(faces: Path, tmp_path: Path) -> None:
     """--embedder both stores dlib | SFace side by side (each half the photo variant's own embedding, plus
     the simulator's noise) with the eye distance of the face each embedding shows; a colour image of twice
-    the resolution lets more faces use full-resolution photo variants."""
+    the resolution shows more faces with 20 px or more between the eyes (camera-true views); the bank's fixed
+    variants (face-reid-fit-likelihood --camera-views) include the 14, 10 and 9 px ones."""
     from face_reid_master.sim.photos import variant_eye_px
 
     cache = tmp_path / "both.npz"
