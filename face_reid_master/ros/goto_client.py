@@ -163,9 +163,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    if reply.passed_over:
-        print(f"{PROG}: {goto}: {reply.passed_over} unauthenticated repl{'y' if reply.passed_over == 1 else 'ies'} "
-              "from a server without the key ignored", file=sys.stderr)
     if reply.accepted:
         print(f"{goto}: {reply.status}")
         return EXIT_OK
