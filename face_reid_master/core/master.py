@@ -106,6 +106,7 @@ class MasterCore:
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
         self.identity = self._identity_manager(model, evidence_sources)
+        self.identity._held.apart = self._apart
         dim = space_dim(cfg.embedding_space)
         self.people = PredefinedPeople(
             {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
@@ -284,6 +285,11 @@ class MasterCore:
         for ev in self.identity.step(stamp):
             if ev.kind == IdentityEventKind.NEW_FACE and not self.memory.room_for(ev.face_id):
                 continue  # not learned (its id not durable, or max_faces): the track stays unidentified
+            if ev.kind == IdentityEventKind.MERGED:
+                self.memory.merged(ev.face_id, ev.merged_into)
+                self.stats.faces_merged += 1
+                kept.append(ev)
+                continue
             public = self.public_id(ev.track_id)
             kept.append(ev if public == ev.track_id else dataclasses.replace(ev, track_id=public))
             if ev.kind == IdentityEventKind.NEW_FACE:
@@ -306,6 +312,11 @@ class MasterCore:
         assert track is not None, "a SWAPPED event names a track of this step"
         track.public_id, track.public_since_s = self.tracker.reserve_id(), stamp
         track.face_observations = 0
+
+    def _apart(self, a: TrackerId, b: TrackerId) -> float:
+        """Metres between two live tracks at the tracker's time (inf when either is unknown)."""
+        where = {s.track_id: s.position_xy for s in self.tracker.snapshots() if s.track_id in (a, b)}
+        return float(np.hypot(*(where[a] - where[b]))) if len(where) == 2 else math.inf
 
     def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""

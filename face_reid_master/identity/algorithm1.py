@@ -40,6 +40,7 @@ from face_reid_master.identity.entries import (
 from face_reid_master.identity.evidence import CueChunk, Cues, Evidence, EvidenceSource
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
+from face_reid_master.identity.held_faces import HeldFaces
 from face_reid_master.identity.lent_faces import LentFaces
 from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats
 from face_reid_master.identity.swap_guard import SwapGuard
@@ -106,7 +107,9 @@ class IdentityManagerBase:
                               self._on_face_available, self._on_faces_unavailable)
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
+        self._held = HeldFaces(feature_gate_distance, self.faces)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
+        self._merges: list[tuple[int, list[int]]] = []  # (kept face, faces of one person) found by _decide
 
     # ------------------------------------------------------------------------------ public inputs
     def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float,
@@ -184,7 +187,15 @@ class IdentityManagerBase:
         self.tracks.retired.clear()
         events: list[IdentityEvent] = []
         self._learn(stamp, events)
-        for tid, face_or_new, confidence in self._decide():
+        decisions = self._decide()
+        for keep, others in self._merges:
+            events.extend(self._merge_faces(keep, others, stamp))
+        self._merges = []
+        for tid, face_or_new, confidence in decisions:
+            if face_or_new == 0:
+                face_or_new = self._not_held(self.tracks.entries[tid], stamp, events)
+                if face_or_new is None:
+                    continue
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for source in self.sources:
             events.extend(self._cue_step(source, stamp))
@@ -195,6 +206,42 @@ class IdentityManagerBase:
             ev = self._remove_track(tid, died)
             if ev is not None:
                 events.append(ev)
+        return events
+
+    def _not_held(self, track: TrackRecord, stamp: float, events: list[IdentityEvent]) -> int | None:
+        """A track classified as a new person: 0 (new), or the face another live track holds that its buffer shows
+        (:mod:`~face_reid_master.identity.held_faces`): None while the holder shows it too (one person twice: the
+        track waits), else the face, which the swapped holder gives up."""
+        held = self._held.shown_by(track, self.tracks.entries)
+        if held is None:
+            return 0
+        if held.duplicate:
+            self.stats.new_ids_held_waiting += 1
+            return None
+        events.append(self._release_swapped(held.holder, stamp, max(held.holder.face_confirmed_s,
+                                                                    held.holder.first_seen_s)))
+        self.stats.held_faces_taken += 1
+        return held.face_id
+
+    def _merge_faces(self, keep: int, others: list[int], stamp: float) -> list[IdentityEvent]:
+        """Faces ``others`` (of face_list) are face ``keep``'s person: their features join it, a name it lacks
+        comes with them, and they are gone (one MERGED event each)."""
+        face = self.faces.entries[keep]
+        events = []
+        for fid in others:
+            other = self.faces.entries.get(fid)
+            if other is None or other.track_id is not None or fid == keep:
+                continue
+            self._bank.add_features(face.slot, self._bank.features(other.slot))
+            face.n_observations += other.n_observations
+            face.last_seen_s = max(face.last_seen_s, other.last_seen_s)
+            face.created_s = min(face.created_s, other.created_s)
+            if face.name is None:
+                face.name = other.name
+            self.faces.forget(fid)
+            self.sources.forget_face(fid)
+            self.stats.faces_merged += 1
+            events.append(IdentityEvent(IdentityEventKind.MERGED, 0, fid, stamp, 1.0, merged_into=keep))
         return events
 
     def _learn(self, stamp: float, events: list[IdentityEvent]) -> None:
@@ -219,6 +266,7 @@ class IdentityManagerBase:
                 slot = track.slot
                 if slot is None:
                     track.slot = bank.new_slot(obs)
+                    track.buffer_since_s = min(c.stamp_s for c in chunks)
                 unassigned[0].append(tid)
                 unassigned[1].append(obs)
                 unassigned[2].append(eye_rows(chunks))
@@ -254,6 +302,8 @@ class IdentityManagerBase:
                 return None, swapped, obs
             if obs.shape[0] == 0:
                 return face.slot, chunks, None
+        if obs.shape[0]:
+            track.face_confirmed_s = max(track.face_confirmed_s, chunks[-1].stamp_s)
         if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
             track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
         return face.slot, chunks, obs
@@ -363,20 +413,26 @@ class IdentityManagerBase:
         face, which absorbs them."""
         track = self.tracks.entries[tid]
         assert track.slot is not None, "a track is only classified after observations"
+        buffer = self._bank.features(track.slot)
         if face_or_new == 0:
-            fid = self.faces.new_id()  # the track's buffer becomes the new face's feature set
+            fid = self.faces.new_id()  # the track's buffer (its person's part) becomes the new face's feature set
+            core = self._swaps.core(buffer)
+            if core.shape[0] < buffer.shape[0]:
+                self._bank.free_slot(track.slot)
+                track.slot = self._bank.new_slot(core)
             self.faces.entries[fid] = FaceEntry(fid, track.slot, None, stamp, stamp, track.n_observations)
             kind = IdentityEventKind.NEW_FACE
             self.stats.new_faces += 1
         else:
             fid = face_or_new
             face = self.faces.entries[fid]
-            self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
+            self._bank.add_features(face.slot, self._swaps.agreeing(buffer, face.slot))  # add result.face_images
             self._bank.free_slot(track.slot)
             face.n_observations += track.n_observations
             kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
         self._give_face(track, fid, confidence, stamp, Evidence.FACE, new=kind == IdentityEventKind.NEW_FACE)
+        track.face_confirmed_s = stamp
         track.slot = None
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))

@@ -235,11 +235,39 @@ class BayesIdentityManager(IdentityManagerBase):
         idx = np.arange(len(self._rows))
         p = body[idx, best]
         n_obs = self._counts[1:][idx, best]
-        ok = np.flatnonzero((p > self.posterior_threshold) & (n_obs >= self.min_observations))
+        enough = n_obs >= self.min_observations
+        ok = np.flatnonzero((p > self.posterior_threshold) & enough)
         decisions = []
         for r in ok:
             col = int(best[r])
             face = 0 if col == 0 else self.faces.available[col - 1]
             decisions.append((self._rows[r].track_id, face, float(p[r])))
+        split = np.flatnonzero((p <= self.posterior_threshold) & enough & (best > 0)
+                               & (body[:, 1:].sum(axis=1) > self.posterior_threshold))
+        for r in split:
+            decision = self._one_person(body[r], int(best[r]))
+            if decision is not None:
+                decisions.append((self._rows[r].track_id, *decision))
         return decisions
+
+    def _one_person(self, row: FloatArray, best: int) -> tuple[int, float] | None:
+        """A row whose posterior splits between learned faces of one person (features within half the decision
+        distance of its best face's): (the oldest of them, their summed posterior) when that passes the threshold,
+        the others queued for merging into it; else None."""
+        available = self.faces.available
+        top = available[best - 1]
+        if self.feature_gate_distance is None:
+            return None
+        others = [f for f, p in zip(available, row[1:], strict=True) if f != top and p > self.clamp_probability]
+        same = [f for f, alike in zip(others, self.faces.alike(top, others, 0.5 * self.feature_gate_distance),
+                                      strict=True) if alike]
+        if not same:
+            return None
+        group = [top, *same]
+        total = float(sum(row[1 + available.index(f)] for f in group))
+        if total <= self.posterior_threshold:
+            return None
+        keep = min(group, key=lambda f: (self.faces.entries[f].created_s, f))
+        self._merges.append((keep, [f for f in group if f != keep]))
+        return keep, total
 

@@ -87,3 +87,26 @@ class SwapGuard:
             return None
         track.inconsistent = []
         return run
+
+    def agreeing(self, rows: F32Array, slot: int) -> F32Array:
+        """The rows of a decided buffer that lie within the gate of the face in bank ``slot`` (all when the gate is
+        off): a buffer that spans a swap teaches the face only its person's features."""
+        if self.gate_distance is None or not rows.shape[0]:
+            return rows
+        keep = self.bank.exact_min_distances(rows, np.array([slot], np.intp))[:, 0] <= self.gate_distance
+        self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
+        return rows if keep.all() else rows[keep]
+
+    def core(self, rows: F32Array) -> F32Array:
+        """The rows of a buffer that becomes a new face within the gate of its most central row (the one with most
+        rows within the gate): a buffer that spans a swap founds the face on one person (all when the gate is
+        off)."""
+        if self.gate_distance is None or rows.shape[0] < 2:
+            return rows
+        sq = np.einsum("ij,ij->i", rows, rows)
+        d2 = sq[:, None] + sq[None, :] - 2.0 * (rows @ rows.T)
+        near = d2 <= self.gate_distance ** 2
+        keep = near[int(np.argmax(near.sum(axis=1)))]
+        self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
+        return rows if keep.all() else rows[keep]
+
