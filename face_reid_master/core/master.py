@@ -184,6 +184,8 @@ class MasterCore:
         self.stats.detections_rejected_position += len(update.rejected_detections)
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
+        for a, b, p in update.swaps:
+            self.identity.tracks_crossed(a, b, p, stamp)
         self._observe(update.associations, detections, stamp, frame)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
         self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)
@@ -302,6 +304,8 @@ class MasterCore:
             if ev.kind == IdentityEventKind.SWAPPED:
                 self.stats.faces_released_swapped += 1
                 self._split_track(ev.track_id, stamp)
+            if ev.kind == IdentityEventKind.EXCHANGED:
+                self._exchange_public(ev.track_id, ev.partner)
         self.identity.tracks.retired.clear()  # the records of the tracks deleted at this step are read: they go
         return kept
 
@@ -318,6 +322,14 @@ class MasterCore:
         where = {s.track_id: s.position_xy for s in self.tracker.snapshots() if s.track_id in (a, b)}
         return float(np.hypot(*(where[a] - where[b]))) if len(where) == 2 else math.inf
 
+    def _exchange_public(self, a: TrackerId, b: TrackerId) -> None:
+        """Two crossed tracks exchanged identities: their published ids go with them (each follows its person)."""
+        ra, rb = self.identity.tracks.record(a), self.identity.tracks.record(b)
+        assert ra is not None and rb is not None, "an EXCHANGED event names two tracks of this step"
+        ra.public_id, rb.public_id = rb.public_id, ra.public_id
+        ra.public_since_s, rb.public_since_s = rb.public_since_s, ra.public_since_s
+        ra.face_observations, rb.face_observations = rb.face_observations, ra.face_observations
+
     def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
         track = self.identity.tracks.record(track_id)
@@ -331,7 +343,8 @@ class MasterCore:
         if not evidence:
             return 0.0
         raw = float(self.identity.confidence_of(track_id))
-        return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
+        mapped = float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
+        return mapped * (1.0 - self.identity.doubt_of(track_id))  # a crossing since may have swapped the person
 
     # ------------------------------------------------------------------------------ people and faces
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:

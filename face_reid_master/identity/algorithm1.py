@@ -29,6 +29,7 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
+from face_reid_master.identity.crossings import Crossings, Exchange
 from face_reid_master.identity.entries import (
     Chunk,
     FaceEntry,
@@ -108,6 +109,7 @@ class IdentityManagerBase:
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
         self._held = HeldFaces(feature_gate_distance, self.faces)
+        self.crossings = Crossings()
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
         self._merges: list[tuple[int, list[int]]] = []  # (kept face, faces of one person) found by _decide
 
@@ -154,6 +156,19 @@ class IdentityManagerBase:
         self.tracks.queue_cue(kind, track_id, CueChunk(values, stamp_s, source, heights))
         if kind == Evidence.BODY:
             self.stats.body_observations += values.shape[0]
+
+    def tracks_crossed(self, a: int, b: int, probability: float, stamp_s: float) -> None:
+        """The tracker's association may have swapped the people of tracks ``a`` and ``b`` (``probability``):
+        their identities carry that doubt until evidence decides it (:mod:`~face_reid_master.identity.crossings`)."""
+        if self.tracks.gone(a) or self.tracks.gone(b):
+            return
+        ra, rb = self.tracks.entries.get(a), self.tracks.entries.get(b)
+        if (ra is None or ra.face_id is None) and (rb is None or rb.face_id is None):
+            return
+        ex = self.crossings.crossed(ra or self.tracks.seen(a, stamp_s, latest=False),
+                                    rb or self.tracks.seen(b, stamp_s, latest=False), float(probability))
+        if ex is not None:
+            self._side_events.append(self._exchange(ex, stamp_s))
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
@@ -248,6 +263,7 @@ class IdentityManagerBase:
         """The queued observations: an identified track's join its face (those its face accepts; a swap releases
         the track, :class:`SwapGuard`); an unassigned track's join its buffer and go to the classification."""
         pending = self.tracks.take_pending()
+        self._weigh_crossings(pending, stamp, events)
         unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
         singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
         rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
@@ -281,6 +297,51 @@ class IdentityManagerBase:
         if unassigned[0]:
             self._ingest_unassigned(*unassigned)
 
+    def _weigh_crossings(self, pending: dict[int, list[Chunk]], stamp: float, events: list[IdentityEvent]) -> None:
+        """The face observations of crossed tracks weigh their crossings; tracks found swapped exchange their
+        identities before anything is learned."""
+        for tid, chunks in pending.items():
+            track = self.tracks.entries[tid]
+            if track.crossed:
+                weigh = self.crossings.face_log_ratios(rows_of(chunks), self._face_log_ratios)
+                for ex in self.crossings.weigh(track, self.tracks.entries, weigh):
+                    events.append(self._exchange(ex, stamp))
+
+    def _exchange(self, ex: Exchange, stamp: float) -> IdentityEvent:
+        """Two crossed tracks were swapped: each takes the other's identity (an unidentified one's buffer goes:
+        it was gathered on both people)."""
+        a, b = ex.first, ex.second
+        given = [(b, a.face_id, a.confidence, a.evidence, a.new_face), (a, b.face_id, b.confidence, b.evidence,
+                                                                         b.new_face)]
+        for track, fid, confidence, evidence, new in given:
+            if fid is None:
+                track.unassign()
+                track.inconsistent.clear()
+                continue
+            if track.face_id is None:
+                if track.slot is not None:
+                    self._bank.free_slot(track.slot)
+                    track.slot = None
+                self._on_track_identified(track)
+            track.give(fid, confidence, evidence, new)
+            track.inconsistent.clear()
+            track.face_confirmed_s = -math.inf
+            self.faces.entries[fid].track_id = track.track_id
+            self.sources.track_identified(track.track_id, fid)
+        self.stats.crossings_exchanged += 1
+        return IdentityEvent(IdentityEventKind.EXCHANGED, a.track_id, a.face_id or 0, stamp, ex.probability,
+                             partner=b.track_id)
+
+    def _face_log_ratios(self, rows: F32Array, face_ids: list[int]) -> FloatArray | None:
+        """Log likelihood ratios (same person vs another) of face observations for learned faces (Q, len); None
+        when the method has no face likelihood (crossings are then left to the swap guard)."""
+        return None
+
+    def doubt_of(self, track_id: int) -> float:
+        """The probability that a live track's person is not the one its identity was decided on (crossings)."""
+        track = self.tracks.entries.get(track_id)
+        return 0.0 if track is None else self.crossings.doubt(track)
+
     def _learn_identified(self, track: TrackRecord, chunks: list[Chunk], obs: F32Array,
                           keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
                           ) -> tuple[int | None, list[Chunk], F32Array | None]:
@@ -312,8 +373,14 @@ class IdentityManagerBase:
         """One cue's observations: an identified track's describe its face's person; faceless tracks gather
         evidence against every learned face and are given one of face_list when it is strong enough (their own
         face, once seen, overrules it)."""
-        source.observe(self.tracks.take_cue(source.kind), list(self.faces.entries))
+        queued = self.tracks.take_cue(source.kind)
         events = []
+        log_ratios = getattr(source, "face_log_ratios", None)  # a cue that can weigh crossings
+        for track, parts in queued if log_ratios is not None else ():
+            if track.crossed and track.track_id in self.tracks.entries:
+                for ex in self.crossings.weigh(track, self.tracks.entries, lambda faces, p=parts: log_ratios(p, faces)):
+                    events.append(self._exchange(ex, stamp))
+        source.observe(queued, list(self.faces.entries))
         for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
@@ -449,6 +516,7 @@ class IdentityManagerBase:
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track)
         track.give(fid, confidence, evidence, new)
+        self.crossings.forget_all(track, self.tracks.entries)  # decided on what it showed since
         self.sources.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
@@ -465,6 +533,7 @@ class IdentityManagerBase:
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None
+        self.crossings.forget_all(track, self.tracks.entries)
         if track.face_id is None:
             if track.slot is not None:
                 self._bank.free_slot(track.slot)

@@ -130,6 +130,13 @@ class BayesIdentityManager(IdentityManagerBase):
         out.update({fid: float(v) for fid, v in zip(self.faces.available, p[1:], strict=True)})
         return out
 
+    def _face_log_ratios(self, rows: F32Array, face_ids: list[int]) -> FloatArray | None:
+        if not face_ids:
+            return np.zeros((rows.shape[0], 0))
+        slots = np.array([self.faces.entries[f].slot for f in face_ids], np.intp)
+        d = self._bank.exact_min_distances(rows, slots)
+        return self.likelihood.log_ratio_rows(d, self._bank.count[slots].astype(np.float64)[None, :], None)
+
     def _current_confidence(self, track: TrackRecord) -> float:
         row = track.bayes_row
         return float(self._table[row].max()) if row else 0.0

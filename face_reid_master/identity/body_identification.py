@@ -56,10 +56,20 @@ class BodyIdentification:
         for track, parts in queued:
             for emb, t, source, heights in parts:
                 if track.face_id is not None:
-                    self.evidence.add_face_bodies(track.face_id, emb, t, heights)
+                    if not track.crossed:  # a track maybe swapped does not teach its face's gallery
+                        self.evidence.add_face_bodies(track.face_id, emb, t, heights)
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
                     self.evidence.observe(track.track_id, emb, t, face_ids if track.slot is None else [], source,
                                           heights)
+
+    def face_log_ratios(self, parts: list[CueChunk], face_ids: list[int]) -> dict[int, float]:
+        """The summed log-likelihood ratio ("same person") of a track's queued bodies for each of ``face_ids``
+        with recent bodies (what weighs a crossing, :mod:`~face_reid_master.identity.crossings`)."""
+        out: dict[int, float] = {}
+        for emb, t, _, heights in parts:
+            for fid, value in self.evidence.face_log_ratios(emb, t, face_ids, heights).items():
+                out[fid] = out.get(fid, 0.0) + value
+        return out
 
     def decide(self, available: list[int], stamp: float,
                alike: Callable[[int, list[int]], list[bool]]) -> list[tuple[int, int, float]]:

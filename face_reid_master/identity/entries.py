@@ -76,6 +76,7 @@ class TrackRecord:
     face_observations: int = 0  # face embeddings the master used since it got its public id
     buffer_since_s: float = math.inf  # unassigned: stamp of the first face observation in its buffer
     face_confirmed_s: float = -math.inf  # identified: last stamp its own face was seen on it (decided or agreeing)
+    crossed: dict[int, float] = field(default_factory=dict)  # track id -> probability the tracker swapped them
 
     def __post_init__(self) -> None:
         if not self.public_id:

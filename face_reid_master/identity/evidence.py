@@ -54,6 +54,7 @@ class TrackView(Protocol):
     track_id: int
     face_id: int | None  # None: not identified
     slot: int | None  # not None: the track shows a face and is being classified by it
+    crossed: dict[int, float]  # tracks the tracker may have swapped it with (their people), with that probability
 
 
 class EvidenceSource(Protocol):
