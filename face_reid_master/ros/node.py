@@ -37,6 +37,7 @@ from face_reid_camera.common.stamps import set_stamp
 from face_reid_master.core import MasterCore
 from face_reid_master.cycle_schedule import CycleSchedule
 from face_reid_master.health import MasterHealthWatch
+from face_reid_master.identity.predefined_people import with_kept_people
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
@@ -106,6 +107,11 @@ class MasterNode(ManagedNode):
         self.people_topics = PeopleTopics(self, values)  # checks its parameters and the world->map file first
         self.store = self._open_store() if values["persist_faces"] else None
         gallery = _gallery_people(self, str(values["gallery_path"]))
+        if self.store is not None:  # the people named at run time (face-reid-faces add) win over the folder's
+            gallery, both = with_kept_people(gallery, self.store.load_people())
+            if both:
+                self.log(f"named at run time, used instead of the gallery folder's: {', '.join(both)[:300]}",
+                         private=True)
         body_metric = None
         if config.body_appearance_tracking and values["body_metric_path"]:
             from face_reid_master.body.metric_file import load_body_metric
@@ -467,10 +473,9 @@ def _gallery_people(node: MasterNode, path: str) -> dict[str, np.ndarray]:
     from face_reid_master.storage.gallery import load_gallery
 
     result = load_gallery(Path(path), node.photo_embedder())
-    skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
+    skipped = result.skipped_summary(path)
     if skipped:
-        node.log(f"gallery {path}: skipped {len(result.skipped_unreadable)} unreadable photos and "
-                 f"{len(result.skipped_no_face)} without a detectable face", "warn", private=True)
+        node.log(f"gallery {path}: {skipped}", "warn", private=True)
     return dict(result.people)
 
 

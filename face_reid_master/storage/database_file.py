@@ -34,6 +34,20 @@ _LEGACY_SPACE = "dlib_resnet_v1"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 VECTOR_DTYPE = np.dtype("<f4")  # little-endian float32 on every platform
 
+# people named at run time (face-reid-faces add): their photos' embeddings, kept like the gallery folder's. Added
+# without a new schema version (an earlier version opens such a file and ignores these tables)
+_PEOPLE_SCHEMA = """
+CREATE TABLE IF NOT EXISTS people (
+    name TEXT PRIMARY KEY,
+    added_s REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS person_features (
+    name TEXT NOT NULL REFERENCES people(name) ON DELETE CASCADE,
+    idx INTEGER NOT NULL CHECK (idx >= 0),
+    vector BLOB NOT NULL,
+    PRIMARY KEY (name, idx)
+) WITHOUT ROWID;
+"""
 _SCHEMA = f"""
 CREATE TABLE meta (
     key TEXT PRIMARY KEY,
@@ -53,6 +67,7 @@ CREATE TABLE features (
     PRIMARY KEY (face_id, idx)
 ) WITHOUT ROWID;
 CREATE INDEX faces_name ON faces(name);
+{_PEOPLE_SCHEMA}
 INSERT INTO meta(key, value) VALUES ('schema_version', '{SCHEMA_VERSION}');
 """
 _EXPECTED_TABLES = {"meta", "faces", "features"}
@@ -133,10 +148,18 @@ class FaceDatabaseFile:
                 self._enable_wal(conn)
                 conn.execute(f"PRAGMA synchronous={self.synchronous}")
                 self._drop_retired(conn)
+                self._add_people_tables(conn)
         except BaseException:
             conn.close()
             raise
         return conn
+
+    @staticmethod
+    def _add_people_tables(conn: sqlite3.Connection) -> None:
+        """A store written before people were kept gains their (empty) tables."""
+        present = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()}
+        if not {"people", "person_features"} <= present:
+            conn.executescript("BEGIN IMMEDIATE;" + _PEOPLE_SCHEMA + "COMMIT;")
 
     @staticmethod
     def _drop_retired(conn: sqlite3.Connection) -> None:

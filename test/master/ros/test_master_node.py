@@ -152,13 +152,22 @@ def test_services_add_list_forget_and_refuse_hostile_requests(ros_context, tmp_p
         for k in range(8):  # Alice walks in and shows her face: a face, named from the gallery
             _feed(node, _frame(50.0 + 0.1 * k, emb=alice + 0.01 * _unit(100 + k)))
         faces = _call(executor, node, listing, ListFaces.Request())
-        assert list(faces.face_ids) == [1] and list(faces.names) == ["Alice"] and faces.num_features[0] >= 3
+        # the learned face, then the predefined person (face id 0: no face id is 0) with her 6 embeddings
+        assert list(faces.face_ids) == [1, 0] and list(faces.names) == ["Alice", "Alice"]
+        assert faces.num_features[0] >= 3 and faces.num_features[1] == 6
         assert not _call(executor, node, forget, ForgetFace.Request()).success  # neither id nor name
         assert not _call(executor, node, forget, ForgetFace.Request(face_id=99)).success
+        # a restart (face-reid-up restarts the master on its own): Alice is still named, as a gallery person is
+        assert node.trigger_deactivate() == OK and node.trigger_cleanup() == OK
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        assert node.core.people.names() == ["Alice"]  # before: 0 predefined people after a restart
+        assert node.core.face_name(1) == "Alice"
         gone = _call(executor, node, forget, ForgetFace.Request(name="Alice"))
         assert gone.success and list(gone.forgotten_face_ids) == [1]
         assert list(_call(executor, node, listing, ListFaces.Request()).face_ids) == []
-        assert node.store.load_faces() == []  # deleted from disk too
+        assert node.store.load_faces() == [] and node.store.load_people() == {}  # deleted from disk too
+        assert node.trigger_deactivate() == OK and node.trigger_cleanup() == OK
+        assert node.trigger_configure() == OK and node.core.people.names() == []  # forgotten stays forgotten
     finally:
         executor.shutdown()
         client_node.destroy_node()
