@@ -16,9 +16,8 @@ import pytest
 from conftest import REPO_ROOT
 
 from face_reid_master.core import MasterConfig, MasterCore
-from face_reid_master.identity.predefined_people import with_kept_people
 from face_reid_master.identity.records import LearnedFace
-from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError, reason_of
+from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError
 from face_reid_master.storage.face_store import FaceStore
 from face_reid_master.tools.faces_cli import build_parser
 from face_reid_master.tools.faces_cli import main as cli_main
@@ -38,6 +37,8 @@ def db(tmp_path: Path) -> Path:
 
 def test_a_person_added_at_run_time_is_kept_listed_named_after_a_restart_and_forgotten(
         db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from face_reid_master.identity.predefined_people import with_kept_people
+
     carol = _unit_rows(3, 2)
     folder = {"Dan": _unit_rows(4, 1), "Carol": _unit_rows(5, 1)}  # the gallery folder also has a Carol
     with FaceStore(db) as store:  # the running master: add Carol
@@ -156,6 +157,8 @@ def test_options_are_taken_after_the_command_too() -> None:
 def test_store_errors_are_said_as_sentences(db: Path) -> None:
     """A master that cannot open its store says why, without the class name in front (before:
     ``FaceStoreLockedError: face store ... is in use``): its errors are OSErrors, which the nodes say plainly."""
+    from face_reid_master.storage.errors import reason_of
+
     with FaceStore(db):
         with pytest.raises(FaceStoreLockedError) as caught:
             FaceStore(db)
