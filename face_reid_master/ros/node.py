@@ -91,6 +91,7 @@ class MasterNode(ManagedNode):
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
         self.receiver = FrameReceiver(None, {}, self._reject, self.log_throttled)  # messages into the next cycle
+        self.receiver.camera_ids = self.cameras.camera_ids  # which topics each camera id's frames come on
         self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
         self._wall_steps = ClockStepDetector()  # this host's wall clock stepping (an ERROR while it lasts)
 
@@ -252,19 +253,19 @@ class MasterNode(ManagedNode):
         return self._photos
 
     # ------------------------------------------------------------------ camera messages
-    def _on_camera_message(self, message: bytes) -> bool:
+    def _on_camera_message(self, message: bytes, topic: str = "") -> bool:
         """A camera topic's message (CDR bytes; sealed on a secured network): whether it was received."""
         if self._openers:
-            return self._on_sealed(message)
-        return self._on_frame(message)
+            return self._on_sealed(message, topic)
+        return self._on_frame(message, topic)
 
-    def _on_frame(self, frame: bytes | Any) -> bool:
+    def _on_frame(self, frame: bytes | Any, topic: str = "") -> bool:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
         (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
         meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
-        received = self.receiver.receive(frame, now)
+        received = self.receiver.receive(frame, now, topic=topic)
         self._cycle(now)
         return received
 
@@ -279,11 +280,11 @@ class MasterNode(ManagedNode):
         if wait > 0.0:
             time.sleep(wait)
 
-    def _on_sealed(self, sealed: bytes) -> bool:
+    def _on_sealed(self, sealed: bytes, topic: str = "") -> bool:
         """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one (True)."""
         self._wait_for_cycle()
         now = self.now_s()
-        if received := self.receiver.receive_sealed(sealed, now):
+        if received := self.receiver.receive_sealed(sealed, now, topic):
             self._cycle(now)
         return received
 
