@@ -203,8 +203,9 @@ class AdminServices:
         response.message = "; ".join(said) if said else "no such face or person"
 
     def list_faces(self, request: Any, response: Any) -> Any:
-        """The learned faces (ids, names, features, last seen); on a secured master only for a request sealed with
-        the key for this master (others get empty lists, counted as refused)."""
+        """The learned faces (ids, names, features, last seen), then the predefined people (face id 0, their number
+        of embeddings, last seen 0); on a secured master only for a request sealed with the key for this master
+        (others get empty lists, counted as refused)."""
         _, error = self._opened(request)
         if error is not None:
             self._count("list_faces", True)
