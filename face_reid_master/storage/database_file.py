@@ -26,7 +26,7 @@ from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.errors import FaceStoreError
 
 __all__ = ["SCHEMA_VERSION", "VECTOR_DTYPE", "CorruptStore", "FaceDatabaseFile", "decode_face", "salvage_faces",
-           "set_meta", "transaction"]
+           "salvage_people", "set_meta", "transaction"]
 
 SCHEMA_VERSION = 1
 _DEFAULT_DIM = 128
@@ -279,3 +279,32 @@ def salvage_faces(backup: Path, dim: int) -> tuple[list[LearnedFace], int | str]
     finally:
         conn.close()
     return faces, total
+
+
+def salvage_people(backup: Path, dim: int) -> list[tuple[str, np.ndarray, float]]:
+    """Every person named at run time still readable from a corrupt face store moved aside to ``backup``: (name,
+    (k, ``dim``) float32 embeddings, when added)."""
+    out: list[tuple[str, np.ndarray, float]] = []
+    try:
+        conn = sqlite3.connect(f"{backup.as_uri()}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return out
+    width = dim * VECTOR_DTYPE.itemsize
+    try:
+        conn.execute("PRAGMA trusted_schema=OFF")
+        for name, added_s in conn.execute("SELECT name, added_s FROM people ORDER BY name").fetchall():
+            try:
+                blobs = [b for (b,) in conn.execute("SELECT vector FROM person_features WHERE name = ? ORDER BY idx",
+                                                    (name,))]
+                if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
+                    continue
+                rows = np.frombuffer(b"".join(blobs), dtype=VECTOR_DTYPE).reshape(len(blobs), -1).astype(np.float32)
+                if np.all(np.isfinite(rows)):
+                    out.append((check_person_name(name), rows, float(added_s)))
+            except (sqlite3.Error, ValueError, TypeError):
+                continue
+    except sqlite3.Error:  # no people tables (an earlier version), or unreadable
+        pass
+    finally:
+        conn.close()
+    return out

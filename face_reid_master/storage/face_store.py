@@ -50,6 +50,7 @@ from face_reid_master.storage.database_file import (
     FaceDatabaseFile,
     decode_face,
     salvage_faces,
+    salvage_people,
     transaction,
 )
 from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError
@@ -169,6 +170,7 @@ class FaceStore:
         self._row_hashes: dict[int, tuple[int, list[int]]] = {}
         self._lock_fd: int | None = None
         self._conn: sqlite3.Connection | None = None
+        self._salvaged_people: list[tuple[str, npt.NDArray[np.float32], float]] = []  # of a corrupt file
         if (not create or self.read_only) and not os.path.lexists(self.path):
             raise FaceStoreError(f"no face store at {self.path}")
         ensure_private_parent(self.path, self.read_only)
@@ -181,6 +183,8 @@ class FaceStore:
         if not self.read_only:
             secure_sidecars(self.path)
         self._check_ledger(salvaged)
+        for name, rows, added_s in self._salvaged_people:  # written into the fresh store, as the faces are
+            self.save_person(name, rows, added_s)
 
     @property
     def embedding_dim(self) -> int:
@@ -241,6 +245,10 @@ class FaceStore:
         if backup is None:
             return []
         faces, total = salvage_faces(backup, self.embedding_dim)
+        self._salvaged_people = salvage_people(backup, self.embedding_dim)
+        if self._salvaged_people:
+            _LOG.error("FACE STORE CORRUPT: %s: recovered %d person(s) named at run time from %s", self.path,
+                       len(self._salvaged_people), backup)
         self.salvaged_face_ids = sorted(f.face_id for f in faces)
         _LOG.error("FACE STORE CORRUPT: %s: recovered %d of %s faces from %s (ids %s)", self.path, len(faces), total,
                    backup, ", ".join(map(str, self.salvaged_face_ids[:50])) or "none")

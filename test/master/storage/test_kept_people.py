@@ -165,3 +165,21 @@ def test_store_errors_are_said_as_sentences(db: Path) -> None:
             FaceStore(db)
     assert isinstance(caught.value, OSError) and reason_of(caught.value).startswith(f"face store {db}")
     assert reason_of(RuntimeError("x")) == "RuntimeError: x"
+
+
+def test_people_still_readable_in_a_damaged_file_are_recovered(db: Path) -> None:
+    carol = _unit_rows(8, 2)
+    with FaceStore(db) as store:
+        store.save_face(LearnedFace(1, _unit_rows(9, 3), "Carol", 1.0, 2.0, 4))
+        store.save_person("Carol", carol, added_s=5.0)
+    conn = sqlite3.connect(db)
+    root = conn.execute("SELECT rootpage FROM sqlite_master WHERE name = 'faces_name'").fetchone()[0]
+    page = conn.execute("PRAGMA page_size").fetchone()[0]
+    conn.close()
+    with open(db, "r+b") as fh:  # the name index is garbage now: integrity_check fails, the tables are intact
+        fh.seek((root - 1) * page)
+        fh.write(b"\xa5" * page)
+    with FaceStore(db) as store:  # moved aside, a fresh store: Carol is read back from the damaged file
+        assert store.recovered_from is not None and store.salvaged_face_ids == [1]
+        assert [(p.name, p.n_embeddings, p.added_s) for p in store.list_people()] == [("Carol", 2, 5.0)]
+        assert np.array_equal(store.load_people()["Carol"], carol)
