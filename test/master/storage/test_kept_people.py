@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT
+from conftest import FACES_DIR, REPO_ROOT
 
 from face_reid_master.core import MasterConfig, MasterCore
 from face_reid_master.identity.records import LearnedFace
@@ -183,3 +183,19 @@ def test_people_still_readable_in_a_damaged_file_are_recovered(db: Path) -> None
         assert store.recovered_from is not None and store.salvaged_face_ids == [1]
         assert [(p.name, p.n_embeddings, p.added_s) for p in store.list_people()] == [("Carol", 2, 5.0)]
         assert np.array_equal(store.load_people()["Carol"], carol)
+
+
+def test_add_on_the_store_with_the_master_stopped(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``face-reid-faces add NAME PHOTO...`` without --master: the photos' embeddings kept in the store (before:
+    refused, "add works on a running master"); refused while a master holds the store."""
+    photos = [str(p) for p in sorted((FACES_DIR / "deepface_id01").glob("*.jpg"))[:2]]
+    with FaceStore(db):  # a running master holds it
+        assert cli_main(["--db", str(db), "add", "Eve", *photos]) == 3
+        assert "stop the master node first, or give --master NODE" in capsys.readouterr().err
+    assert cli_main(["add", "Eve", *photos, str(db.parent / "missing.jpg"), "--db", str(db)]) == 0
+    captured = capsys.readouterr()
+    assert "added 'Eve' with 2 embeddings" in captured.out and "missing.jpg" in captured.err
+    with FaceStore(db, read_only=True) as store:
+        assert store.load_people()["Eve"].shape == (2, DIM)
+    assert cli_main(["--db", str(db), "add", "Eve\x1b[2J", *photos]) == 2  # a name the master would refuse
+    assert cli_main(["--db", str(db), "forget", "--name", "Eve"]) == 0
