@@ -2,9 +2,10 @@
 
 The data never leaves the store: there is no export of vectors, ``list --json`` prints summaries only. The
 store holds the learned faces and the people named at run time (``add``). ``list`` reads it beside a running
-master (read-only, through SQLite's own locks); ``forget`` / ``rename`` need the master stopped (it would
-overwrite them), or ``--master NODE`` to list / forget / add through the running master's services
-(faces_remote.py). Options (``--db``, ``--master``, ...) go before or after the command.
+master (read-only, through SQLite's own locks); ``forget`` / ``rename`` / ``add`` need the master stopped (it
+would overwrite them), or ``--master NODE`` to list / forget / add through the running master's services
+(faces_remote.py). ``add`` embeds the photos here: only their embeddings are kept. Options (``--db``,
+``--master``, ...) go before or after the command.
 
 Exit codes: 0 done, 1 nothing matched (unknown face id / name) or the master refused, 2 usage error, 3 store
 in use by another process, 4 store unusable (missing file, I/O or configuration error), 5 no master answered.
