@@ -89,11 +89,12 @@ def build_parser() -> argparse.ArgumentParser:
     name.add_argument("name", nargs="?", help="new name")
     name.add_argument("--clear", action="store_true", help="remove the name")
     p_add = sub.add_parser("add", parents=[common],
-                           help="with --master: name a person from photos (embedded here; kept in the master's "
-                                "face store across restarts)")
+                           help="name a person from photos (embedded here, no photo is kept): with --master on the "
+                                "running master, else in the store (the master stopped); kept across restarts")
     p_add.add_argument("name")
     p_add.add_argument("photos", nargs="+", help="face photos (JPEG/PNG) of that person")
-    p_add.add_argument("--space", default="", help="the master's embedding space (default: the master's default)")
+    p_add.add_argument("--space", default="", help="with --master: the master's embedding space (default: the "
+                                                   "master's default; on the store: the store's)")
     return parser
 
 
@@ -148,6 +149,29 @@ def _print_list(faces: list[FaceSummary], people: list[PersonSummary], as_json: 
         print(f"{len(people)} person(s) named at run time")
 
 
+def _add(store: FaceStore, args: argparse.Namespace) -> int:
+    """``add`` on the store (the master stopped): the photos' embeddings in the store's space, kept as a person named
+    at run time (the master names them from its next start)."""
+    import numpy as np
+
+    from face_reid_master.tools.faces_remote import photo_embeddings
+
+    try:
+        name = check_person_name(args.name)
+    except ValueError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    values, notes = photo_embeddings(args.photos, store.embedding_space)
+    for note in notes:
+        print(f"{PROG}: {note}", file=sys.stderr)
+    if not values:
+        print(f"{PROG}: no usable face in the photos", file=sys.stderr)
+        return EXIT_NOT_FOUND
+    n = store.save_person(name, np.asarray(values, dtype=np.float32).reshape(-1, store.embedding_dim))
+    print(f"added {shown(name)} with {n} embeddings to {store.path} (the master names them from its next start)")
+    return EXIT_OK
+
+
 def _run(store: FaceStore, args: argparse.Namespace) -> int:
     if args.command == "list":
         _print_list(store.list_faces(), store.list_people(), args.json)
@@ -168,6 +192,8 @@ def _run(store: FaceStore, args: argparse.Namespace) -> int:
             return EXIT_NOT_FOUND
         print(f"forgot face {args.face_id}")
         return EXIT_OK
+    if args.command == "add":
+        return _add(store, args)
     # rename
     new_name = None if args.clear else args.name
     if new_name is not None:
@@ -204,9 +230,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as exc:  # e.g. an unusable key file
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return EXIT_USAGE
-    if args.command == "add":
-        print(f"{PROG}: add works on a running master: give --master NODE", file=sys.stderr)
-        return EXIT_USAGE
     path = args.db if args.db is not None else default_db_path()
     try:
         with FaceStore(path, create=False, embedding_dim=None, embedding_space=None,

@@ -53,7 +53,9 @@ def format_remote_list(rows: list[tuple[int, str, int, float]], master: str) -> 
     return "\n".join(lines)
 
 
-def _embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
+def photo_embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
+    """The embeddings (of embedder space ``space``, flattened) of the largest face of each photo, and a note per
+    photo left out (unreadable, no face); the photos are read here and go nowhere else."""
     from face_reid_camera.common.embedding_spaces import embedder_for_space
     from face_reid_camera.faces.embedder import load_embedder
     from face_reid_camera.faces.photos import PhotoEmbedder
@@ -106,7 +108,7 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
             request = ForgetFace.Request(face_id=args.face_id or 0, name=args.name or "")
             reply = client.call(ForgetFace, "forget_face", request)
         else:  # add
-            values, notes = _embeddings(args.photos, args.space)
+            values, notes = photo_embeddings(args.photos, args.space)
             for note in notes:
                 print(f"{prog}: {note}", file=sys.stderr)
             if not values:
