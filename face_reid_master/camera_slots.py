@@ -11,14 +11,21 @@ many topics do not hold back a camera that appears after them. A discovered topi
 opened for ``slot_idle_s`` (a camera stopped, or a replayed frame that once got a stranger's topic in) gives its
 slot back and is offered again like a new one; topics gone from the graph are forgotten. Pure: the node
 subscribes and unsubscribes what :meth:`CameraSlots.step` says.
+
+:class:`CameraIdWatch` finds two cameras under one camera id: frames naming one id on two topics (two camera
+nodes given the same ``camera_id`` in different namespaces), or one camera topic published by two nodes (two
+cameras started in one namespace); either is a WARN on /diagnostics naming both.
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-__all__ = ["CameraSlots", "SlotChanges", "camera_of_topic"]
+from face_reid_camera.common.checks import shown
+
+__all__ = ["CameraIdWatch", "CameraSlots", "SlotChanges", "camera_of_topic"]
 
 PROBATION_TOPICS = 16  # topics on probation (subscribed, not authenticated) at once
 PROBATION_S = 5.0  # a topic on probation with no message opened with the key this long is released (s)
@@ -28,6 +35,8 @@ RETRY_MAX_S = 160.0  # ... up to this (s)
 SLOT_IDLE_S = 60.0  # a discovered topic with no message opened this long gives its slot back (s; cameras publish
 #                     every frame, people or not)
 MAX_PARTICIPANTS = 4096  # participants remembered as suspected / trusted (the oldest forgotten first)
+CAMERA_ID_WINDOW_S = 10.0  # frames of one camera id on two topics within this long: two cameras under one id (s)
+MAX_CAMERA_IDS = 1024  # camera ids remembered for that (the least recently heard forgotten first)
 CAMERA_TOPIC_DEPTH = 2  # a camera's own topic below its namespace: face_reid/frames or face_reid/frames_sealed
 
 
@@ -212,3 +221,45 @@ def _remember(seen: dict[str, None], ids: frozenset[str]) -> None:
         seen[i] = None
     while len(seen) > MAX_PARTICIPANTS:
         del seen[next(iter(seen))]
+
+
+class CameraIdWatch:
+    """Two cameras under one camera id (see the module doc): :meth:`frame` is told of each received frame's camera
+    id and topic, :meth:`warnings` says what was found (``window_s``: how recent the frames must be)."""
+
+    def __init__(self, window_s: float = CAMERA_ID_WINDOW_S, max_ids: int = MAX_CAMERA_IDS) -> None:
+        self.window_s, self.max_ids = window_s, max_ids
+        self._topics: dict[str, dict[str, float]] = {}  # camera id -> topic -> when a frame of it last came there
+
+    def frame(self, camera_id: str, topic: str, now_s: float) -> None:
+        """A received frame naming ``camera_id`` came on ``topic``."""
+        if not topic:
+            return
+        topics = self._topics.pop(camera_id, None) or {}
+        self._topics[camera_id] = topics  # most recently heard last
+        topics[topic] = now_s
+        if len(topics) > 8:  # one id on many topics: the 8 most recent are enough to name it
+            del topics[min(topics, key=topics.__getitem__)]
+        while len(self._topics) > self.max_ids:
+            del self._topics[next(iter(self._topics))]
+
+    def warnings(self, now_s: float, publishers: Mapping[str, Sequence[str]] | None = None) -> list[str]:
+        """One line per camera id heard on two topics within ``window_s``, and per camera topic that
+        ``publishers`` (topic -> its publishers, e.g. ``/cam1/face_reid_camera (participant 01ab...)``) gives more
+        than one of."""
+        out = []
+        for camera_id, topics in list(self._topics.items()):
+            recent = sorted(t for t, last in topics.items() if now_s - last <= self.window_s)
+            if not recent:
+                del self._topics[camera_id]
+            elif len(recent) > 1:
+                out.append(f"camera id {shown(camera_id, 64)} is used by {len(recent)} cameras: frames naming it come "
+                           f"on {' and '.join(shown(t, 128) for t in recent[:4])}; give each camera its own camera_id "
+                           "(the master takes them for one camera)")
+        for topic, nodes in sorted((publishers or {}).items()):
+            if len(nodes) > 1:
+                out.append(f"camera topic {shown(topic, 128)} is published by {len(nodes)} nodes: "
+                           f"{' and '.join(shown(n, 128) for n in sorted(nodes)[:4])}; two cameras started with one "
+                           "namespace (or another participant publishing on its topic): give each camera its own "
+                           "namespace and camera_id")
+        return out

@@ -28,6 +28,7 @@ __all__ = [
     "assign_one_to_one",
     "check_person_name",
     "face_to_person_distance",
+    "with_kept_people",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -52,6 +53,17 @@ def check_person_name(name: object) -> str:
     if name != name.strip():
         raise ValueError(f"person name {quoted} starts or ends with a space")
     return name
+
+
+def with_kept_people(folder: Mapping[str, npt.ArrayLike], kept: Mapping[str, npt.ArrayLike]
+                     ) -> tuple[dict[str, npt.ArrayLike], list[str]]:
+    """The predefined people of a master: the gallery folder's and those named at run time (kept in the face store),
+    and the names both hold. A person named at run time wins over the gallery folder's of the same name (the
+    operator's newer word: ``add`` replaces a person at run time, and so it stays after a restart) until
+    ``forget --name`` removes them; then the folder's person is back at the next start."""
+    people: dict[str, npt.ArrayLike] = dict(folder)
+    people.update(kept)
+    return people, sorted(set(folder) & set(kept))
 
 
 def _as_features(features: npt.ArrayLike, dim: int, what: str) -> npt.NDArray[np.float32]:
@@ -187,6 +199,11 @@ class PredefinedPeople:
 
     def names(self) -> list[str]:
         return sorted(self._people)
+
+    def n_embeddings(self, name: str) -> int:
+        """How many gallery embeddings the person has (0: no such person)."""
+        feats = self._people.get(name)
+        return 0 if feats is None else int(feats.shape[0])
 
     # ------------------------------------------------------------------------------ learned faces
     def update_face(self, face_id: int, features: npt.ArrayLike) -> None:

@@ -5,6 +5,12 @@ on). On a secured network only a request sealed with the network key for this ma
 request (only its sender can read it, nobody else can forge it); a refused request or any error is reported in the
 response, logged (cut) and counted (calls and refusals per service on /diagnostics), never raised into the
 executor. Photos are read, decoded and embedded on a worker thread, within a request's pixel budget.
+
+A person added by ``~/add_person`` is kept in the face store (with ``persist_faces``), so that the next start has
+them as it has the gallery folder's people (the one added wins over the folder's of the same name); ``~/forget_face``
+by name removes them from the store too. ``~/list_faces`` lists the learned faces, then every predefined person
+(gallery folder or added) as a row of face id 0 (no face id is 0) with the number of their embeddings and last
+seen 0 (the message has no other place for them).
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from face_reid_camera.common.checks import shown
 from face_reid_camera.common.embedding_spaces import space_dim
 from face_reid_camera.common.ros.sealed import open_request, reply_is_sealed, seal_response
 from face_reid_camera.common.sealing import SealError
+from face_reid_master.storage.errors import reason_of
 from face_reid_msgs.srv import AddPerson, ForgetFace, ListFaces
 
 __all__ = ["AdminServices"]
@@ -163,8 +170,18 @@ class AdminServices:
             self.node.configured_core().add_person(name, np.stack(rows))
         except ValueError as exc:
             raise ValueError("; ".join([str(exc), *notes])[:_MAX_REPLY_CHARS]) from None
+        added = f"added {name} with {len(rows)} embeddings"
+        store = self.node.store
+        if store is None:
+            notes.insert(0, "for this run only: persist_faces is off, the next start will not know them")
+        else:
+            try:
+                store.save_person(name, np.stack(rows))
+            except Exception as exc:  # they are named until the master stops: the operator must know they vanish then
+                raise ValueError(f"{added} for this run only: the face store could not keep them "
+                                 f"({reason_of(exc)[:300]})") from None
         response.success, response.num_embeddings = True, len(rows)
-        response.message = "; ".join([f"added {name} with {len(rows)} embeddings", *notes])[:_MAX_REPLY_CHARS]
+        response.message = "; ".join([added, *notes])[:_MAX_REPLY_CHARS]
 
     async def _do_forget_face(self, request: Any, response: Any) -> None:
         self.node.finish_frames()  # the request acts on the face table as the frames applied so far left it
@@ -175,7 +192,10 @@ class AdminServices:
             fid for fid in core.identity.face_ids() if core.face_name(fid) == request.name
         ]
         forgotten = [fid for fid in ids if core.forget_face(fid)]
-        person = bool(request.name) and not request.face_id and core.forget_person(request.name)
+        by_name = bool(request.name) and not request.face_id
+        person = by_name and core.forget_person(request.name)
+        kept = by_name and self.node.store is not None and self.node.store.forget_person(request.name)
+        person = person or kept
         response.forgotten_face_ids = forgotten
         response.success = bool(forgotten) or person
         said = ([f"forgot faces {forgotten}"] if forgotten else []) + (
@@ -183,8 +203,9 @@ class AdminServices:
         response.message = "; ".join(said) if said else "no such face or person"
 
     def list_faces(self, request: Any, response: Any) -> Any:
-        """The learned faces (ids, names, features, last seen); on a secured master only for a request sealed with
-        the key for this master (others get empty lists, counted as refused)."""
+        """The learned faces (ids, names, features, last seen), then the predefined people (face id 0, their number
+        of embeddings, last seen 0); on a secured master only for a request sealed with the key for this master
+        (others get empty lists, counted as refused)."""
         _, error = self._opened(request)
         if error is not None:
             self._count("list_faces", True)
@@ -198,4 +219,9 @@ class AdminServices:
             response.names.append(core.face_name(face.face_id))
             response.num_features.append(int(face.features.shape[0]))
             response.last_seen_s.append(float(face.last_seen_s))
+        for name in core.people.names():  # the predefined people: face id 0, their embeddings, never seen as a face
+            response.face_ids.append(0)
+            response.names.append(name)
+            response.num_features.append(core.people.n_embeddings(name))
+            response.last_seen_s.append(0.0)
         return self._reply(request, response, None)

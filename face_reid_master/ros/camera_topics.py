@@ -22,7 +22,7 @@ from typing import Any
 from rclpy.event_handler import SubscriptionEventCallbacks
 
 from face_reid_camera.common.checks import shown
-from face_reid_master.camera_slots import CameraSlots, SlotChanges, camera_of_topic
+from face_reid_master.camera_slots import CameraIdWatch, CameraSlots, SlotChanges, camera_of_topic
 from face_reid_msgs.msg import CameraFrame, Sealed
 
 __all__ = ["CameraTopics"]
@@ -35,7 +35,7 @@ class CameraTopics:
     message's CDR bytes and says whether it was received (on a secured network: opened with the key; None: not
     said); ``reject(code, message)`` counts and logs a refused or released topic."""
 
-    def __init__(self, node: Any, on_message: Callable[[bytes], bool | None],
+    def __init__(self, node: Any, on_message: Callable[[bytes, str], bool | None],
                  reject: Callable[[str, str], None]) -> None:
         self.node = node
         self.on_message = on_message
@@ -49,6 +49,7 @@ class CameraTopics:
         self.sealed = False  # the messages are Sealed (a secured network), not CameraFrame
         self.qos: Any = None
         self.clock: Callable[[], float] = time.monotonic
+        self.camera_ids = CameraIdWatch()  # two cameras under one camera id (told of frames by the receiver)
 
     @property
     def refused(self) -> set[str]:
@@ -87,7 +88,7 @@ class CameraTopics:
         self.node.get_logger().info(f"subscribed to camera topic {shown(topic, 128)}{on_probation}")
 
     def _message(self, topic: str, raw: bytes) -> None:
-        received = self.on_message(raw)
+        received = self.on_message(raw, topic)
         if received is not None:
             self.heard(topic, received)
 
@@ -122,6 +123,13 @@ class CameraTopics:
                 f"camera topic {shown(topic, 128)}: {len(offered)} publisher(s) offering reliability "
                 f"{'/'.join(policies)} do not match the master's subscription (reliable, depth 50): their frames "
                 "are not received; publish camera frames reliable")
+
+    def _publishers(self, topic: str) -> list[str]:
+        """The nodes publishing ``topic``: ``/ns/node (participant <GUID prefix>)`` (two camera processes of one
+        name and namespace differ by their participant)."""
+        infos = self.node.get_publishers_info_by_topic(topic)
+        return sorted({f"{info.node_namespace.rstrip('/')}/{info.node_name} (participant "
+                       f"{bytes(info.endpoint_gid[:12]).hex()})" for info in infos})
 
     def _sources(self, topic: str) -> frozenset[str]:
         """The participants publishing ``topic`` (the GUID prefix of each publisher's gid; empty: none)."""
@@ -187,6 +195,7 @@ class CameraTopics:
         if slots.last_release_s is not None and self.clock() - slots.last_release_s <= _RELEASE_WARN_S:
             warnings.append(f"{slots.released} camera topic(s) released so far: nothing on them opened with the "
                             "network key (a keyless or silent publisher on this domain)")
+        warnings += self.camera_ids.warnings(time.monotonic(), {t: self._publishers(t) for t in self.subscribed})
         if self.unmatched:
             warnings.append(f"{len(self.unmatched)} camera topic(s) whose publishers do not match the master's "
                             f"reliable subscription, e.g. {shown(min(self.unmatched), 64)}: publish camera frames "

@@ -19,6 +19,7 @@ from face_reid_camera.common.checks import shown
 from face_reid_camera.common.diagnostics import NodeHealth
 from face_reid_camera.common.ros.sealed import open_payload
 from face_reid_camera.common.sealing import SealError
+from face_reid_master.camera_slots import CameraIdWatch
 from face_reid_master.clock_offsets import ClockOffsets
 from face_reid_master.intake import FrameIntake, PendingFrame
 from face_reid_master.records import CameraFrameRecord
@@ -45,8 +46,9 @@ class FrameReceiver:
         self.log_throttled = log_throttled
         self.intake: FrameIntake[Any] = FrameIntake()
         self.clocks = ClockOffsets()
+        self.camera_ids: CameraIdWatch | None = None  # told which topic each received frame's camera id came on
 
-    def receive_sealed(self, raw: bytes, now: float) -> bool:
+    def receive_sealed(self, raw: bytes, now: float, topic: str = "") -> bool:
         """The CameraFrame inside a sealed message's CDR bytes received (True), or refused (counted by reason,
         logged): an oversized one before it is even read."""
         if self.health is not None:
@@ -66,9 +68,10 @@ class FrameReceiver:
         except SealError as exc:
             self.reject(f"sealed_{exc.code}", f"sealed frame from {shown(sender, 64)} refused: {exc}")
             return False
-        return self.receive(payload, now, sender, counted=True)
+        return self.receive(payload, now, sender, counted=True, topic=topic)
 
-    def receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None, counted: bool = False) -> bool:
+    def receive(self, frame: bytes | Any, now: float, sealed_by: str | None = None, counted: bool = False,
+                topic: str = "") -> bool:
         """A camera frame (CDR bytes or a CameraFrame message; ``sealed_by``: the sender of the seal it came in)
         read into a record and queued for the next cycle (True); one that cannot be read, or sealed by another
         camera than it names, is refused (counted, logged)."""
@@ -88,6 +91,8 @@ class FrameReceiver:
                                                    f"{shown(record.camera_id, 64)}")
             return False
         self.intake.add(PendingFrame(record.camera_id, record.stamp_s, record))
+        if self.camera_ids is not None:  # ``topic``: the camera topic it came on ('' unknown)
+            self.camera_ids.frame(record.camera_id, topic, time.monotonic())
         try:
             self.clocks.observe(record.camera_id, record.stamp_s, time.time(), processing_ms * 1e-3)
         except (TypeError, ValueError):
@@ -103,7 +108,9 @@ class FrameReceiver:
             try:
                 with sub.handle:
                     while (taken := sub.handle.take_message(sub.msg_type, True)) is not None:
-                        received = self.receive_sealed(taken[0], now) if self.openers else self.receive(taken[0], now)
+                        topic = sub.topic_name
+                        received = (self.receive_sealed(taken[0], now, topic) if self.openers
+                                    else self.receive(taken[0], now, topic=topic))
                         if heard is not None:
                             heard(sub.topic_name, received)
             except Exception as exc:  # a destroyed subscription (deactivating): its messages are gone anyway

@@ -37,6 +37,7 @@ from face_reid_camera.common.stamps import set_stamp
 from face_reid_master.core import MasterCore
 from face_reid_master.cycle_schedule import CycleSchedule
 from face_reid_master.health import MasterHealthWatch
+from face_reid_master.identity.predefined_people import with_kept_people
 from face_reid_master.output_stamps import OutputStamps
 from face_reid_master.records import CameraFrameRecord
 from face_reid_master.ros import params as master_params
@@ -90,6 +91,7 @@ class MasterNode(ManagedNode):
         self.markers_pub: Any = None
         self.people_topics: PeopleTopics | None = None  # /people and REP-155 (optional outputs)
         self.receiver = FrameReceiver(None, {}, self._reject, self.log_throttled)  # messages into the next cycle
+        self.receiver.camera_ids = self.cameras.camera_ids  # which topics each camera id's frames come on
         self.schedule = CycleSchedule()  # cycles, identity steps and publishes (monotonic clock: time.monotonic)
         self._wall_steps = ClockStepDetector()  # this host's wall clock stepping (an ERROR while it lasts)
 
@@ -106,6 +108,11 @@ class MasterNode(ManagedNode):
         self.people_topics = PeopleTopics(self, values)  # checks its parameters and the world->map file first
         self.store = self._open_store() if values["persist_faces"] else None
         gallery = _gallery_people(self, str(values["gallery_path"]))
+        if self.store is not None:  # the people named at run time (face-reid-faces add) win over the folder's
+            gallery, both = with_kept_people(gallery, self.store.load_people())
+            if both:
+                self.log(f"named at run time, used instead of the gallery folder's: {', '.join(both)[:300]}",
+                         private=True)
         body_metric = None
         if config.body_appearance_tracking and values["body_metric_path"]:
             from face_reid_master.body.metric_file import load_body_metric
@@ -246,19 +253,19 @@ class MasterNode(ManagedNode):
         return self._photos
 
     # ------------------------------------------------------------------ camera messages
-    def _on_camera_message(self, message: bytes) -> bool:
+    def _on_camera_message(self, message: bytes, topic: str = "") -> bool:
         """A camera topic's message (CDR bytes; sealed on a secured network): whether it was received."""
         if self._openers:
-            return self._on_sealed(message)
-        return self._on_frame(message)
+            return self._on_sealed(message, topic)
+        return self._on_frame(message, topic)
 
-    def _on_frame(self, frame: bytes | Any) -> bool:
+    def _on_frame(self, frame: bytes | Any, topic: str = "") -> bool:
         """A camera message (its CDR bytes, or a CameraFrame): a cycle with it and everything else already waiting
         (the cycle drains every camera subscription, so the executor finds nothing left for the messages that came
         meanwhile), no sooner than min_cycle_period_s after the last cycle began."""
         self._wait_for_cycle()
         now = self.now_s()
-        received = self.receiver.receive(frame, now)
+        received = self.receiver.receive(frame, now, topic=topic)
         self._cycle(now)
         return received
 
@@ -273,11 +280,11 @@ class MasterNode(ManagedNode):
         if wait > 0.0:
             time.sleep(wait)
 
-    def _on_sealed(self, sealed: bytes) -> bool:
+    def _on_sealed(self, sealed: bytes, topic: str = "") -> bool:
         """A sealed camera message's CDR bytes (secured network): opened, then queued like a plain one (True)."""
         self._wait_for_cycle()
         now = self.now_s()
-        if received := self.receiver.receive_sealed(sealed, now):
+        if received := self.receiver.receive_sealed(sealed, now, topic):
             self._cycle(now)
         return received
 
@@ -467,10 +474,9 @@ def _gallery_people(node: MasterNode, path: str) -> dict[str, np.ndarray]:
     from face_reid_master.storage.gallery import load_gallery
 
     result = load_gallery(Path(path), node.photo_embedder())
-    skipped = len(result.skipped_unreadable) + len(result.skipped_no_face)
+    skipped = result.skipped_summary(path)
     if skipped:
-        node.log(f"gallery {path}: skipped {len(result.skipped_unreadable)} unreadable photos and "
-                 f"{len(result.skipped_no_face)} without a detectable face", "warn", private=True)
+        node.log(f"gallery {path}: {skipped}", "warn", private=True)
     return dict(result.people)
 
 

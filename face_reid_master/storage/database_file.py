@@ -26,7 +26,7 @@ from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.errors import FaceStoreError
 
 __all__ = ["SCHEMA_VERSION", "VECTOR_DTYPE", "CorruptStore", "FaceDatabaseFile", "decode_face", "salvage_faces",
-           "set_meta", "transaction"]
+           "salvage_people", "set_meta", "transaction"]
 
 SCHEMA_VERSION = 1
 _DEFAULT_DIM = 128
@@ -34,6 +34,20 @@ _LEGACY_SPACE = "dlib_resnet_v1"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 VECTOR_DTYPE = np.dtype("<f4")  # little-endian float32 on every platform
 
+# people named at run time (face-reid-faces add): their photos' embeddings, kept like the gallery folder's. Added
+# without a new schema version (an earlier version opens such a file and ignores these tables)
+_PEOPLE_SCHEMA = """
+CREATE TABLE IF NOT EXISTS people (
+    name TEXT PRIMARY KEY,
+    added_s REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS person_features (
+    name TEXT NOT NULL REFERENCES people(name) ON DELETE CASCADE,
+    idx INTEGER NOT NULL CHECK (idx >= 0),
+    vector BLOB NOT NULL,
+    PRIMARY KEY (name, idx)
+) WITHOUT ROWID;
+"""
 _SCHEMA = f"""
 CREATE TABLE meta (
     key TEXT PRIMARY KEY,
@@ -53,6 +67,7 @@ CREATE TABLE features (
     PRIMARY KEY (face_id, idx)
 ) WITHOUT ROWID;
 CREATE INDEX faces_name ON faces(name);
+{_PEOPLE_SCHEMA}
 INSERT INTO meta(key, value) VALUES ('schema_version', '{SCHEMA_VERSION}');
 """
 _EXPECTED_TABLES = {"meta", "faces", "features"}
@@ -133,10 +148,18 @@ class FaceDatabaseFile:
                 self._enable_wal(conn)
                 conn.execute(f"PRAGMA synchronous={self.synchronous}")
                 self._drop_retired(conn)
+                self._add_people_tables(conn)
         except BaseException:
             conn.close()
             raise
         return conn
+
+    @staticmethod
+    def _add_people_tables(conn: sqlite3.Connection) -> None:
+        """A store written before people were kept gains their (empty) tables."""
+        present = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()}
+        if not {"people", "person_features"} <= present:
+            conn.executescript("BEGIN IMMEDIATE;" + _PEOPLE_SCHEMA + "COMMIT;")
 
     @staticmethod
     def _drop_retired(conn: sqlite3.Connection) -> None:
@@ -256,3 +279,32 @@ def salvage_faces(backup: Path, dim: int) -> tuple[list[LearnedFace], int | str]
     finally:
         conn.close()
     return faces, total
+
+
+def salvage_people(backup: Path, dim: int) -> list[tuple[str, np.ndarray, float]]:
+    """Every person named at run time still readable from a corrupt face store moved aside to ``backup``: (name,
+    (k, ``dim``) float32 embeddings, when added)."""
+    out: list[tuple[str, np.ndarray, float]] = []
+    try:
+        conn = sqlite3.connect(f"{backup.as_uri()}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return out
+    width = dim * VECTOR_DTYPE.itemsize
+    try:
+        conn.execute("PRAGMA trusted_schema=OFF")
+        for name, added_s in conn.execute("SELECT name, added_s FROM people ORDER BY name").fetchall():
+            try:
+                blobs = [b for (b,) in conn.execute("SELECT vector FROM person_features WHERE name = ? ORDER BY idx",
+                                                    (name,))]
+                if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
+                    continue
+                rows = np.frombuffer(b"".join(blobs), dtype=VECTOR_DTYPE).reshape(len(blobs), -1).astype(np.float32)
+                if np.all(np.isfinite(rows)):
+                    out.append((check_person_name(name), rows, float(added_s)))
+            except (sqlite3.Error, ValueError, TypeError):
+                continue
+    except sqlite3.Error:  # no people tables (an earlier version), or unreadable
+        pass
+    finally:
+        conn.close()
+    return out

@@ -1,15 +1,17 @@
 """Persistent memory of the master: learned faces (biometric data) in one SQLite file, private to the user.
 
 One file (default :func:`default_db_path`) holds every learned face: its id, optional name, counters and
-bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.records`).  Privacy measures:
+bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.records`), and the people named at run time
+(``face-reid-faces add``: a name and its photos' embeddings, :meth:`FaceStore.save_person`).  Privacy measures:
 
 * the file, its ``-wal``/``-shm`` companions and backups are mode 0600, a directory we create is 0700;
   an existing file with broader permissions is fixed and a warning logged;
 * :meth:`FaceStore.forget` / :meth:`~FaceStore.forget_name` / :meth:`~FaceStore.prune_unnamed` delete a
   person's rows with ``PRAGMA secure_delete=ON`` (freed content is zeroed) and then truncate the WAL, so
   the vectors no longer exist in either file (the filesystem/SSD may still hold old blocks: out of reach);
-* one process at a time: the store holds an exclusive ``flock`` on the database file, so the CLI cannot
-  edit a store a running node would silently overwrite (:class:`FaceStoreLockedError`).
+* one writer at a time: a writable store holds an exclusive ``flock`` on the database file, so the CLI cannot
+  edit a store a running node would silently overwrite (:class:`FaceStoreLockedError`); a read-only store takes
+  no ``flock`` (it never keeps the master from starting) and reads through SQLite's own locks, beside a writer.
 
 Durability: WAL journal, ``synchronous=FULL`` by default (every commit fsyncs the WAL: survives a
 ``kill -9`` *and* an OS crash / power loss); ``synchronous="NORMAL"`` still survives a process crash
@@ -29,6 +31,7 @@ import logging
 import math
 import os
 import sqlite3
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +50,7 @@ from face_reid_master.storage.database_file import (
     FaceDatabaseFile,
     decode_face,
     salvage_faces,
+    salvage_people,
     transaction,
 )
 from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError
@@ -59,6 +63,7 @@ __all__ = [
     "FaceStoreError",
     "FaceStoreLockedError",
     "FaceSummary",
+    "PersonSummary",
     "default_db_path",
 ]
 
@@ -74,6 +79,15 @@ class FaceSummary:
     n_observations: int
     created_s: float
     last_seen_s: float
+
+
+@dataclass(frozen=True)
+class PersonSummary:
+    """One person named at run time, without the embeddings (for listings)."""
+
+    name: str
+    n_embeddings: int
+    added_s: float
 
 
 def default_db_path() -> Path:
@@ -156,6 +170,7 @@ class FaceStore:
         self._row_hashes: dict[int, tuple[int, list[int]]] = {}
         self._lock_fd: int | None = None
         self._conn: sqlite3.Connection | None = None
+        self._salvaged_people: list[tuple[str, npt.NDArray[np.float32], float]] = []  # of a corrupt file
         if (not create or self.read_only) and not os.path.lexists(self.path):
             raise FaceStoreError(f"no face store at {self.path}")
         ensure_private_parent(self.path, self.read_only)
@@ -168,6 +183,8 @@ class FaceStore:
         if not self.read_only:
             secure_sidecars(self.path)
         self._check_ledger(salvaged)
+        for name, rows, added_s in self._salvaged_people:  # written into the fresh store, as the faces are
+            self.save_person(name, rows, added_s)
 
     @property
     def embedding_dim(self) -> int:
@@ -228,6 +245,10 @@ class FaceStore:
         if backup is None:
             return []
         faces, total = salvage_faces(backup, self.embedding_dim)
+        self._salvaged_people = salvage_people(backup, self.embedding_dim)
+        if self._salvaged_people:
+            _LOG.error("FACE STORE CORRUPT: %s: recovered %d person(s) named at run time from %s", self.path,
+                       len(self._salvaged_people), backup)
         self.salvaged_face_ids = sorted(f.face_id for f in faces)
         _LOG.error("FACE STORE CORRUPT: %s: recovered %d of %s faces from %s (ids %s)", self.path, len(faces), total,
                    backup, ", ".join(map(str, self.salvaged_face_ids[:50])) or "none")
@@ -479,6 +500,80 @@ class FaceStore:
             )
             if int(r[0]) not in keep_ids
         ]
+
+    # ------------------------------------------------------------------------------ people named at run time
+    def _has_people(self) -> bool:
+        """Whether the file has the people tables (a store of an earlier version opened read-only has not)."""
+        return self._db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'person_features'"
+                                ).fetchone() is not None
+
+    def save_person(self, name: str, embeddings: Any, added_s: float | None = None) -> int:
+        """Keep (or replace) a person named at run time: ``name`` and the (k, embedding_dim) embeddings of their
+        photos, committed on return; how many embeddings. ValueError for a bad name or array."""
+        name = check_person_name(name)
+        rows = np.asarray(embeddings)
+        if rows.ndim != 2 or rows.shape[0] < 1 or rows.shape[1] != self.embedding_dim:
+            raise ValueError(f"embeddings of {name!r} must have shape (k >= 1, {self.embedding_dim}), got {rows.shape}")
+        if rows.dtype == np.bool_ or not np.issubdtype(rows.dtype, np.number) or not np.all(np.isfinite(rows)):
+            raise ValueError(f"embeddings of {name!r} must be finite real numbers")
+        if self.read_only:
+            raise FaceStoreError(f"face store {self.path} is open read-only: {name!r} cannot be kept")
+        raw = np.ascontiguousarray(rows, dtype=VECTOR_DTYPE)
+        stamp = time.time() if added_s is None else float(added_s)
+        with self._transaction() as conn:
+            conn.execute("DELETE FROM person_features WHERE name = ?", (name,))
+            conn.execute("INSERT INTO people(name, added_s) VALUES (?, ?) ON CONFLICT(name) DO UPDATE SET "
+                         "added_s = excluded.added_s", (name, stamp))
+            conn.executemany("INSERT INTO person_features(name, idx, vector) VALUES (?, ?, ?)",
+                             [(name, i, raw[i].tobytes()) for i in range(raw.shape[0])])
+        return int(raw.shape[0])
+
+    def load_people(self) -> dict[str, npt.NDArray[np.float32]]:
+        """The people named at run time: name -> (k, embedding_dim) float32, names sorted (a person whose stored
+        data is invalid is skipped with an ERROR log)."""
+        if not self._has_people():
+            return {}
+        blobs: dict[str, list[bytes]] = {}
+        for name, blob in self._db.execute("SELECT p.name, v.vector FROM people p JOIN person_features v "
+                                           "ON v.name = p.name ORDER BY p.name, v.idx"):
+            blobs.setdefault(name, []).append(blob)
+        width = self.embedding_dim * VECTOR_DTYPE.itemsize
+        out: dict[str, npt.NDArray[np.float32]] = {}
+        for name, rows in blobs.items():
+            try:
+                check_person_name(name)
+                if any(not isinstance(b, bytes) or len(b) != width for b in rows):
+                    raise ValueError(f"stored vectors are not {width} bytes each")
+                feats = np.frombuffer(b"".join(rows), dtype=VECTOR_DTYPE).reshape(len(rows), -1).astype(np.float32)
+                if not np.all(np.isfinite(feats)):
+                    raise ValueError("stored vectors hold NaN or Inf")
+            except ValueError as exc:
+                _LOG.error("face store %s: skipping an invalid stored person: %s", self.path, exc)
+                continue
+            out[name] = feats
+        return out
+
+    def list_people(self) -> list[PersonSummary]:
+        """Summaries of the people named at run time (no vectors), sorted by name."""
+        if not self._has_people():
+            return []
+        rows = self._db.execute("SELECT p.name, COUNT(v.idx), p.added_s FROM people p LEFT JOIN person_features v "
+                                "ON v.name = p.name GROUP BY p.name ORDER BY p.name").fetchall()
+        return [PersonSummary(str(r[0]), int(r[1]), float(r[2])) for r in rows]
+
+    def forget_person(self, name: str) -> bool:
+        """Delete a person named at run time and their embeddings for good (zeroed pages, WAL truncated); False
+        if no such person is kept."""
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"name must be a non-empty str, got {name!r}")
+        if not self._has_people() or not self._db.execute("SELECT 1 FROM people WHERE name = ?", (name,)).fetchone():
+            return False
+        with self._transaction() as conn:
+            conn.execute("DELETE FROM person_features WHERE name = ?", (name,))
+            conn.execute("DELETE FROM people WHERE name = ?", (name,))
+        self._scrub_wal()
+        _LOG.info("face store %s: forgot the person %r", self.path, name)
+        return True
 
     def integrity_ok(self) -> bool:
         """Run ``PRAGMA integrity_check`` now (diagnostics)."""

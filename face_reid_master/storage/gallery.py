@@ -63,6 +63,28 @@ class GalleryResult:
     skipped_unreadable: list[Path] = field(default_factory=list)
     skipped_no_face: list[Path] = field(default_factory=list)
 
+    def skipped_summary(self, root: str | Path = "", max_named: int = 5) -> str:
+        """The photos left out, named (relative to ``root`` where below it, the first ``max_named`` of each kind):
+        the operator must know which file to fix; '' when none was."""
+        def named(paths: list[Path]) -> str:
+            shown_paths = []
+            for p in paths[:max_named]:
+                try:
+                    shown_paths.append(repr(str(Path(p).relative_to(root))) if root else repr(str(p)))
+                except ValueError:
+                    shown_paths.append(repr(str(p)))
+            more = f" and {len(paths) - max_named} more" if len(paths) > max_named else ""
+            return ", ".join(shown_paths) + more
+
+        parts = []
+        if self.skipped_unreadable:
+            parts.append(f"skipped {len(self.skipped_unreadable)} unreadable photo(s): "
+                         f"{named(self.skipped_unreadable)}")
+        if self.skipped_no_face:
+            parts.append(f"skipped {len(self.skipped_no_face)} photo(s) without a detectable face: "
+                         f"{named(self.skipped_no_face)}")
+        return "; ".join(parts)
+
     def __post_init__(self) -> None:
         if not self.people:
             raise ValueError("a gallery needs at least one person")

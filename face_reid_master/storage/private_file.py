@@ -2,7 +2,8 @@
 
 The file is created 0600 (an existing one with broader permissions is fixed, with a warning) in a directory
 other users cannot write; it is never opened through a symbolic link and must belong to this user; an
-``flock`` keeps a second process out (shared when read-only). A damaged file is renamed
+exclusive ``flock`` keeps a second writer out (a read-only open takes none: SQLite's own locks let it read beside
+the writer, and it must never keep the master from starting). A damaged file is renamed
 ``<name>.corrupt-<UTC stamp>`` together with its SQLite ``-wal`` / ``-shm``, which must never be replayed into
 a fresh file.
 """
@@ -45,7 +46,7 @@ def ensure_private_parent(path: Path, read_only: bool) -> None:
 
 def open_locked(path: Path, read_only: bool) -> int:
     """Create (0600) or open the file (never through a symlink, only our own), fix broader permissions, take
-    the process lock (exclusive; shared when read-only); its file descriptor."""
+    the process lock (exclusive; none when read-only); its file descriptor."""
     flags = os.O_RDONLY if read_only else os.O_RDWR | os.O_CREAT
     # O_NONBLOCK: opening a FIFO (or a device) put there would wait for a writer forever; refused just below
     flags |= os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
@@ -66,8 +67,10 @@ def open_locked(path: Path, read_only: bool) -> int:
             raise FaceStoreError(f"face store {path} belongs to user id {info.st_uid}, not to this user "
                                  f"({os.geteuid()}): refused")
         _restrict(fd, path, stat.S_IMODE(info.st_mode), read_only)
+        if read_only:  # a reader takes no flock: it reads beside a running master and never keeps one from starting
+            return fd
         try:
-            fcntl.flock(fd, (fcntl.LOCK_SH if read_only else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError as exc:
             raise FaceStoreLockedError(
                 f"face store {path} is in use by another process (is the master node running?)") from exc

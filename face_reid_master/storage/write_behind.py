@@ -25,6 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from face_reid_master.identity.records import LearnedFace
+from face_reid_master.storage.errors import reason_of
 from face_reid_master.storage.face_store import FaceStore
 
 __all__ = ["WriteBehindStore"]
@@ -78,7 +79,7 @@ class WriteBehindStore:
 
     def _failed(self, exc: Exception) -> None:
         self.write_failures += 1
-        self.last_error = f"{type(exc).__name__}: {str(exc)[:_MAX_ERROR_CHARS]}"
+        self.last_error = reason_of(exc)[:_MAX_ERROR_CHARS]
         self.last_write_ok = False
 
     def forget_later(self, face_ids: Iterable[int]) -> None:

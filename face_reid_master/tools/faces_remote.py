@@ -38,15 +38,24 @@ class _Client:
 
 def format_remote_list(rows: list[tuple[int, str, int, float]], master: str) -> str:
     """The ~/list_faces answer as a table: face id, name, stored features, last seen (names and times shown as
-    face-reid-faces shows the store's)."""
+    face-reid-faces shows the store's); its rows of face id 0 are the master's predefined people (gallery folder
+    or named at run time), listed after the faces with their number of embeddings."""
+    faces = [r for r in rows if r[0]]
+    people = [r for r in rows if not r[0]]
     lines = [f"{'id':>6}  {'name':<24} {'features':>8}  last seen {TIME_HEADER}"]
     lines += [f"{fid:>6}  {name_cell(name):<24} {n:>8}  {local_time(seen)}"
-              for fid, name, n, seen in rows]
-    lines.append(f"{len(rows)} face(s) on {master}")
+              for fid, name, n, seen in faces]
+    lines.append(f"{len(faces)} face(s) on {master}")
+    if people:
+        lines.append(f"{'person':<32} {'photos':>8}")
+        lines += [f"{name_cell(name):<32} {n:>8}" for _, name, n, _ in people]
+        lines.append(f"{len(people)} predefined person(s) on {master} (gallery folder and named at run time)")
     return "\n".join(lines)
 
 
-def _embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
+def photo_embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
+    """The embeddings (of embedder space ``space``, flattened) of the largest face of each photo, and a note per
+    photo left out (unreadable, no face); the photos are read here and go nowhere else."""
     from face_reid_camera.common.embedding_spaces import embedder_for_space
     from face_reid_camera.faces.embedder import load_embedder
     from face_reid_camera.faces.photos import PhotoEmbedder
@@ -99,7 +108,7 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
             request = ForgetFace.Request(face_id=args.face_id or 0, name=args.name or "")
             reply = client.call(ForgetFace, "forget_face", request)
         else:  # add
-            values, notes = _embeddings(args.photos, args.space)
+            values, notes = photo_embeddings(args.photos, args.space)
             for note in notes:
                 print(f"{prog}: {note}", file=sys.stderr)
             if not values:

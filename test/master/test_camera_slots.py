@@ -137,3 +137,30 @@ def test_the_camera_of_a_topic_is_its_innermost_namespace() -> None:
 def test_bad_bounds_are_refused() -> None:
     with pytest.raises(ValueError):
         CameraSlots(0, authenticate=True)
+
+
+def test_two_cameras_under_one_camera_id_are_named() -> None:
+    """Frames naming one camera id on two topics, or a camera topic of two publishing nodes: one warning each,
+    naming both (before: nothing anywhere)."""
+    from face_reid_master.camera_slots import CameraIdWatch
+
+    watch = CameraIdWatch(window_s=10.0)
+    watch.frame("cam1", "/cam1/face_reid/frames", 0.0)
+    watch.frame("cam2", "/cam2/face_reid/frames", 1.0)
+    watch.frame("cam1", "", 1.0)  # a topic not known: not counted
+    assert watch.warnings(2.0) == []
+    watch.frame("cam1", "/cam3/face_reid/frames", 5.0)  # a third camera started with camera_id cam1
+    said = watch.warnings(6.0)
+    assert len(said) == 1 and "camera id 'cam1' is used by 2 cameras" in said[0]
+    assert "/cam1/face_reid/frames" in said[0] and "/cam3/face_reid/frames" in said[0]
+    assert watch.warnings(12.0) == []  # cam1's old topic has been silent for 12 s: no longer two cameras
+    two = {"/cam1/face_reid/frames": ["/cam1/face_reid_camera (participant 01)",
+                                      "/cam1/face_reid_camera (participant 02)"],
+           "/cam2/face_reid/frames": ["/cam2/face_reid_camera (participant 03)"]}
+    said = watch.warnings(12.0, two)
+    assert len(said) == 1 and "camera topic '/cam1/face_reid/frames' is published by 2 nodes" in said[0]
+    assert "(participant 01)" in said[0] and "(participant 02)" in said[0]
+    many = CameraIdWatch(max_ids=3)
+    for k in range(10):
+        many.frame(f"cam{k}", f"/cam{k}/face_reid/frames", 0.0)
+    assert len(many._topics) == 3  # bounded: a flood of camera ids does not grow it

@@ -152,13 +152,22 @@ def test_services_add_list_forget_and_refuse_hostile_requests(ros_context, tmp_p
         for k in range(8):  # Alice walks in and shows her face: a face, named from the gallery
             _feed(node, _frame(50.0 + 0.1 * k, emb=alice + 0.01 * _unit(100 + k)))
         faces = _call(executor, node, listing, ListFaces.Request())
-        assert list(faces.face_ids) == [1] and list(faces.names) == ["Alice"] and faces.num_features[0] >= 3
+        # the learned face, then the predefined person (face id 0: no face id is 0) with her 6 embeddings
+        assert list(faces.face_ids) == [1, 0] and list(faces.names) == ["Alice", "Alice"]
+        assert faces.num_features[0] >= 3 and faces.num_features[1] == 6
         assert not _call(executor, node, forget, ForgetFace.Request()).success  # neither id nor name
         assert not _call(executor, node, forget, ForgetFace.Request(face_id=99)).success
+        # a restart (face-reid-up restarts the master on its own): Alice is still named, as a gallery person is
+        assert node.trigger_deactivate() == OK and node.trigger_cleanup() == OK
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        assert node.core.people.names() == ["Alice"]  # before: 0 predefined people after a restart
+        assert node.core.face_name(1) == "Alice"
         gone = _call(executor, node, forget, ForgetFace.Request(name="Alice"))
         assert gone.success and list(gone.forgotten_face_ids) == [1]
         assert list(_call(executor, node, listing, ListFaces.Request()).face_ids) == []
-        assert node.store.load_faces() == []  # deleted from disk too
+        assert node.store.load_faces() == [] and node.store.load_people() == {}  # deleted from disk too
+        assert node.trigger_deactivate() == OK and node.trigger_cleanup() == OK
+        assert node.trigger_configure() == OK and node.core.people.names() == []  # forgotten stays forgotten
     finally:
         executor.shutdown()
         client_node.destroy_node()
@@ -624,4 +633,48 @@ def test_a_retention_that_will_delete_stored_faces_is_a_warning_with_their_numbe
         assert said == [f"retention_unnamed_s=3600 s: 2 of the 4 stored faces (unnamed, not seen for longer) will be "
                         f"deleted from {tmp_path / 'faces.db'} once frames arrive"], recorder.warnings
     finally:
+        node.destroy_node()
+
+
+def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, tmp_path: Path) -> None:
+    """Two camera nodes given one camera_id in two namespaces, and two started in one namespace: /diagnostics
+    WARNs naming both topics, and both publishing nodes (before: no warning anywhere)."""
+    cam_b = "/cam_b/face_reid/frames"
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}",
+                       "-p", f"camera_topics:=[{CAM}, {cam_b}]", "-p", "camera_topic_regex:=''",
+                       "-p", "embedding_space:=dlib_resnet_v1",
+                       "-p", "check_stamps_against_clock:=false"])
+    node = MasterNode(context=ctx)
+    camera_a, camera_b = Node("face_reid_camera", namespace="/cam_a", context=ctx), Node(
+        "face_reid_camera", namespace="/cam_b", context=ctx)
+    twin_ctx = ros_context()  # a second process (participant) started in /cam_a as well
+    twin = Node("face_reid_camera", namespace="/cam_a", context=twin_ctx)
+    executor = SingleThreadedExecutor(context=ctx)
+    for n in (node, camera_a, camera_b):
+        executor.add_node(n)
+    got: list[DiagnosticArray] = []
+    camera_a.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+    try:
+        assert node.trigger_configure() == OK and node.trigger_activate() == OK
+        pub_a = camera_a.create_publisher(type(_frame(1.0)), CAM, 10)
+        pub_b = camera_b.create_publisher(type(_frame(1.0)), cam_b, 10)
+        twin.create_publisher(type(_frame(1.0)), CAM, 10)
+        stamp = [10.0]
+
+        def publish_and_said() -> bool:
+            stamp[0] += 0.1
+            pub_a.publish(_frame(stamp[0], camera="cam_a"))
+            pub_b.publish(_frame(stamp[0], camera="cam_a"))  # cam_b started with camera_id cam_a by mistake
+            said = got[-1].status[0] if got else None
+            return (said is not None and said.level == b"\x01" and "camera id 'cam_a' is used by 2 cameras" in
+                    said.message and "camera topic '/cam_a/face_reid/frames' is published by 2 nodes" in said.message)
+
+        assert spin_until(executor, publish_and_said, 60.0), got[-1].status[0].message if got else "no diagnostics"
+        message = got[-1].status[0].message
+        assert f"'{CAM}' and '{cam_b}'" in message  # both topics named
+        assert message.count("/cam_a/face_reid_camera (participant") == 2  # both nodes named, by participant
+    finally:
+        executor.shutdown()
+        for n in (twin, camera_a, camera_b):
+            n.destroy_node()
         node.destroy_node()

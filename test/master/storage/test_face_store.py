@@ -721,7 +721,9 @@ def test_faces_lost_with_the_wal_are_reported_and_their_ids_never_reused(tmp_pat
     store.close()
     wal = bytearray((crashed / "faces.db-wal").read_bytes())
     cut = int(len(wal) * 0.6)
-    wal[cut:cut + 64] = bytes(64)  # 64 corrupt bytes: SQLite drops this frame and every later one, silently
+    # 64 corrupt bytes (inverted: zeroes could land on bytes already zero): SQLite drops this frame and every later
+    # one, silently
+    wal[cut:cut + 64] = bytes(b ^ 0xFF for b in wal[cut:cut + 64])
     (crashed / "faces.db-wal").write_bytes(bytes(wal))
     with caplog.at_level("ERROR"), FaceStore(crashed / "faces.db") as damaged:
         kept = damaged.face_ids()

@@ -66,6 +66,16 @@ def test_folder_gallery_names_embeddings_and_skipped(gallery_dir: Path, gallery:
     assert gallery.skipped_no_face == [gallery_dir / "Colin Powell" / "desk.png"]
 
 
+def test_the_skipped_photos_are_named(gallery_dir: Path, gallery: GalleryResult) -> None:
+    """The master's warning names the photos it left out (before: "skipped 1 unreadable photos" and no name)."""
+    said = gallery.skipped_summary(gallery_dir)
+    assert said == ("skipped 1 unreadable photo(s): 'Ariel/broken.jpg'; skipped 1 photo(s) without a detectable "
+                    "face: 'Colin Powell/desk.png'")
+    many = GalleryResult({"A": np.ones((1, 128))}, [Path(f"/g/A/{i}.jpg") for i in range(7)])
+    assert many.skipped_summary("/g", max_named=2) == "skipped 7 unreadable photo(s): 'A/0.jpg', 'A/1.jpg' and 5 more"
+    assert GalleryResult({"A": np.ones((1, 128))}).skipped_summary() == ""
+
+
 def test_gallery_names_faces_learned_from_other_photos(
     gallery: GalleryResult, learned: dict[str, np.ndarray]
 ) -> None:

@@ -22,12 +22,7 @@ from face_reid_camera.common.sealing import write_network_key
 from face_reid_master.ros.node import MasterNode
 
 
-@pytest.mark.slow
-def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_context, tmp_path: Path) -> None:
-    key = write_network_key(tmp_path / "network.key")
-    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
-                       "-p", f"network_key_path:={key}", "-p", "admin_services:=true",
-                       "-p", "body_appearance_tracking:=false"])
+def _start_master(ctx) -> tuple[MasterNode, SingleThreadedExecutor, threading.Thread]:
     master = MasterNode(context=ctx)
     assert master.trigger_configure() == TransitionCallbackReturn.SUCCESS
     assert master.trigger_activate() == TransitionCallbackReturn.SUCCESS
@@ -35,6 +30,26 @@ def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_con
     executor.add_node(master)
     spinning = threading.Thread(target=executor.spin, daemon=True)
     spinning.start()
+    return master, executor, spinning
+
+
+def _stop_master(master: MasterNode, executor: SingleThreadedExecutor, spinning: threading.Thread) -> None:
+    executor.shutdown()
+    spinning.join(timeout=10)
+    if master.core is not None:  # as a stopped master leaves it: the store closed
+        master.trigger_deactivate()
+        master.trigger_cleanup()
+    master.destroy_node()
+
+
+@pytest.mark.slow
+def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_context, tmp_path: Path) -> None:
+    key = write_network_key(tmp_path / "network.key")
+    ctx = ros_context(["--ros-args", "-p", f"db_path:={tmp_path / 'faces.db'}", "-p", "embedding_space:=dlib_resnet_v1",
+                       "-p", f"network_key_path:={key}", "-p", "admin_services:=true",
+                       "-p", "body_appearance_tracking:=false"])
+    running = _start_master(ctx)
+    master = running[0]
 
     def faces(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--master",
@@ -49,20 +64,30 @@ def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_con
         run = faces("list")  # no key: a secured master lists nothing, and the tool says why
         assert run.returncode == 0 and "0 face(s) on /face_reid_master" in run.stdout
         assert "answers a listing without --key with nothing" in run.stderr, run.stderr
-        run = faces("--key", str(key), "list")
+        run = faces("list", "--key", str(key), "--timeout-s", "30")  # options after the command too
         assert run.returncode == 0 and "on /face_reid_master" in run.stdout, run.stderr
+        assert "1 predefined person(s)" in run.stdout and any(  # before: "0 face(s)" and no Alice anywhere
+            line.split() == ["Alice", "3"] for line in run.stdout.splitlines()), run.stdout
         assert master.admin.refusals["list_faces"] == 1 and master.admin.calls["list_faces"] == 2
         run = faces("add", "Mallory", *photos, "--space", "dlib_resnet_v1")  # no key: a secured master refuses
         assert run.returncode == 1 and "must be sealed" in run.stderr and master.core.people.names() == ["Alice"]
+        _stop_master(*running)  # a restart (face-reid-up restarts a master on its own): Alice is still known
+        running = _start_master(ctx)
+        master = running[0]
+        assert master.core.people.names() == ["Alice"]  # before: 0 predefined people
+        run = faces("--key", str(key), "list")
+        assert run.returncode == 0 and "1 predefined person(s)" in run.stdout, run.stdout + run.stderr
         run = faces("--key", str(key), "forget", "--name", "Alice")
         assert run.returncode == 0 and "removed the predefined person 'Alice'" in run.stdout, run.stderr
         assert master.core.people.names() == []
+        _stop_master(*running)  # forgotten for good: not back after a restart
+        running = _start_master(ctx)
+        master = running[0]
+        assert master.core.people.names() == [] and master.store.load_people() == {}
         assert faces("rename", "1", "Bob").returncode == 2
         nobody = subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--master", "/nobody",
                                  "--timeout-s", "2", "list"], cwd=REPO_ROOT, env=procs.ros_env(ros_domain_id),
                                 capture_output=True, text=True, timeout=60)
         assert nobody.returncode == 5 and "no service /nobody/list_faces" in nobody.stderr
     finally:
-        executor.shutdown()
-        spinning.join(timeout=10)
-        master.destroy_node()
+        _stop_master(*running)
