@@ -335,12 +335,18 @@ class MasterCore:
         track = self.identity.tracks.record(track_id)
         return PublicId(track_id if track is None else track.public_id)
 
+    def published_face_id(self, track_id: TrackerId) -> int:
+        """The face id a track is published with: its face, or 0 while undecided or while a crossing makes its
+        identity more likely wrong than right."""
+        fid = self.identity.face_id_of(track_id)
+        return 0 if fid is None or self.identity.withheld(track_id) else fid
+
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
         (how often such decisions were right); 0 for an undecided track (it claims no face: its candidates' raw
         posteriors are the overconfident numbers the map exists to correct)."""
         evidence = self.identity.evidence_of(track_id)
-        if not evidence:
+        if not evidence or self.identity.withheld(track_id):
             return 0.0
         raw = float(self.identity.confidence_of(track_id))
         mapped = float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
@@ -395,7 +401,7 @@ class MasterCore:
         for snap in snaps:
             if snap.track_id in clutter:
                 continue
-            fid = self.identity.face_id_of(snap.track_id) or 0
+            fid = self.published_face_id(snap.track_id)
             track = records.get(snap.track_id)
             since = None if track is None else track.public_since_s
             out.append(
@@ -404,7 +410,7 @@ class MasterCore:
                     face_id=fid,
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=self.published_confidence(snap.track_id),
-                    identity_evidence=self.identity.evidence_of(snap.track_id),
+                    identity_evidence=self.identity.evidence_of(snap.track_id) if fid else "",
                     face_observations=0 if track is None else track.face_observations,
                     position_xy=snap.position_xy,
                     velocity_xy=snap.velocity_xy,

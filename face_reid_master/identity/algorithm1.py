@@ -165,10 +165,8 @@ class IdentityManagerBase:
         ra, rb = self.tracks.entries.get(a), self.tracks.entries.get(b)
         if (ra is None or ra.face_id is None) and (rb is None or rb.face_id is None):
             return
-        ex = self.crossings.crossed(ra or self.tracks.seen(a, stamp_s, latest=False),
-                                    rb or self.tracks.seen(b, stamp_s, latest=False), float(probability))
-        if ex is not None:
-            self._side_events.append(self._exchange(ex, stamp_s))
+        self.crossings.crossed(ra or self.tracks.seen(a, stamp_s, latest=False),
+                               rb or self.tracks.seen(b, stamp_s, latest=False), float(probability))
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
@@ -304,7 +302,7 @@ class IdentityManagerBase:
             track = self.tracks.entries[tid]
             if track.crossed:
                 weigh = self.crossings.face_log_ratios(rows_of(chunks), self._face_log_ratios)
-                for ex in self.crossings.weigh(track, self.tracks.entries, weigh):
+                for ex in self.crossings.weigh(track, self.tracks.entries, weigh, self._face_threshold):
                     events.append(self._exchange(ex, stamp))
 
     def _exchange(self, ex: Exchange, stamp: float) -> IdentityEvent:
@@ -336,6 +334,13 @@ class IdentityManagerBase:
         """Log likelihood ratios (same person vs another) of face observations for learned faces (Q, len); None
         when the method has no face likelihood (crossings are then left to the swap guard)."""
         return None
+
+    _face_threshold = 0.95  # the classification's posterior threshold (a crossing's face evidence decides by it)
+
+    def withheld(self, track_id: int) -> bool:
+        """Whether a live track's identity is more likely wrong than right since a crossing (not published)."""
+        track = self.tracks.entries.get(track_id)
+        return track is not None and self.crossings.withheld(track)
 
     def doubt_of(self, track_id: int) -> float:
         """The probability that a live track's person is not the one its identity was decided on (crossings)."""
@@ -378,7 +383,8 @@ class IdentityManagerBase:
         log_ratios = getattr(source, "face_log_ratios", None)  # a cue that can weigh crossings
         for track, parts in queued if log_ratios is not None else ():
             if track.crossed and track.track_id in self.tracks.entries:
-                for ex in self.crossings.weigh(track, self.tracks.entries, lambda faces, p=parts: log_ratios(p, faces)):
+                weigh = lambda faces, p=parts: log_ratios(p, faces)  # noqa: E731
+                for ex in self.crossings.weigh(track, self.tracks.entries, weigh, source.posterior_threshold):
                     events.append(self._exchange(ex, stamp))
         source.observe(queued, list(self.faces.entries))
         for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):

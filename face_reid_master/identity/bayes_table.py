@@ -86,6 +86,7 @@ class BayesIdentityManager(IdentityManagerBase):
             low_open=True, high_open=True,
         )
         self.min_observations = check_int("min_observations", min_observations, 1)
+        self._face_threshold = self.posterior_threshold
         self.sinkhorn_tolerance = check_real(
             "sinkhorn_tolerance", sinkhorn_tolerance, 0.0, 1.0, low_open=True, high_open=True
         )

@@ -42,6 +42,11 @@ class BodyIdentification:
         row = appearance[detection]
         return row[None, :] if np.isfinite(row[0]) else None  # NaN rows: not described
 
+    @property
+    def posterior_threshold(self) -> float:
+        """The body's decision threshold (also what a crossing's body evidence must pass)."""
+        return self.evidence.posterior_threshold
+
     def forget_track(self, track_id: int) -> None:
         """The track was deleted: its evidence goes (its queued bodies went with its record)."""
         self.evidence.forget_track(track_id)

@@ -8,10 +8,12 @@ the probability ``p`` that it did. For a pair of which at least one track carrie
 likelihood: observed on track A, it is A's identity's person if they were not swapped and B's if they were
 (an unidentified track's identity is "someone not learned", log ratio 0), so
 ``logit d += log_ratio(B's face) - log_ratio(A's face)``, each observation bounded by ``max_log_ratio``; body
-observations weigh it likewise against the faces' recent bodies. Whenever
-``d`` passes one half, the swap is the likelier story: the tracks exchange their identities (and published ids:
-each follows its person again) and the doubt becomes ``1 - d``; once it falls below ``floor`` the crossing is
-forgotten.
+observations weigh it likewise against the faces' recent bodies. Once ``d`` passes the cue's decision threshold
+(the face's or the body's posterior threshold) the tracks exchange their identities (and published ids: each
+follows its person again) and the doubt becomes ``1 - d``; once it falls below ``floor`` the crossing is
+forgotten. The association alone never makes a swap the likelier story (``p`` is taken at most one half: it chose
+the assignment it made); while ``d`` is above one half, a track's identity is more likely wrong than right and
+is not published.
 """
 
 from __future__ import annotations
@@ -57,13 +59,18 @@ class Crossings:
         self.floor = floor
         self.max_log_ratio = max_log_ratio
 
-    def crossed(self, a: TrackRecord, b: TrackRecord, p: float) -> Exchange | None:
-        """The tracker's association may have swapped the people of ``a`` and ``b`` with probability ``p``; the
-        exchange when the swap is now the likelier story."""
+    def crossed(self, a: TrackRecord, b: TrackRecord, p: float) -> None:
+        """The tracker's association may have swapped the people of ``a`` and ``b`` with probability ``p``."""
         if a is b or (a.face_id is None and b.face_id is None):
-            return None
+            return
+        p = min(p, 0.5)  # the association chose: it alone never makes the swap the likelier story
         d = a.crossed.get(b.track_id, 0.0)
-        return self._update(a, b, d * (1.0 - p) + (1.0 - d) * p)
+        self._set(a, b, d * (1.0 - p) + (1.0 - d) * p)
+
+    @staticmethod
+    def withheld(track: TrackRecord) -> bool:
+        """Whether a crossing makes the track's identity more likely wrong than right (it is not published)."""
+        return any(d > 0.5 for d in track.crossed.values())
 
     def doubt(self, track: TrackRecord) -> float:
         """The probability that the track's person is not the one its identity was decided on (any crossing)."""
@@ -72,11 +79,11 @@ class Crossings:
             keep *= 1.0 - d
         return 1.0 - keep
 
-    def weigh(self, track: TrackRecord, partners: dict[int, TrackRecord],
-              log_ratio_of: LogRatioOf) -> list[Exchange]:
+    def weigh(self, track: TrackRecord, partners: dict[int, TrackRecord], log_ratio_of: LogRatioOf,
+              threshold: float) -> list[Exchange]:
         """Observations of a crossed ``track`` weigh each of its crossings (``partners``: the live records by id;
         ``log_ratio_of(face ids)``: the observations' summed log ratio "same person" for each of those faces, None
-        when the cue cannot tell); the pairs now likelier swapped than not."""
+        when the cue cannot tell); the pairs now swapped with a probability above the cue's ``threshold``."""
         out = []
         for pid, d in list(track.crossed.items()):
             other = partners.get(pid)
@@ -88,9 +95,12 @@ class Crossings:
                 return []
             own = column.get(track.face_id, 0.0) if track.face_id is not None else 0.0
             theirs = column.get(other.face_id, 0.0) if other.face_id is not None else 0.0
-            ex = self._update(track, other, 1.0 / (1.0 + math.exp(-max(-700.0, min(700.0, _logit(d) + theirs - own)))))
-            if ex is not None:
-                out.append(ex)
+            d = 1.0 / (1.0 + math.exp(-max(-700.0, min(700.0, _logit(d) + theirs - own))))
+            if d > threshold:
+                self._set(track, other, 1.0 - d)
+                out.append(Exchange(track, other, d))
+            else:
+                self._set(track, other, d)
         return out
 
     def face_log_ratios(self, rows: F32Array, log_ratios: FaceLogRatios) -> LogRatioOf:
@@ -103,14 +113,6 @@ class Crossings:
             np.clip(lr, -self.max_log_ratio, self.max_log_ratio, out=lr)
             return dict(zip(faces, lr.sum(axis=0).tolist(), strict=True))
         return of
-
-    def _update(self, a: TrackRecord, b: TrackRecord, d: float) -> Exchange | None:
-        """The pair's new doubt; past one half they exchange (the exchange, its doubt now ``1 - d``)."""
-        if d <= 0.5:
-            self._set(a, b, d)
-            return None
-        self._set(a, b, 1.0 - d)
-        return Exchange(a, b, d)
 
     def forget(self, track: TrackRecord, partner: int, records: dict[int, TrackRecord] | None = None) -> None:
         """The crossing of ``track`` with ``partner`` is over (both records, when ``records`` has the partner)."""

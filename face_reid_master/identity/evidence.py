@@ -84,6 +84,10 @@ class EvidenceSource(Protocol):
     def forget_face(self, face_id: int) -> None:
         """The face was forgotten."""
 
+    # Optional: a cue that also has ``face_log_ratios(parts, face_ids) -> {face_id: log ratio}`` (its queued
+    # observations of one track against those faces) and ``posterior_threshold`` weighs crossings
+    # (:mod:`~face_reid_master.identity.crossings`), as the body does.
+
 
 class Cues:
     """The registry of the cues besides the face, in the order they decide (the body first): each kind once."""
