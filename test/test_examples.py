@@ -61,3 +61,42 @@ def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_doma
     assert "track 3: someone unknown at (-2.00, 3.00) m, predicted (not seen for a while); identity no identity yet" \
         in out
     assert "track 1" not in out
+
+
+@pytest.mark.parametrize("script", ["who_is_where.py", "diagnostics.py"])
+def test_the_examples_run_as_commands_say_what_they_wait_for_and_end_cleanly_on_ctrl_c(
+        script: str, ros_domain_id: int) -> None:
+    """README step 7 runs them as commands; with nothing published they say once (stderr) what they wait for, and
+    Ctrl-C is the normal way to end them: exit status 0, no traceback."""
+    import os
+    import signal
+
+    from face_reid_master.demo.children import child_env
+
+    path = REPO_ROOT / "examples" / script
+    assert path.read_text().startswith("#!/usr/bin/env python3\n") and os.access(path, os.X_OK)
+    proc = subprocess.Popen([sys.executable, str(path), *(["0"] if script == "who_is_where.py" else ["600"])],
+                            env=child_env(ros_domain_id), cwd=REPO_ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        first = proc.stderr.readline()  # a barrier: the line comes once it listens (rclpy's Ctrl-C handler is set)
+        assert "/tracks_named" in first or "/diagnostics" in first, first
+        assert "Ctrl-C ends" in first and f"ROS_DOMAIN_ID={ros_domain_id}" in first, first
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert out == ""
+
+
+def test_who_is_where_names_an_unusable_key_file_in_one_line(tmp_path, ros_domain_id: int) -> None:
+    from face_reid_master.demo.children import child_env
+
+    run = subprocess.run([sys.executable, str(EXAMPLE), "0", str(tmp_path / "nope.key")],
+                         env=child_env(ros_domain_id),
+                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and run.stderr.startswith("who_is_where: network key ") and "Traceback" not in \
+        run.stderr, run.stderr
