@@ -189,3 +189,28 @@ def test_the_step_7_checks_work_as_written_on_a_running_demo(ros_domain_id: int,
             demo.wait(timeout=30)
         except subprocess.TimeoutExpired:
             os.killpg(demo.pid, signal.SIGKILL)
+
+
+def _recipe() -> str:
+    text = (REPO / "docs" / "tuning.md").read_text(encoding="utf-8")
+    return text.split("## Tuning a site, step by step", 1)[1].split("\n## ", 1)[0]
+
+
+def test_the_tuning_recipe_names_real_parameters_and_diagnostics_values() -> None:
+    """The parameters the recipe says to touch first are declared ones (docs/parameters.md), and every value it
+    says to read on /diagnostics is one a node publishes (its name in the nodes' code)."""
+    recipe = _recipe()
+    declared = set(re.findall(r"^\| `([^`]+)` \|", (REPO / "docs" / "parameters.md").read_text(), re.M))
+    first = re.findall(r"^- \*\*`([^`]+)`\*\*", recipe, re.M)
+    assert len(first) >= 3 and set(first) <= declared, set(first) - declared
+    code = "\n".join(p.read_text(encoding="utf-8") for package in ("face_reid_camera", "face_reid_master")
+                     for p in (REPO / package).rglob("*.py"))
+    table = [line for line in recipe.splitlines() if line.startswith("| ") and ": `" in line.split("|")[1]]
+    values = {v for line in table for v in re.findall(r"`([a-z_]+)(?:_\*)?`", line.split("|")[1])}
+    assert len(values) >= 15, values
+    # published values are dict keys ("name": ...), counters (name: int = 0) or built from a prefix (rejected_*)
+    def published(name: str) -> bool:
+        return bool(re.search(rf"[\"'{{]{name}[\"'_]|\b{name}: int\b", code))
+
+    missing = [v for v in values if not published(v) and not published(v.removeprefix("rejected_"))]
+    assert not missing, missing
