@@ -21,15 +21,28 @@ def test_the_robots_page_shows_the_example_verbatim() -> None:
     assert f"```python\n{EXAMPLE.read_text()}```" in (REPO_ROOT / "docs" / "robots.md").read_text()
 
 
-def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_domain_id: int) -> None:
+@pytest.mark.parametrize("secured", [False, True], ids=["plain", "with_key"])
+def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_domain_id: int, tmp_path,
+                                                           secured: bool) -> None:
+    """Plain tracks, and (README step 7: ``who_is_where.py 0 KEYFILE``) tracks sealed with the network key."""
     import rclpy.executors
 
+    from face_reid_camera.common.ros.sealed import seal_message
+    from face_reid_camera.common.sealing import Sealer, load_network_key, write_network_key
     from face_reid_master.demo.children import child_env
-    from face_reid_msgs.msg import NamedTrack, NamedTrackArray
+    from face_reid_master.tracks_auth import TRACKS_PURPOSE
+    from face_reid_msgs.msg import NamedTrack, NamedTrackArray, Sealed
 
     ctx = ros_context()
     node = rclpy.create_node("tracks_source", context=ctx)
-    pub = node.create_publisher(NamedTrackArray, "/tracks_named", 10)
+    key_args: list[str] = []
+    if secured:
+        key_path = write_network_key(tmp_path / "network.key")
+        sealer = Sealer(load_network_key(key_path), "/face_reid_master", TRACKS_PURPOSE)
+        key_args = [str(key_path)]
+        pub = node.create_publisher(Sealed, "/tracks_named_sealed", 10)
+    else:
+        pub = node.create_publisher(NamedTrackArray, "/tracks_named", 10)
     msg = NamedTrackArray()
     msg.header.frame_id = "world"
     for track_id, face_id, name, state, x in ((1, 0, "", NamedTrack.STATE_TENTATIVE, 0.5),
@@ -39,7 +52,7 @@ def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_doma
                        identity_evidence="face" if face_id else "")
         t.position.x, t.position.y = x, 3.0
         msg.tracks.append(t)
-    proc = subprocess.Popen([sys.executable, str(EXAMPLE), "1"], env=child_env(ros_domain_id), cwd=REPO_ROOT,
+    proc = subprocess.Popen([sys.executable, str(EXAMPLE), "1", *key_args], env=child_env(ros_domain_id), cwd=REPO_ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
@@ -47,7 +60,7 @@ def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_doma
         # a barrier: publish until the example has printed its one message and exited
         while proc.poll() is None:
             if pub.get_subscription_count() > 0:
-                pub.publish(msg)
+                pub.publish(seal_message(sealer, msg) if secured else msg)
             executor.spin_once(timeout_sec=0.2)
         out = proc.stdout.read() if proc.stdout else ""
     finally:
