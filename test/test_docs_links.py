@@ -114,7 +114,6 @@ def test_the_step_7_checks_are_found() -> None:
     readme = [c for c, page in commands.items() if page == "README.md"]
     assert any("examples/diagnostics.py" in c for c in readme) and any("examples/who_is_where.py 0" in c
                                                                         for c in readme), commands
-    assert all(page in {"README.md", "docs/deployment.md", "docs/robots.md"} for page in commands.values())
 
 
 @pytest.mark.slow  # a demo of about a minute
