@@ -1,8 +1,15 @@
-"""Print who is where, from the face-reid master's /tracks_named (a robot's view of the camera network)."""
+#!/usr/bin/env python3
+"""Print who is where, from the face-reid master's /tracks_named (a robot's view of the camera network).
 
+Usage: who_is_where.py [COUNT [KEYFILE]]: stop after COUNT messages (0, the default: never; Ctrl-C ends it);
+KEYFILE: a secured network's key file (then only sealed tracks are taken)."""
+
+import os
 import sys
 
 import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.utilities import remove_ros_args
 
 from face_reid_master.ros.tracks_in import subscribe_tracks
 from face_reid_msgs.msg import NamedTrack, NamedTrackArray
@@ -20,11 +27,13 @@ def describe(track: NamedTrack) -> str | None:
     return f"track {track.track_id}: {who} at {where}; identity {sure}"
 
 
-def main() -> None:
-    rclpy.init()
-    node = rclpy.create_node("who_is_where")
-    count = int(sys.argv[1]) if len(sys.argv) > 1 else 0  # stop after this many messages (0: never)
-    key = sys.argv[2] if len(sys.argv) > 2 else ""  # a secured network's key file: only sealed tracks are taken
+def main() -> int:
+    args = remove_ros_args(sys.argv)[1:]
+    if len(args) > 2 or not (args[:1] or ["0"])[0].isdigit():
+        print(__doc__.split("\n\n")[1], file=sys.stderr)
+        return 2
+    count = int(args[0]) if args else 0  # stop after this many messages (0: never)
+    key = args[1] if len(args) > 1 else ""  # a secured network's key file: only sealed tracks are taken
     seen = [0]
 
     def on_tracks(msg: NamedTrackArray) -> None:
@@ -32,11 +41,24 @@ def main() -> None:
         print(f"{len(lines)} people in '{msg.header.frame_id}':", *lines, sep="\n  ", flush=True)
         seen[0] += 1
 
-    subscribe_tracks(node, on_tracks, "/tracks_named", key)  # checks sealed tracks; says when a key is needed
-    while rclpy.ok() and (count == 0 or seen[0] < count):
-        rclpy.spin_once(node, timeout_sec=0.5)
-    rclpy.shutdown()
+    rclpy.init()
+    node = rclpy.create_node("who_is_where")
+    try:
+        tracks = subscribe_tracks(node, on_tracks, "/tracks_named", key)  # checks sealed tracks; says when a key
+        print(f"who_is_where: waiting for {'sealed ' if key else ''}tracks on {tracks.listening} "  # is needed
+              f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}); Ctrl-C ends", file=sys.stderr, flush=True)
+        while rclpy.ok() and (count == 0 or seen[0] < count):
+            rclpy.spin_once(node, timeout_sec=0.5)
+    except ValueError as exc:  # an unusable key file: one line
+        print(f"who_is_where: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass  # Ctrl-C: the way to end it
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -9,6 +9,7 @@ import shutil
 import sys
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -69,23 +70,86 @@ def copy_fixture_faces(root: Path, identities: Iterable[str], per_identity: int 
 _domain_counter = [0]
 # the domain a developer's own system runs on (any valid id): the tests never use it
 _USERS_DOMAIN = os.environ.get("ROS_DOMAIN_ID", "").strip()
+DOMAINS_VARIABLE = "FACE_REID_TEST_DOMAINS"
+DEFAULT_DOMAINS = range(1, 101)
+_DOMAIN_WAIT_S = 600.0  # every domain of the range taken by other test runs: wait this long for one to be free
+
+
+def parse_test_domains(text: str | None, users_domain: str = "") -> range:
+    """The ROS domains the DDS tests take: ``text`` (FACE_REID_TEST_DOMAINS) as ``FIRST-LAST``, inclusive, within
+    0..232; empty or None: 1-100. ValueError (saying the expected form) for anything else, or for a range that
+    holds only ``users_domain`` (the environment's own ROS_DOMAIN_ID, never used)."""
+    from face_reid_master.demo.children import MAX_DOMAIN_ID
+
+    if not (text or "").strip():
+        return DEFAULT_DOMAINS
+    first, sep, last = text.strip().partition("-")
+    if not (sep and first.strip().isdigit() and last.strip().isdigit()):
+        raise ValueError(f"{DOMAINS_VARIABLE}={text!r}: expected a range of ROS domain ids FIRST-LAST, e.g. 120-180")
+    domains = range(int(first), int(last) + 1)
+    if not (0 <= domains.start and domains.stop - 1 <= MAX_DOMAIN_ID and len(domains) > 0):
+        raise ValueError(f"{DOMAINS_VARIABLE}={text!r}: the ids must be in 0..{MAX_DOMAIN_ID}, FIRST <= LAST")
+    if [str(d) for d in domains] == [users_domain]:
+        raise ValueError(f"{DOMAINS_VARIABLE}={text!r}: holds only this environment's ROS_DOMAIN_ID, which the "
+                         "tests never use: give a range with other ids")
+    return domains
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """A malformed FACE_REID_TEST_DOMAINS stops the run at once, with one line."""
+    try:
+        parse_test_domains(os.environ.get(DOMAINS_VARIABLE), _USERS_DOMAIN)
+    except ValueError as exc:
+        raise pytest.UsageError(str(exc)) from None
+
+
+def take_domain(domains: range, start: int, users_domain: str = "", lock_dir: Path | None = None,
+                wait_s: float = _DOMAIN_WAIT_S) -> tuple[int, Any]:
+    """A domain of ``domains`` (from index ``start`` on, never ``users_domain``) that no other test run holds:
+    an exclusive lock on its file in ``lock_dir`` (per user, in the temporary folder), held until the returned
+    file is closed. Two test runs at once (two worktrees, a re-run beside a run) thus never share a domain."""
+    import fcntl
+    import tempfile
+    import time
+
+    lock_dir = lock_dir or Path(tempfile.gettempdir()) / f"face_reid_test_domains-{os.getuid()}"
+    lock_dir.mkdir(mode=0o700, exist_ok=True)
+    deadline = time.monotonic() + wait_s
+    while True:
+        for k in range(len(domains)):
+            domain = domains[(start + k) % len(domains)]
+            if str(domain) == users_domain:
+                continue
+            lock = open(lock_dir / f"{domain}.lock", "w")
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                lock.close()
+                continue
+            return domain, lock
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"every ROS domain of {domains.start}-{domains.stop - 1} is held by other test runs "
+                               f"(locks in {lock_dir}); give {DOMAINS_VARIABLE} a range of its own")
+        time.sleep(1.0)
 
 
 @pytest.fixture
-def ros_domain_id(monkeypatch: pytest.MonkeyPatch) -> int:
-    """A ROS_DOMAIN_ID of this test only (derived from the pytest process id, never the environment's own
-    ROS_DOMAIN_ID, so a running system there is not disturbed), set in the environment. Every test that uses it
-    runs ROS nodes: it skips where rclpy or the built face_reid_msgs is missing."""
+def ros_domain_id(monkeypatch: pytest.MonkeyPatch):
+    """A ROS_DOMAIN_ID of this test only, set in the environment: from FACE_REID_TEST_DOMAINS (default 1-100),
+    never the environment's own ROS_DOMAIN_ID (a running system there is not disturbed), and held for the test
+    so that no other test run on this machine takes it meanwhile. Every test that uses it runs ROS nodes: it
+    skips where rclpy or the built face_reid_msgs is missing."""
     if ROS_MISSING is not None:
         pytest.skip(ROS_MISSING)
     _domain_counter[0] += 1
-    domain = 1 + (os.getpid() * 7 + _domain_counter[0]) % 100
-    if str(domain) == _USERS_DOMAIN:
-        _domain_counter[0] += 1
-        domain = 1 + (os.getpid() * 7 + _domain_counter[0]) % 100
+    domains = parse_test_domains(os.environ.get(DOMAINS_VARIABLE), _USERS_DOMAIN)
+    domain, lock = take_domain(domains, os.getpid() * 7 + _domain_counter[0], _USERS_DOMAIN)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    return domain
+    try:
+        yield domain
+    finally:
+        lock.close()
 
 
 @pytest.fixture

@@ -21,15 +21,28 @@ def test_the_robots_page_shows_the_example_verbatim() -> None:
     assert f"```python\n{EXAMPLE.read_text()}```" in (REPO_ROOT / "docs" / "robots.md").read_text()
 
 
-def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_domain_id: int) -> None:
+@pytest.mark.parametrize("secured", [False, True], ids=["plain", "with_key"])
+def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_domain_id: int, tmp_path,
+                                                           secured: bool) -> None:
+    """Plain tracks, and (README step 7: ``who_is_where.py 0 KEYFILE``) tracks sealed with the network key."""
     import rclpy.executors
 
+    from face_reid_camera.common.ros.sealed import seal_message
+    from face_reid_camera.common.sealing import Sealer, load_network_key, write_network_key
     from face_reid_master.demo.children import child_env
-    from face_reid_msgs.msg import NamedTrack, NamedTrackArray
+    from face_reid_master.tracks_auth import TRACKS_PURPOSE
+    from face_reid_msgs.msg import NamedTrack, NamedTrackArray, Sealed
 
     ctx = ros_context()
     node = rclpy.create_node("tracks_source", context=ctx)
-    pub = node.create_publisher(NamedTrackArray, "/tracks_named", 10)
+    key_args: list[str] = []
+    if secured:
+        key_path = write_network_key(tmp_path / "network.key")
+        sealer = Sealer(load_network_key(key_path), "/face_reid_master", TRACKS_PURPOSE)
+        key_args = [str(key_path)]
+        pub = node.create_publisher(Sealed, "/tracks_named_sealed", 10)
+    else:
+        pub = node.create_publisher(NamedTrackArray, "/tracks_named", 10)
     msg = NamedTrackArray()
     msg.header.frame_id = "world"
     for track_id, face_id, name, state, x in ((1, 0, "", NamedTrack.STATE_TENTATIVE, 0.5),
@@ -39,7 +52,7 @@ def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_doma
                        identity_evidence="face" if face_id else "")
         t.position.x, t.position.y = x, 3.0
         msg.tracks.append(t)
-    proc = subprocess.Popen([sys.executable, str(EXAMPLE), "1"], env=child_env(ros_domain_id), cwd=REPO_ROOT,
+    proc = subprocess.Popen([sys.executable, str(EXAMPLE), "1", *key_args], env=child_env(ros_domain_id), cwd=REPO_ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
@@ -47,7 +60,7 @@ def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_doma
         # a barrier: publish until the example has printed its one message and exited
         while proc.poll() is None:
             if pub.get_subscription_count() > 0:
-                pub.publish(msg)
+                pub.publish(seal_message(sealer, msg) if secured else msg)
             executor.spin_once(timeout_sec=0.2)
         out = proc.stdout.read() if proc.stdout else ""
     finally:
@@ -61,3 +74,42 @@ def test_who_is_where_prints_the_people_a_robot_may_act_on(ros_context, ros_doma
     assert "track 3: someone unknown at (-2.00, 3.00) m, predicted (not seen for a while); identity no identity yet" \
         in out
     assert "track 1" not in out
+
+
+@pytest.mark.parametrize("script", ["who_is_where.py", "diagnostics.py"])
+def test_the_examples_run_as_commands_say_what_they_wait_for_and_end_cleanly_on_ctrl_c(
+        script: str, ros_domain_id: int) -> None:
+    """README step 7 runs them as commands; with nothing published they say once (stderr) what they wait for, and
+    Ctrl-C is the normal way to end them: exit status 0, no traceback."""
+    import os
+    import signal
+
+    from face_reid_master.demo.children import child_env
+
+    path = REPO_ROOT / "examples" / script
+    assert path.read_text().startswith("#!/usr/bin/env python3\n") and os.access(path, os.X_OK)
+    proc = subprocess.Popen([sys.executable, str(path), *(["0"] if script == "who_is_where.py" else ["600"])],
+                            env=child_env(ros_domain_id), cwd=REPO_ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None
+        first = proc.stderr.readline()  # a barrier: the line comes once it listens (rclpy's Ctrl-C handler is set)
+        assert "/tracks_named" in first or "/diagnostics" in first, first
+        assert "Ctrl-C ends" in first and f"ROS_DOMAIN_ID={ros_domain_id}" in first, first
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert out == ""
+
+
+def test_who_is_where_names_an_unusable_key_file_in_one_line(tmp_path, ros_domain_id: int) -> None:
+    from face_reid_master.demo.children import child_env
+
+    run = subprocess.run([sys.executable, str(EXAMPLE), "0", str(tmp_path / "nope.key")],
+                         env=child_env(ros_domain_id),
+                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and run.stderr.startswith("who_is_where: network key ") and "Traceback" not in \
+        run.stderr, run.stderr

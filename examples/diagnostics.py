@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""Print each node's status on /diagnostics once (level, name, warnings, values), for a site check without a
+ROS 2 installation (with one: ``ros2 topic echo /diagnostics`` or rqt_robot_monitor).
+
+Usage: diagnostics.py [SECONDS]: listen this long (default 5; the nodes publish once a second), Ctrl-C ends it
+earlier. Exit status 0 when some node was heard, 1 when none was."""
+
+import os
+import sys
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import ExternalShutdownException
+from rclpy.utilities import remove_ros_args
+
+LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+
+
+def main() -> int:
+    args = remove_ros_args(sys.argv)[1:]
+    if len(args) > 1 or not (args[:1] or ["5"])[0].isdigit():
+        print(__doc__.split("\n\n")[1], file=sys.stderr)
+        return 2
+    seconds = int(args[0]) if args else 5
+    seen: set[str] = set()
+
+    def show(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name not in seen:
+                seen.add(status.name)
+                level = LEVELS.get(status.level[0] if isinstance(status.level, bytes) else status.level, "?")
+                print(level, status.name, "|", status.message)
+                print("   ", ", ".join(f"{v.key}={v.value}" for v in status.values), flush=True)
+
+    domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    rclpy.init()
+    node = rclpy.create_node("diagnostics_peek")
+    try:
+        node.create_subscription(DiagnosticArray, "/diagnostics", show, 10)
+        print(f"diagnostics: listening to /diagnostics for {seconds} s (ROS_DOMAIN_ID={domain}); Ctrl-C ends",
+              file=sys.stderr, flush=True)
+        deadline = time.monotonic() + seconds
+        while rclpy.ok() and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.2)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0  # Ctrl-C: the way to end it early
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if not seen:
+        print(f"diagnostics: no node heard in {seconds} s on ROS_DOMAIN_ID={domain}: are the nodes running, with "
+              "this domain id, and does discovery reach their hosts (ROS_AUTOMATIC_DISCOVERY_RANGE)?",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
