@@ -5,6 +5,7 @@ Usage: who_is_where.py [COUNT [KEYFILE]]: stop after COUNT messages (0, the defa
 KEYFILE: a secured network's key file (then only sealed tracks are taken)."""
 
 import os
+import signal
 import sys
 
 import rclpy
@@ -55,6 +56,7 @@ def main() -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass  # Ctrl-C: the way to end it
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C during the cleanup ends nothing half-way
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
