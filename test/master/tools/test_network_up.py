@@ -104,7 +104,7 @@ def test_a_missing_network_key_stops_face_reid_up_before_any_node(tmp_path: Path
     ("hosts: {a: {cameras: [{id: cam1, namespace: kitchen}]}}", "namespace"),
     ("domain_id: 500\nhosts: {a: {master: {}}}", "domain_id"),
     ("hosts: {a: {robots: []}}", "cameras"),
-    ("hosts: [", "not YAML"),
+    ("hosts: [", "not YAML: line 1, column 9: expected the node content, but found '<stream end>'$"),  # one line
 ])
 def test_bad_network_files_are_refused_with_the_place(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "net.yaml"
