@@ -37,7 +37,7 @@ from face_reid_master.demo.children import (
     stop_children,
 )
 from face_reid_master.demo.report import format_summary, format_table, summarize
-from face_reid_master.demo.scenario import DEFAULT_SEED, DemoScenario, build_scenario
+from face_reid_master.demo.scenario import DEFAULT_SEED, DemoScenario, build_scenario, duration_range_text
 from face_reid_master.evaluation.published_tracks import TrackMessage
 from face_reid_master.ros.convert import track_from_msg
 
@@ -239,11 +239,12 @@ def _parser() -> argparse.ArgumentParser:
                     "rendered in real time) -> camera nodes -> master, over DDS on loopback only. Prints who is "
                     "where every second and a summary of the re-identifications at the end (about a minute).",
     )
-    p.add_argument("--duration-s", type=float, default=50.0, help="scenario length in seconds (default 50)")
+    p.add_argument("--duration-s", type=float, default=50.0,
+                   help=f"scenario length in seconds (default 50; {duration_range_text()})")
     p.add_argument("--cameras", type=int, default=2, help="number of cameras, 1-4 (default 2)")
-    p.add_argument("--people", type=int, default=4, help="people in the scene, 1-6 (default 4)")
-    p.add_argument("--gallery-people", type=int, default=2,
-                   help="how many of them are predefined people with a name (default 2)")
+    p.add_argument("--people", type=int, default=4, help="people in the scene, 1-6 (1-4 with one camera; default 4)")
+    p.add_argument("--gallery-people", type=int, default=None,
+                   help="how many of them are predefined people with a name (default 2, or all of 1)")
     p.add_argument("--rate-hz", type=float, default=5.0, help="frames per second rendered per camera (default 5)")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"scenario seed (default {DEFAULT_SEED})")
     p.add_argument("--domain-id", type=int, default=None,
@@ -289,7 +290,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               "(which installs share/face_reid/demo_faces), or pass --faces DIR", file=sys.stderr)
         return 2
     try:
-        scenario = build_scenario(faces, args.seed, args.cameras, args.people, args.gallery_people, args.duration_s)
+        gallery = min(2, args.people) if args.gallery_people is None else args.gallery_people  # --people 1 works
+        scenario = build_scenario(faces, args.seed, args.cameras, args.people, gallery, args.duration_s)
     except ValueError as exc:
         print(f"face-reid-demo: {exc}", file=sys.stderr)
         return 2
