@@ -56,6 +56,21 @@ def _ros_setting(text: str) -> str:
     return text
 
 
+def _setting_problems(camera: Sequence[str], master: Sequence[str]) -> tuple[list[str], list[str]]:
+    """--camera-param / --master-param checked by the nodes' own loader before anything starts: (what the nodes
+    would refuse, names they would ignore), one line each."""
+    from face_reid_camera.common.params_files import check_sources
+    from face_reid_camera.ros.params import TABLE as CAMERA
+    from face_reid_master.ros.params import TABLE as MASTER
+
+    problems, warnings = [], []
+    for flag, table, settings in (("--camera-param", CAMERA, camera), ("--master-param", MASTER, master)):
+        check = check_sources(table, settings=settings)
+        problems += [f"{flag}: {line.removeprefix('-p ')}" for line in check.problems]
+        warnings += [f"{flag}: {line.removeprefix('-p ')}" for line in check.warnings]
+    return problems, warnings
+
+
 def _fmt(values: Sequence[float]) -> str:
     return "[" + ", ".join(f"{float(v):.6f}" for v in values) + "]"
 
@@ -281,6 +296,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if not (math.isfinite(args.rate_hz) and 0.5 <= args.rate_hz <= 30):
         print(f"face-reid-demo: --rate-hz must be in [0.5, 30], got {args.rate_hz}", file=sys.stderr)
+        return 2
+    problems, warnings = _setting_problems(args.camera_param, args.master_param)
+    for line in [f"warning: {w}" for w in warnings] + problems:
+        print(f"face-reid-demo: {line}", file=sys.stderr)
+    if problems:  # the nodes would refuse them
         return 2
     from face_reid_camera.common.resources import demo_faces_dir
 

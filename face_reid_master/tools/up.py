@@ -212,7 +212,8 @@ def supervise(specs: list[NodeSpec], log_dir: Path, max_backoff_s: float = 30.0,
     """Run ``specs`` until ``stop[0]`` is set (by the signal handlers): start, watch, restart with back-off.
 
     A node that exits with CONFIG_EXIT_STATUS (it refused its configuration: starting it again changes nothing) is
-    not restarted: its error line is said; once no node runs, returns CONFIG_EXIT_STATUS (also after a stop)."""
+    not restarted: its error lines are said; once every node refused, returns CONFIG_EXIT_STATUS (so does a stop
+    after one refused)."""
     stop = stop if stop is not None else [False]
     log_dir.mkdir(parents=True, exist_ok=True)
     nodes = [_Running(s, log=log_dir / f"{s.name.replace(' ', '_')}.log") for s in specs]

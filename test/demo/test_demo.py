@@ -374,3 +374,14 @@ def test_node_parameters_pass_through_and_bad_ones_are_refused(capsys: pytest.Ca
         with pytest.raises(SystemExit):
             _parser().parse_args(["--camera-param", bad])
         assert "expected NAME:=VALUE" in capsys.readouterr().err
+
+
+def test_node_parameters_the_nodes_would_refuse_stop_the_demo_before_it_starts(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Checked by the nodes' own loader (before: the camera nodes failed at start, the demo with them)."""
+    assert run.main(["--camera-param", "floor_map_period_s:=2", "--master-param", "publish_peeple:=true"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "face-reid-demo: warning: --master-param: publish_peeple:=true: 'publish_peeple' is not a parameter of "
+        "face_reid_master: ignored (did you mean 'publish_people'?)",
+        "face-reid-demo: --camera-param: floor_map_period_s:=2: parameter 'floor_map_period_s' must be a float like "
+        "0.0, got 2 (write numbers with a decimal point, e.g. 2.0)"]
