@@ -37,7 +37,7 @@ from rclpy.parameter_service import ParameterService
 from face_reid_camera.common.diagnostics import DiagnosticReport
 from face_reid_camera.common.errors import CONFIG_EXIT_STATUS, ModelLoadError
 from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable
-from face_reid_camera.common.params_files import check_ros_args
+from face_reid_camera.common.params_files import check_ros_args, check_ros_value
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.common.transitions import QUERY, TransitionError, plan
 
@@ -135,14 +135,11 @@ class ManagedNode(LifecycleNode):
         for spec in table.specs:
             try:
                 self.declare_parameter(spec.name, spec.default, descriptor_for(spec))
-            except InvalidParameterTypeException:
+            except InvalidParameterTypeException:  # the loader's words (ParamError), as at the start-up check
                 given = self._parameter_overrides.get(spec.name)
-                raise ParamError(
-                    f"parameter {spec.name!r} must be a {spec.type_text()} like {json.dumps(spec.default)}, got "
-                    f"{given.value if given is not None else '?'!r}"
-                    + (" (write numbers with a decimal point, e.g. 2.0)" if spec.kind in ("float", "float_list")
-                       else "")
-                ) from None
+                check_ros_value(spec, given.value if given is not None else None)
+                raise ParamError(f"parameter {spec.name!r} must be a {spec.type_text()} like "
+                                 f"{json.dumps(spec.default)}") from None
             except InvalidParameterValueException:  # out of the descriptor's range: the spec says so in its words
                 given = self._parameter_overrides.get(spec.name)
                 spec.check(given.value if given is not None else None)
