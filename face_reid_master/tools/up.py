@@ -90,10 +90,14 @@ def _master_file_problems(values: dict[str, Any]) -> list[str]:
         config = master_params.master_config(values)
     except ValueError as exc:
         return [str(exc)]
-    problems = [f"{name} {values[name]}: no such file or folder"
-                for name in ("gallery_path", "people_world_to_map_path")
-                if values[name] and not os.path.exists(os.path.expanduser(str(values[name])))]
-    loads: list[Callable[[], object]] = []
+    gallery = str(values["gallery_path"])
+    problems = [f"gallery_path {gallery}: no such file or folder"] if gallery and not os.path.exists(
+        os.path.expanduser(gallery)) else []
+    from face_reid_camera.common.param_table import config_from_values
+    from face_reid_master.robot.people_outputs import PeopleOutputConfig, PeopleOutputs
+
+    loads: list[Callable[[], object]] = [  # the /people options and their world->map file, as the node reads them
+        lambda: PeopleOutputs(config_from_values(PeopleOutputConfig, values))]
     if values["likelihood_path"]:
         from face_reid_master.identity.size_likelihood import load_face_likelihood
 

@@ -370,3 +370,12 @@ def test_a_node_refusing_its_configuration_is_started_once_and_its_error_line_sa
                for line in said), said
     assert any(line.startswith("face-reid-up:   [face-reid-camera] FATAL: cannot start: params file ") and
                "'embed_budget_ms' must be a float like 40.0, got 'fast'" in line for line in said), said
+
+
+def test_the_dry_run_reads_the_masters_files_as_its_configure_does(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    status, err = _dry_run(tmp_path, f"    master: {{set: {{gallery_path: {tmp_path / 'people'}, "
+                           f"people_world_to_map_path: {tmp_path / 'map.yaml'}}}}}\n", capsys)
+    assert status == 2
+    assert err[0] == f"face-reid-up: master: gallery_path {tmp_path / 'people'}: no such file or folder"
+    assert err[1].startswith(f"face-reid-up: master: cannot read the world->map transform {tmp_path / 'map.yaml'}")
