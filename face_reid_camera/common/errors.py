@@ -1,8 +1,13 @@
-"""Exception types shared by the face-reid model loaders and converters."""
+"""Exception types shared by the face-reid model loaders and converters, and the nodes' exit status for a
+configuration they refuse."""
 
 from __future__ import annotations
 
-__all__ = ["ModelChecksumError", "ModelFormatError", "ModelLoadError"]
+__all__ = ["CONFIG_EXIT_STATUS", "ModelChecksumError", "ModelFormatError", "ModelLoadError"]
+
+# A node that cannot start with its configuration (bad parameter, params file, key or model file; one FATAL line)
+# exits with this status: starting it again changes nothing, so face-reid-up does not restart it.
+CONFIG_EXIT_STATUS = 2
 
 
 class ModelLoadError(RuntimeError):

@@ -293,24 +293,11 @@ class ParamTable:
         return out
 
     def load_yaml(self, path: str | Path) -> dict[str, ParamValue]:
-        """Read a ROS 2 params file (section ``/**`` or the node's name, ``ros__parameters``) over the defaults."""
-        with open(path, encoding="utf-8") as fh:
-            try:
-                doc = load_yaml_without_aliases(fh) or {}
-            except yaml.YAMLError as exc:
-                raise ParamError(f"{path}: {exc}") from None
-        if not isinstance(doc, dict):
-            raise ParamError(f"{path}: a params file is a mapping of node names to sections")
-        raw: dict[str, Any] = {}
-        for key in ("/**", self.node_name, f"/{self.node_name}"):
-            section = doc.get(key)
-            if section is None:
-                continue
-            params = section.get("ros__parameters") if isinstance(section, dict) else None
-            if not isinstance(params, dict):
-                raise ParamError(f"{path}: '{key}' needs a 'ros__parameters' mapping")
-            raw.update(_flatten(params))
-        return self.check_all(raw)
+        """Read a ROS 2 params file over the defaults, by the node's rules (one loader:
+        :func:`face_reid_camera.common.params_files.load_params_file`); ParamError naming every problem."""
+        from face_reid_camera.common.params_files import load_params_file  # it builds on this module
+
+        return load_params_file(self, path).values
 
     def write_yaml(self, path: str | Path) -> None:
         """Write the deployment parameters at their defaults under ``/**`` (applies whatever the node's name and
@@ -362,13 +349,3 @@ class ParamTable:
                         f"| {s.description.replace('|', '/')} |")
         return "\n".join(rows) + "\n"
 
-
-def _flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in tree.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + "."))
-        else:
-            out[name] = value
-    return out

@@ -206,7 +206,8 @@ def write_network_key(path: str | Path, overwrite: bool = False) -> Path:
     try:
         fd = os.open(path, flags, 0o600)
     except FileExistsError as exc:
-        raise ValueError(f"{path} exists: a network key is not overwritten (remove it first)") from exc
+        raise ValueError(f"{path} exists: a network key is not overwritten (face-reid-keys new --force replaces it; "
+                         "every host then needs the new key)") from exc
     with os.fdopen(fd, "wb") as f:
         os.fchmod(f.fileno(), 0o600)
         f.write(os.urandom(KEY_BYTES).hex().encode() + b"\n")
@@ -220,8 +221,12 @@ def load_network_key(path: str | Path) -> bytes:
         st = os.lstat(path)
     except OSError as exc:
         raise ValueError(f"network key {path}: {exc.strerror} (make one with: face-reid-keys new {path})") from exc
-    if stat.S_ISLNK(st.st_mode) or not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"network key {path} is not a regular file (symlinks are refused)")
+    if stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"network key {path} is a folder: give the key file in it")
+    if stat.S_ISLNK(st.st_mode):
+        raise ValueError(f"network key {path} is a symlink: refused (give the file it points to)")
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"network key {path} is not a regular file")
     if st.st_mode & 0o077:
         raise ValueError(f"network key {path} is readable by others (mode {st.st_mode & 0o777:o}): chmod 600 it")
     if hasattr(os, "getuid") and st.st_uid != os.getuid():

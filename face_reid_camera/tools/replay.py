@@ -18,11 +18,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
 from face_reid_camera.common.errors import ModelLoadError
+from face_reid_camera.common.params_files import load_params_file, read_yaml_file
 from face_reid_camera.people.detector import MIN_FLOOR_SUPPORT
 from face_reid_camera.pipeline import CameraPipeline, FrameResult
 from face_reid_camera.ros import params as camera_params
@@ -42,7 +42,9 @@ class ReplayFrame:
 
 def parse_intrinsics_yaml(path: Path) -> CameraIntrinsics:
     """Intrinsics from a YAML with fx, fy, cx, cy, width, height keys, or a ROS camera_info YAML."""
-    doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    doc = read_yaml_file(path, "intrinsics file") or {}  # one line when missing or not YAML
+    if not isinstance(doc, dict):
+        raise ValueError(f"intrinsics file {path}: a mapping (fx, fy, cx, cy, width, height, or a camera_info)")
     if "camera_matrix" in doc:
         k = doc["camera_matrix"]["data"]
         return CameraIntrinsics(k[0], k[4], k[2], k[5], int(doc["image_width"]), int(doc["image_height"]))
@@ -173,7 +175,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        values = camera_params.load_params_yaml(args.params) if args.params else camera_params.defaults()
+        values = camera_params.defaults()
+        if args.params:  # the node's own rules (one loader): what the camera node refuses, replay refuses
+            loaded = load_params_file(camera_params.TABLE, args.params)
+            for warning in loaded.warnings:
+                print(f"face-reid-replay: warning: {warning}", file=sys.stderr)
+            values = loaded.values
         if args.no_faces:
             values["detect_faces"] = False
         if args.no_bodies:

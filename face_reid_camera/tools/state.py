@@ -21,7 +21,7 @@ from typing import Any
 from face_reid_camera.common.ros.service_call import SealedCaller, call_service
 from face_reid_camera.common.transitions import QUERY, TRANSITIONS, TransitionError, plan
 
-__all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main"]
+__all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main", "outcome_line"]
 
 PROG = "face-reid-state"
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
@@ -96,12 +96,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    where = f" (state {state})" if state else ""
     if ok:
-        print(f"{target}: {message}{where}")
+        print(outcome_line(target, message, state))
         return EXIT_OK
-    print(f"{PROG}: {target}: {message}{where}", file=sys.stderr)
+    print(f"{PROG}: {outcome_line(target, message, state)}", file=sys.stderr)
     return EXIT_REFUSED
+
+
+def outcome_line(target: str, message: str, state: str) -> str:
+    """'/n: configure: done (state inactive)'; the state only once ('/n: state active' for get)."""
+    where = f" (state {state})" if state and message != f"state {state}" else ""
+    return f"{target}: {message}{where}"
 
 
 if __name__ == "__main__":

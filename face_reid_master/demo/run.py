@@ -37,7 +37,7 @@ from face_reid_master.demo.children import (
     stop_children,
 )
 from face_reid_master.demo.report import format_summary, format_table, summarize
-from face_reid_master.demo.scenario import DEFAULT_SEED, DemoScenario, build_scenario
+from face_reid_master.demo.scenario import DEFAULT_SEED, DemoScenario, build_scenario, duration_range_text
 from face_reid_master.evaluation.published_tracks import TrackMessage
 from face_reid_master.ros.convert import track_from_msg
 
@@ -54,6 +54,21 @@ def _ros_setting(text: str) -> str:
     if not sep or not name or not all(c.isalnum() or c in "_." for c in name):
         raise argparse.ArgumentTypeError(f"expected NAME:=VALUE (a node parameter), got {text!r}")
     return text
+
+
+def _setting_problems(camera: Sequence[str], master: Sequence[str]) -> tuple[list[str], list[str]]:
+    """--camera-param / --master-param checked by the nodes' own loader before anything starts: (what the nodes
+    would refuse, names they would ignore), one line each."""
+    from face_reid_camera.common.params_files import check_sources
+    from face_reid_camera.ros.params import TABLE as CAMERA
+    from face_reid_master.ros.params import TABLE as MASTER
+
+    problems, warnings = [], []
+    for flag, table, settings in (("--camera-param", CAMERA, camera), ("--master-param", MASTER, master)):
+        check = check_sources(table, settings=settings)
+        problems += [f"{flag}: {line.removeprefix('-p ')}" for line in check.problems]
+        warnings += [f"{flag}: {line.removeprefix('-p ')}" for line in check.warnings]
+    return problems, warnings
 
 
 def _fmt(values: Sequence[float]) -> str:
@@ -239,11 +254,12 @@ def _parser() -> argparse.ArgumentParser:
                     "rendered in real time) -> camera nodes -> master, over DDS on loopback only. Prints who is "
                     "where every second and a summary of the re-identifications at the end (about a minute).",
     )
-    p.add_argument("--duration-s", type=float, default=50.0, help="scenario length in seconds (default 50)")
+    p.add_argument("--duration-s", type=float, default=50.0,
+                   help=f"scenario length in seconds (default 50; {duration_range_text()})")
     p.add_argument("--cameras", type=int, default=2, help="number of cameras, 1-4 (default 2)")
-    p.add_argument("--people", type=int, default=4, help="people in the scene, 1-6 (default 4)")
-    p.add_argument("--gallery-people", type=int, default=2,
-                   help="how many of them are predefined people with a name (default 2)")
+    p.add_argument("--people", type=int, default=4, help="people in the scene, 1-6 (1-4 with one camera; default 4)")
+    p.add_argument("--gallery-people", type=int, default=None,
+                   help="how many of them are predefined people with a name (default 2, or all of 1)")
     p.add_argument("--rate-hz", type=float, default=5.0, help="frames per second rendered per camera (default 5)")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"scenario seed (default {DEFAULT_SEED})")
     p.add_argument("--domain-id", type=int, default=None,
@@ -281,6 +297,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not (math.isfinite(args.rate_hz) and 0.5 <= args.rate_hz <= 30):
         print(f"face-reid-demo: --rate-hz must be in [0.5, 30], got {args.rate_hz}", file=sys.stderr)
         return 2
+    problems, warnings = _setting_problems(args.camera_param, args.master_param)
+    for line in [f"warning: {w}" for w in warnings] + problems:
+        print(f"face-reid-demo: {line}", file=sys.stderr)
+    if problems:  # the nodes would refuse them
+        return 2
     from face_reid_camera.common.resources import demo_faces_dir
 
     faces = args.faces if args.faces is not None else demo_faces_dir()
@@ -289,7 +310,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               "(which installs share/face_reid/demo_faces), or pass --faces DIR", file=sys.stderr)
         return 2
     try:
-        scenario = build_scenario(faces, args.seed, args.cameras, args.people, args.gallery_people, args.duration_s)
+        gallery = min(2, args.people) if args.gallery_people is None else args.gallery_people  # --people 1 works
+        scenario = build_scenario(faces, args.seed, args.cameras, args.people, gallery, args.duration_s)
     except ValueError as exc:
         print(f"face-reid-demo: {exc}", file=sys.stderr)
         return 2

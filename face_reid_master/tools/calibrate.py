@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import re
 import sys
 import time
@@ -63,6 +64,7 @@ def record(out: Path, seconds: float, topic_regex: str, key_path: str, max_frame
     written = [0]
     refused = [0]
     subscribed: set[str] = set()
+    passed_over: set[str] = set()  # camera topics of the other kind (sealed without --key, or plain with it)
     with open(out, "w") as f:
         def write(msg: Any) -> None:
             f.write(json.dumps(_frame_line(msg)) + "\n")
@@ -89,6 +91,7 @@ def record(out: Path, seconds: float, topic_regex: str, key_path: str, max_frame
                         elif "face_reid_msgs/msg/Sealed" in types and opener is not None:
                             node.create_subscription(Sealed, name, on_sealed, 50)
                         else:
+                            passed_over.add(name)
                             continue
                         subscribed.add(name)
                         print(f"recording {name}", file=sys.stderr, flush=True)
@@ -98,9 +101,24 @@ def record(out: Path, seconds: float, topic_regex: str, key_path: str, max_frame
         finally:
             node.destroy_node()
             rclpy.try_shutdown()
-    print(f"wrote {written[0]} frames of {len(subscribed)} camera topics to {out}"
-          + (f"; {refused[0]} sealed frames did not open with the key" if refused[0] else ""), file=sys.stderr)
+    print(record_summary(out, written[0], len(subscribed), refused[0], len(passed_over - subscribed),
+                         bool(opener)), file=sys.stderr)
     return 0 if written[0] else 2
+
+
+def record_summary(out: Path, frames: int, topics: int, refused: int, passed_over: int, keyed: bool) -> str:
+    """The closing line of ``record``; with no frame, where to look (the domain, the key, the cameras)."""
+    line = f"wrote {frames} frames of {topics} camera topics to {out}"
+    if refused:
+        line += f"; {refused} sealed frames did not open with the key (is --key the network's key?)"
+    if frames:
+        return line
+    if passed_over:
+        other = "sealed: give --key with the network's key" if not keyed else "unsealed: leave out --key"
+        return f"{line}: the {passed_over} camera topic(s) heard are {other}"
+    domain = os.environ.get("ROS_DOMAIN_ID", "") or "0, unset"
+    return (f"{line}: no camera heard; check that the camera nodes run (and see a person), that ROS_DOMAIN_ID "
+            f"(here {domain}) is theirs, and that --key is given exactly when the network has a network key")
 
 
 def load_recording(path: Path) -> tuple[list[CameraTrack], dict[str, CameraPose]]:

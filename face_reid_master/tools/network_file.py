@@ -31,6 +31,7 @@ from typing import Any
 import yaml
 
 from face_reid_camera.common.param_table import YamlAliasError, load_yaml_without_aliases
+from face_reid_camera.common.params_files import yaml_error_line
 
 __all__ = ["NodeSpec", "load_network_file", "network_key_path", "node_specs"]
 
@@ -62,7 +63,7 @@ def load_network_file(path: str | Path) -> dict[str, Any]:
     except YamlAliasError as exc:
         raise ValueError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not YAML: {exc}") from None
+        raise ValueError(f"{path}: not YAML: {yaml_error_line(exc)}") from None
     if not isinstance(data, dict) or not isinstance(data.get("hosts"), dict) or not data["hosts"]:
         raise ValueError(f"{path}: needs a 'hosts' mapping (host name -> its cameras and/or master)")
     unknown = set(data) - {"hosts", "domain_id", "network_key"}

@@ -35,7 +35,9 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_service import ParameterService
 
 from face_reid_camera.common.diagnostics import DiagnosticReport
+from face_reid_camera.common.errors import CONFIG_EXIT_STATUS, ModelLoadError
 from face_reid_camera.common.param_table import ParamError, ParamSpec, ParamTable
+from face_reid_camera.common.params_files import check_ros_args, check_ros_value
 from face_reid_camera.common.stamps import set_stamp
 from face_reid_camera.common.transitions import QUERY, TransitionError, plan
 
@@ -133,14 +135,11 @@ class ManagedNode(LifecycleNode):
         for spec in table.specs:
             try:
                 self.declare_parameter(spec.name, spec.default, descriptor_for(spec))
-            except InvalidParameterTypeException:
+            except InvalidParameterTypeException:  # the loader's words (ParamError), as at the start-up check
                 given = self._parameter_overrides.get(spec.name)
-                raise ParamError(
-                    f"parameter {spec.name!r} must be a {spec.type_text()} like {json.dumps(spec.default)}, got "
-                    f"{given.value if given is not None else '?'!r}"
-                    + (" (write numbers with a decimal point, e.g. 2.0)" if spec.kind in ("float", "float_list")
-                       else "")
-                ) from None
+                check_ros_value(spec, given.value if given is not None else None)
+                raise ParamError(f"parameter {spec.name!r} must be a {spec.type_text()} like "
+                                 f"{json.dumps(spec.default)}") from None
             except InvalidParameterValueException:  # out of the descriptor's range: the spec says so in its words
                 given = self._parameter_overrides.get(spec.name)
                 spec.check(given.value if given is not None else None)
@@ -251,7 +250,8 @@ class ManagedNode(LifecycleNode):
         try:
             self.configure()
         except Exception as exc:  # a bad parameter, a missing model, a corrupt file: say why, stay unconfigured
-            self.failure = f"{exc}" if isinstance(exc, ValueError | OSError) else f"{type(exc).__name__}: {exc}"
+            self.failure = f"{exc}" if isinstance(exc, ValueError | OSError | ModelLoadError) else (
+                f"{type(exc).__name__}: {exc}")
             if not self.quiet_failures:  # the reason may name a file (database, gallery): private
                 self.log(f"configure failed: {self.failure}", "error", private=True)
             self._release_quietly()
@@ -403,9 +403,10 @@ def _printed_help(argv: list[str], usage: str, table: ParamTable) -> bool:
 
 
 def fatal_start(prog: str, message: str) -> int:
-    """The one line of a node that cannot start; returns its exit status, 2."""
+    """The one line of a node that cannot start; returns its exit status, CONFIG_EXIT_STATUS (2: face-reid-up
+    does not restart it)."""
     print(f"[{prog}] FATAL: cannot start: {message}", file=sys.stderr, flush=True)
-    return 2
+    return CONFIG_EXIT_STATUS
 
 
 def start_node(prog: str, argv: list[str], make_node: Callable[[], ManagedNode]) -> ManagedNode | int:
@@ -446,6 +447,12 @@ def run_node(prog: str, usage: str, table: ParamTable, make_node: Callable[[], M
     argv = list(sys.argv if argv is None else argv)
     if _printed_help(argv, usage, table):
         return 0
+    # params files and -p settings checked by the loader replay and face-reid-up --dry-run use: one line each
+    problems = check_ros_args(table, argv).problems
+    for problem in problems:
+        fatal_start(prog, problem)
+    if problems:
+        return CONFIG_EXIT_STATUS
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 

@@ -101,7 +101,7 @@ def test_key_files_are_private_and_checked(tmp_path: Path) -> None:
     os.chmod(path, 0o600)
     link = tmp_path / "link.key"
     link.symlink_to(path)
-    with pytest.raises(ValueError, match="not a regular file"):
+    with pytest.raises(ValueError, match="is a symlink: refused"):
         load_network_key(link)
     bad = tmp_path / "bad.key"
     bad.write_text("not hex")
@@ -121,6 +121,23 @@ def test_face_reid_keys_makes_and_checks_a_key(tmp_path: Path, capsys: pytest.Ca
     assert main(["new", str(path)]) == 2 and "not overwritten" in capsys.readouterr().err
     path.chmod(0o640)
     assert main(["check", str(path)]) == 2 and "chmod 600" in capsys.readouterr().err
+
+
+def test_face_reid_keys_says_what_to_do(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: '(remove it first)' though --force exists; 'is not a regular file (symlinks are refused)' for a
+    folder; a traceback for --force onto a folder."""
+    from face_reid_camera.tools.keys import main
+
+    path = tmp_path / "network.key"
+    assert main(["new", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["new", str(path)]) == 2
+    assert capsys.readouterr().err == (f"face-reid-keys: {path} exists: a network key is not overwritten "
+                                       "(face-reid-keys new --force replaces it; every host then needs the new key)\n")
+    assert main(["check", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"face-reid-keys: network key {tmp_path} is a folder: give the key file in it\n"
+    assert main(["new", "--force", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"face-reid-keys: {tmp_path}: Is a directory\n"
 
 
 def test_a_receiver_refuses_what_was_sealed_before_it_started_so_a_restart_reopens_no_replay() -> None:

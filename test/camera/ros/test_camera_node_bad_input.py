@@ -32,6 +32,7 @@ def test_node_refuses_to_start_without_a_usable_model(
     assert "FATAL: cannot start" in result.stderr
     assert str(model) in result.stderr
     assert "Traceback" not in result.stderr
+    assert "Error:" not in result.stderr  # no class name (before: 'ModelLoadError: cannot load YuNet ONNX model')
 
 
 def test_help_lists_the_deployment_parameters_and_help_all_every_one() -> None:

@@ -94,3 +94,23 @@ def test_missing_input_and_missing_models_are_clear_errors(
     monkeypatch.setenv("FACE_REID_MODELS_DIR", str(tmp_path))
     assert main([str(RGBD / "pcl_desk")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("/**:\n  ros__parameters:\n    camera_id: [cam\n",
+     "not YAML: line 4, column 1: expected ',' or ']', but got '<stream end>'"),
+    ("/**:\n  ros__parameters:\n    camera_pose_xyz_m: [0, 0, 1.5]\n",
+     "parameter 'camera_pose_xyz_m': a list mixing integers and floats ([0, 0, 1.5]) is refused by ROS (Sequence "
+     "should be of same type); write every number with a decimal point, e.g. 1.0"),
+    (None, "no such file"),
+])
+def test_a_params_file_the_node_refuses_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                    text: str | None, message: str) -> None:
+    """Before: a multi-line yaml error (a traceback in the issue), and the mixed list was read as [0.0, 0.0, 1.5]
+    though the camera node refuses it."""
+    params = tmp_path / "bad.yaml"
+    if text is not None:
+        params.write_text(text)
+    assert main([str(RGBD / "person.pcd"), "--no-faces", "--no-bodies", "--params", str(params)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == f"face-reid-replay: error: params file {params}: {message}\n"

@@ -63,3 +63,24 @@ def test_record_writes_every_cameras_frames_with_pose_and_people(ros_domain_id: 
     got = CameraPose.from_position_quaternion(first["pose"][:3], first["pose"][3:])
     np.testing.assert_allclose(got.xyz_rpy(), pose.xyz_rpy(), atol=1e-6)
     assert "recording /cam1/face_reid/frames" in err and "wrote 20 frames of 2 camera topics" in err
+
+
+def test_a_record_that_hears_no_camera_says_where_to_look(ros_domain_id: int, tmp_path: Path) -> None:
+    """Before: only 'wrote 0 frames of 0 camera topics'."""
+    out = tmp_path / "walk.jsonl"
+    done = subprocess.run([sys.executable, "-m", "face_reid_master.tools.calibrate", "record", "--out", str(out),
+                           "--seconds", "1"], cwd=REPO_ROOT, env=procs.ros_env(ros_domain_id), capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.splitlines()[-1] == (
+        f"wrote 0 frames of 0 camera topics to {out}: no camera heard; check that the camera nodes run (and see a "
+        f"person), that ROS_DOMAIN_ID (here {ros_domain_id}) is theirs, and that --key is given exactly when the "
+        "network has a network key")
+
+
+def test_the_record_summary_names_sealed_topics_it_passed_over() -> None:
+    from face_reid_master.tools.calibrate import record_summary
+
+    assert record_summary(Path("w.jsonl"), 0, 0, 0, 2, False).endswith(
+        ": the 2 camera topic(s) heard are sealed: give --key with the network's key")
+    assert record_summary(Path("w.jsonl"), 5, 1, 0, 0, True) == "wrote 5 frames of 1 camera topics to w.jsonl"

