@@ -3,7 +3,8 @@ identity events expected out, read as a story. Each file says what it shows in i
 
 A step at time ``at`` (s) may show faces (``faces: {track: "alice x3"}``: three noisy face embeddings of
 Alice on that track), bodies (``bodies: {track: "red x2"}``), and tell the tracker's ``lost`` / ``found`` /
-``deleted`` tracks, ``forget`` face ids, ``restart`` (the learned faces saved and loaded into a new
+``deleted`` tracks, the pairs of tracks it may have swapped (``crossed: [[1, 2, 0.4]]``: with probability
+0.4), ``forget`` face ids, ``restart`` (the learned faces saved and loaded into a new
 manager, as the face store does), or load ``stored`` faces (``["alice x5", ...]``: learned faces as a face store
 holds them, given the next free ids). ``expect`` lists the step's identity events in order as
 ``"<kind> track <T> face <F>"`` (``by body`` when the body decided it) or ``"merged face <F> into <G>"``; none
@@ -83,6 +84,8 @@ class ScenarioRun:
             colour, n = _observed(worn)
             rows = np.repeat(np.eye(4, dtype=np.float32)[COLOURS.index(colour)][None, :], n, axis=0)
             m.add_body_observations(int(track), rows + self.rng.normal(0.0, 0.02, rows.shape).astype(np.float32), t)
+        for a, b, p in step.get("crossed") or ():
+            m.tracks_crossed(int(a), int(b), float(p), t)
         for track in step.get("lost") or ():
             m.track_lost(int(track))
         for track in step.get("found") or ():
@@ -119,4 +122,4 @@ def test_there_are_scenarios_for_each_behaviour() -> None:
     names = {p.stem for p in SCENARIOS}
     assert {"leave_and_return", "swap", "stranger", "look_alikes", "body_only", "second_day", "forget",
             "restart", "held_by_swapped_track", "held_by_duplicate_track", "split_person_merged",
-            "buffer_across_a_swap"} <= names
+            "buffer_across_a_swap", "crossing_then_a_face", "crossing_then_bodies"} <= names
