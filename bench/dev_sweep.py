@@ -4,7 +4,8 @@
 
 Each variant (``LABEL:`` alone = the defaults) runs the master core over every scenario, as ``face-reid-eval``
 does offline (fused evidence), and is summed over them: Table II
-right / wrong, recover rate, face and body decisions, wrong names and strangers named per detection. Choices are
+right / wrong, recover rate, face and body decisions, wrong identity, wrong names and strangers named per detection.
+Choices are
 made on these sums (the frontier of wrong decisions against recover rate), on development scenarios only.
 """
 
@@ -27,7 +28,8 @@ from face_reid_master.identity.size_likelihood import default_face_likelihood
 from face_reid_master.sim.scenario_files import load_scenario
 
 _SUMS = ("right", "wrong", "reid_success", "reid_cases", "face_right", "face_wrong", "body_right", "body_wrong",
-         "gallery_detections", "wrong_names", "other_detections", "others_named")
+         "gallery_detections", "wrong_names", "other_detections", "others_named", "published_detections",
+         "wrong_identity_detections")
 
 
 def _value(text: str) -> Any:
@@ -61,12 +63,15 @@ def run_variant(scenarios: list[Any], metric: Any, overrides: dict[str, Any]) ->
         m = evaluate_run(log, gallery_people=gal.gt_of_name or None, scenario_summary=sc.summary, with_mot=False)
         t2, reid, ev = m["table_ii"], m["reidentification"], m["calibration"]["by_evidence"]
         dets = m["predefined_people"]["detections"]
+        per_detection = m["per_detection"]
         for key, value in (("right", t2["success"]), ("wrong", t2["failure"]), ("reid_success", reid["success"]),
                            ("reid_cases", reid["tracks"]), ("face_right", ev["face"]["right"]),
                            ("face_wrong", ev["face"]["wrong"]), ("body_right", ev["body"]["right"]),
                            ("body_wrong", ev["body"]["wrong"]), ("gallery_detections", dets["gallery_detections"]),
                            ("wrong_names", dets["wrong_name"]), ("other_detections", dets["other_detections"]),
-                           ("others_named", dets["other_named"])):
+                           ("others_named", dets["other_named"]),
+                           ("published_detections", per_detection["published_detections"]),
+                           ("wrong_identity_detections", per_detection["wrong_identity"])):
             sums[key] += int(value)
     return sums
 

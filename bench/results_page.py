@@ -130,8 +130,8 @@ def _pooled(docs: list[dict[str, Any]], evidence: str) -> str:
 
 
 _CHOICE_COLUMNS = ("variant", "settings", "Table II right / wrong", "wrong of decided", "recover rate",
-                   "face decisions right / wrong", "body decisions right / wrong", "wrong names (detections)",
-                   "strangers named (detections)")
+                   "face decisions right / wrong", "body decisions right / wrong", "wrong identity (detections)",
+                   "wrong names (detections)", "strangers named (detections)")
 
 
 def _choices(doc: dict[str, Any]) -> str:
@@ -147,6 +147,7 @@ def _choices(doc: dict[str, Any]) -> str:
         recover = v["reid_success"] / v["reid_cases"] if v["reid_cases"] else 0.0
         rows.append(f"| {v['label']} | {settings} | {v['right']} / {v['wrong']} | {pct(v['wrong'], decided)} | "
                     f"{recover:.3f} | {v['face_right']} / {v['face_wrong']} | {v['body_right']} / {v['body_wrong']} | "
+                    f"{pct(v.get('wrong_identity_detections', 0), v.get('published_detections', 0))} | "
                     f"{pct(v['wrong_names'], v['gallery_detections'])} | "
                     f"{pct(v['others_named'], v['other_detections'])} |")
     seeds = ", ".join(str(s["seed"]) for s in doc["scenarios"])
