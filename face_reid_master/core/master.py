@@ -339,14 +339,14 @@ class MasterCore:
         """The face id a track is published with: its face, or 0 while undecided or while a crossing makes its
         identity more likely wrong than right."""
         fid = self.identity.face_id_of(track_id)
-        return 0 if fid is None or self.identity.withheld(track_id) else fid
+        return 0 if fid is None or self.identity.doubt_of(track_id) > 0.5 else fid
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
         (how often such decisions were right); 0 for an undecided track (it claims no face: its candidates' raw
         posteriors are the overconfident numbers the map exists to correct)."""
         evidence = self.identity.evidence_of(track_id)
-        if not evidence or self.identity.withheld(track_id):
+        if not evidence or self.identity.doubt_of(track_id) > 0.5:
             return 0.0
         raw = float(self.identity.confidence_of(track_id))
         mapped = float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))

@@ -29,7 +29,7 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
-from face_reid_master.identity.crossings import Crossings, Exchange
+from face_reid_master.identity.crossings import Crossings
 from face_reid_master.identity.entries import (
     Chunk,
     FaceEntry,
@@ -56,21 +56,14 @@ F32Array = npt.NDArray[np.float32]
 class IdentityManagerBase:
     """Algorithm 1 of the paper, shared by the Bayesian method and the threshold baseline.
 
-    ``embedding_dim``: length of the face descriptors.  ``max_features_per_face``: bound of every face's
-    (and unidentified track's) feature set, kept diverse
-    (:func:`~face_reid_master.identity.feature_bank.select_diverse_subset`).  Eq. 4 is exact
-    while face_list holds at most ``exact_search_max_features`` features; beyond, only the
-    ``shortlist_faces`` faces with the nearest centroids are compared per observation.  Track ids must not
-    be reused after :meth:`track_deleted` (late observations of a deleted id are ignored).
-
-    Our extensions, each off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
-    (:mod:`~face_reid_master.identity.swap_guard`), ``body_evidence``
-    (:mod:`~face_reid_master.identity.body_identification`) and ``lend_lost_faces``
-    (:mod:`~face_reid_master.identity.lent_faces`).
-
-    Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
-    ``_current_confidence`` and may override the ``_on_*`` notifications; they read :attr:`tracks`,
-    :attr:`faces` and the feature bank ``_bank``.
+    ``embedding_dim``: length of the face descriptors; ``max_features_per_face``: bound of every face's (and
+    unidentified track's) feature set, kept diverse; eq. 4 is exact up to ``exact_search_max_features`` features
+    in face_list, beyond only the ``shortlist_faces`` faces with the nearest centroids are compared. Track ids
+    are never reused after :meth:`track_deleted`. Our extensions, each off by default (the paper):
+    ``feature_gate_distance`` / ``release_after_inconsistent`` (:mod:`~.swap_guard`, which the held faces,
+    merges and crossings need too), ``body_evidence`` (:mod:`~.body_identification`), ``lend_lost_faces``
+    (:mod:`~.lent_faces`). Subclasses (the classification methods) implement ``_ingest_unassigned``,
+    ``_decide``, ``_current_confidence`` and may override the ``_on_*`` notifications.
     """
 
     def __init__(
@@ -108,8 +101,8 @@ class IdentityManagerBase:
                               self._on_face_available, self._on_faces_unavailable)
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
-        self._held = HeldFaces(feature_gate_distance, self.faces)
-        self.crossings = Crossings()
+        self._held = HeldFaces(feature_gate_distance, self.faces, self.stats)
+        self.crossings = Crossings(self.tracks, self.faces, self.sources, self.stats, self._drop_buffer)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
         self._merges: list[tuple[int, list[int]]] = []  # (kept face, faces of one person) found by _decide
 
@@ -160,13 +153,7 @@ class IdentityManagerBase:
     def tracks_crossed(self, a: int, b: int, probability: float, stamp_s: float) -> None:
         """The tracker's association may have swapped the people of tracks ``a`` and ``b`` (``probability``):
         their identities carry that doubt until evidence decides it (:mod:`~face_reid_master.identity.crossings`)."""
-        if self.tracks.gone(a) or self.tracks.gone(b):
-            return
-        ra, rb = self.tracks.entries.get(a), self.tracks.entries.get(b)
-        if (ra is None or ra.face_id is None) and (rb is None or rb.face_id is None):
-            return
-        self.crossings.crossed(ra or self.tracks.seen(a, stamp_s, latest=False),
-                               rb or self.tracks.seen(b, stamp_s, latest=False), float(probability))
+        self.crossings.crossed(a, b, float(probability), stamp_s)
 
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
@@ -181,17 +168,6 @@ class IdentityManagerBase:
         """The LOST track was detected again: it takes its face back from face_list if nobody took it."""
         self._lent.give_back(self.tracks.entries.get(track_id))
 
-    def _take_lent(self, fid: int, stamp: float) -> None:
-        """Face ``fid`` goes to another track: a LOST track that lent it is no longer identified."""
-        lender = self._lent.take(fid)
-        track = None if lender is None else self.tracks.entries.get(lender)
-        if track is None or track.face_id != fid:
-            return
-        confidence = track.confidence
-        track.unassign()
-        self.stats.lent_faces_taken += 1
-        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
-
     def step(self, stamp_s: float) -> list[IdentityEvent]:
         """Run one update of Algorithm 1: learn the queued observations, classify the unassigned tracks (by face,
         then by body), then handle deaths."""
@@ -201,14 +177,19 @@ class IdentityManagerBase:
         events: list[IdentityEvent] = []
         self._learn(stamp, events)
         decisions = self._decide()
-        for keep, others in self._merges:
-            events.extend(self._merge_faces(keep, others, stamp))
+        for keep, others in self._merges:  # faces of one person: the older keeps them
+            for fid in self.faces.merge(keep, others):
+                self.sources.forget_face(fid)
+                events.append(IdentityEvent(IdentityEventKind.MERGED, 0, fid, stamp, 1.0, merged_into=keep))
         self._merges = []
         for tid, face_or_new, confidence in decisions:
-            if face_or_new == 0:
-                face_or_new = self._not_held(self.tracks.entries[tid], stamp, events)
-                if face_or_new is None:
-                    continue
+            if face_or_new == 0:  # a new person, or one whose face another live track holds
+                held = self._held.shown_by(self.tracks.entries[tid], self.tracks.entries)
+                if held is not None and held.duplicate:
+                    continue  # one person twice: it waits
+                if held is not None:  # the holder was swapped: it gives the face up
+                    events.append(self._release_swapped(held.holder, stamp, held.since_s))
+                    face_or_new = held.face_id
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for source in self.sources:
             events.extend(self._cue_step(source, stamp))
@@ -221,47 +202,11 @@ class IdentityManagerBase:
                 events.append(ev)
         return events
 
-    def _not_held(self, track: TrackRecord, stamp: float, events: list[IdentityEvent]) -> int | None:
-        """A track classified as a new person: 0 (new), or the face another live track holds that its buffer shows
-        (:mod:`~face_reid_master.identity.held_faces`): None while the holder shows it too (one person twice: the
-        track waits), else the face, which the swapped holder gives up."""
-        held = self._held.shown_by(track, self.tracks.entries)
-        if held is None:
-            return 0
-        if held.duplicate:
-            self.stats.new_ids_held_waiting += 1
-            return None
-        events.append(self._release_swapped(held.holder, stamp, max(held.holder.face_confirmed_s,
-                                                                    held.holder.first_seen_s)))
-        self.stats.held_faces_taken += 1
-        return held.face_id
-
-    def _merge_faces(self, keep: int, others: list[int], stamp: float) -> list[IdentityEvent]:
-        """Faces ``others`` (of face_list) are face ``keep``'s person: their features join it, a name it lacks
-        comes with them, and they are gone (one MERGED event each)."""
-        face = self.faces.entries[keep]
-        events = []
-        for fid in others:
-            other = self.faces.entries.get(fid)
-            if other is None or other.track_id is not None or fid == keep:
-                continue
-            self._bank.add_features(face.slot, self._bank.features(other.slot))
-            face.n_observations += other.n_observations
-            face.last_seen_s = max(face.last_seen_s, other.last_seen_s)
-            face.created_s = min(face.created_s, other.created_s)
-            if face.name is None:
-                face.name = other.name
-            self.faces.forget(fid)
-            self.sources.forget_face(fid)
-            self.stats.faces_merged += 1
-            events.append(IdentityEvent(IdentityEventKind.MERGED, 0, fid, stamp, 1.0, merged_into=keep))
-        return events
-
     def _learn(self, stamp: float, events: list[IdentityEvent]) -> None:
         """The queued observations: an identified track's join its face (those its face accepts; a swap releases
         the track, :class:`SwapGuard`); an unassigned track's join its buffer and go to the classification."""
         pending = self.tracks.take_pending()
-        self._weigh_crossings(pending, stamp, events)
+        events += self.crossings.weigh_faces(pending, stamp)
         unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
         singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
         rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
@@ -273,7 +218,13 @@ class IdentityManagerBase:
             slot: int | None = None
             obs: F32Array | None = rows[tid]
             if track.face_id is not None:
-                slot, chunks, obs = self._learn_identified(track, chunks, rows[tid], near.get(tid), stamp, events)
+                face = self.faces.entries[track.face_id]
+                obs, swapped = self._swaps.learn(track, face, chunks, rows[tid], near.get(tid), stamp)
+                slot = face.slot
+                if swapped is not None:  # the face kept what was its person's; the track goes on as someone else
+                    events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
+                    slot, chunks, obs = None, swapped, rows_of(swapped)
+                    track.n_observations = obs.shape[0]
             if obs is None:
                 continue
             if track.face_id is None:
@@ -295,112 +246,33 @@ class IdentityManagerBase:
         if unassigned[0]:
             self._ingest_unassigned(*unassigned)
 
-    def _weigh_crossings(self, pending: dict[int, list[Chunk]], stamp: float, events: list[IdentityEvent]) -> None:
-        """The face observations of crossed tracks weigh their crossings; tracks found swapped exchange their
-        identities before anything is learned."""
-        for tid, chunks in pending.items():
-            track = self.tracks.entries[tid]
-            if track.crossed:
-                weigh = self.crossings.face_log_ratios(rows_of(chunks), self._face_log_ratios)
-                for ex in self.crossings.weigh(track, self.tracks.entries, weigh, self._face_threshold):
-                    events.append(self._exchange(ex, stamp))
-
-    def _exchange(self, ex: Exchange, stamp: float) -> IdentityEvent:
-        """Two crossed tracks were swapped: each takes the other's identity (an unidentified one's buffer goes:
-        it was gathered on both people)."""
-        a, b = ex.first, ex.second
-        given = [(b, a.face_id, a.confidence, a.evidence, a.new_face), (a, b.face_id, b.confidence, b.evidence,
-                                                                         b.new_face)]
-        for track, fid, confidence, evidence, new in given:
-            if fid is None:
-                track.unassign()
-                track.inconsistent.clear()
-                continue
-            if track.face_id is None:
-                if track.slot is not None:
-                    self._bank.free_slot(track.slot)
-                    track.slot = None
-                self._on_track_identified(track)
-            track.give(fid, confidence, evidence, new)
-            track.inconsistent.clear()
-            track.face_confirmed_s = -math.inf
-            self.faces.entries[fid].track_id = track.track_id
-            self.sources.track_identified(track.track_id, fid)
-        self.stats.crossings_exchanged += 1
-        return IdentityEvent(IdentityEventKind.EXCHANGED, a.track_id, a.face_id or 0, stamp, ex.probability,
-                             partner=b.track_id)
-
-    def _face_log_ratios(self, rows: F32Array, face_ids: list[int]) -> FloatArray | None:
-        """Log likelihood ratios (same person vs another) of face observations for learned faces (Q, len); None
-        when the method has no face likelihood (crossings are then left to the swap guard)."""
-        return None
-
-    _face_threshold = 0.95  # the classification's posterior threshold (a crossing's face evidence decides by it)
-
-    def withheld(self, track_id: int) -> bool:
-        """Whether a live track's identity is more likely wrong than right since a crossing (not published)."""
-        track = self.tracks.entries.get(track_id)
-        return track is not None and self.crossings.withheld(track)
-
     def doubt_of(self, track_id: int) -> float:
         """The probability that a live track's person is not the one its identity was decided on (crossings)."""
         track = self.tracks.entries.get(track_id)
         return 0.0 if track is None else self.crossings.doubt(track)
 
-    def _learn_identified(self, track: TrackRecord, chunks: list[Chunk], obs: F32Array,
-                          keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
-                          ) -> tuple[int | None, list[Chunk], F32Array | None]:
-        """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
-        the rows it learns (None: none), or, when they show a swap, the released track's chunks and rows."""
-        assert track.face_id is not None
-        face = self.faces.entries[track.face_id]
-        face.n_observations += obs.shape[0]
-        face.last_seen_s = max(face.last_seen_s, stamp)
-        if keep is not None:
-            swapped = self._swaps.swapped(track, chunks, keep)
-            obs = obs if keep.all() else obs[keep]
-            if swapped is not None:  # the face keeps what was its person's, then lets the track go
-                if obs.shape[0]:
-                    self._bank.add_features(face.slot, obs)
-                events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
-                obs = rows_of(swapped)
-                track.n_observations = obs.shape[0]
-                return None, swapped, obs
-            if obs.shape[0] == 0:
-                return face.slot, chunks, None
-        if obs.shape[0]:
-            track.face_confirmed_s = max(track.face_confirmed_s, chunks[-1].stamp_s)
-        if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
-            track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
-        return face.slot, chunks, obs
+    def _drop_buffer(self, track: TrackRecord) -> None:
+        """An unidentified track takes a face without a decision of its own: its buffer and table row go."""
+        if track.slot is not None:
+            self._bank.free_slot(track.slot)
+            track.slot = None
+        self._on_track_identified(track)
 
     def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
         """One cue's observations: an identified track's describe its face's person; faceless tracks gather
         evidence against every learned face and are given one of face_list when it is strong enough (their own
         face, once seen, overrules it)."""
         queued = self.tracks.take_cue(source.kind)
-        events = []
-        log_ratios = getattr(source, "face_log_ratios", None)  # a cue that can weigh crossings
-        for track, parts in queued if log_ratios is not None else ():
-            if track.crossed and track.track_id in self.tracks.entries:
-                weigh = lambda faces, p=parts: log_ratios(p, faces)  # noqa: E731
-                for ex in self.crossings.weigh(track, self.tracks.entries, weigh, source.posterior_threshold):
-                    events.append(self._exchange(ex, stamp))
+        events = self.crossings.weigh_cue(source, queued, stamp)
         source.observe(queued, list(self.faces.entries))
         for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
-                events.append(self._apply_cue_decision(track, fid, p, stamp, source.kind))
+                self._give_face(track, fid, p, stamp, source.kind, new=False)  # no features to add
+                self.stats.assigned_by_body += source.kind == Evidence.BODY
+                events.append(IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, tid, fid, stamp, float(p),
+                                            evidence=source.kind))
         return events
-
-    def _apply_cue_decision(self, track: TrackRecord, fid: int, confidence: float, stamp: float,
-                            evidence: str) -> IdentityEvent:
-        """A faceless track is face ``fid``'s person by another cue: it carries the face (no features to add)."""
-        self._give_face(track, fid, confidence, stamp, evidence, new=False)
-        if evidence == Evidence.BODY:
-            self.stats.assigned_by_body += 1
-        return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
-                             evidence=evidence)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are learned ``face``'s person: closer than the body evidence's
@@ -449,22 +321,16 @@ class IdentityManagerBase:
         return sorted(self.faces.entries)
 
     def forget_face(self, face_id: int) -> bool:
-        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
-
-        The face leaves face_list (its table column / threshold votes go) and its bank slot is zeroed.
-        If a live track carries it, that track becomes unidentified again: its assignment, confidence
-        and queued observations are dropped (they were merged into / meant for the forgotten face), so
-        while the person stays in view new observations are classified afresh and normally create a
-        *new* face id after ``min_observations``.  Face ids are never reused within this manager.
-        """
+        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown. A live track
+        carrying it is unidentified again, its queued observations dropped: it is classified afresh (and
+        normally becomes a *new* face). Face ids are never reused within this manager."""
         fid = check_int("face_id", face_id, -(2**63))
         face = self.faces.entries.get(fid)
         if face is None:
             return False
-        lent_by = self._lent.take(fid)
-        lender = None if lent_by is None else self.tracks.entries.get(lent_by)
-        if lender is not None and lender.face_id == fid:
-            lender.face_id, lender.confidence = None, 0.0  # a LOST track lent it: it holds nothing now
+        lender = self._lent.take_from(fid, self.tracks.entries)
+        if lender is not None:
+            lender.unassign()  # a LOST track lent it: it holds nothing now
         track = None if face.track_id is None else self.tracks.entries.get(face.track_id)
         if track is not None and track.face_id == fid:
             track.unassign()
@@ -516,13 +382,18 @@ class IdentityManagerBase:
         lent it); the bodies it gathered join the face's gallery."""
         face = self.faces.entries[fid]
         if not new:
-            self._take_lent(fid, stamp)
+            lender = self._lent.take_from(fid, self.tracks.entries)  # a LOST track that lent it holds nothing now
+            if lender is not None:
+                self.stats.lent_faces_taken += 1
+                self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, lender.track_id, fid, stamp,
+                                                       lender.confidence))
+                lender.unassign()
             self.faces.make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track)
         track.give(fid, confidence, evidence, new)
-        self.crossings.forget_all(track, self.tracks.entries)  # decided on what it showed since
+        self.crossings.forget_all(track)  # decided on what it showed since
         self.sources.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
@@ -539,7 +410,7 @@ class IdentityManagerBase:
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None
-        self.crossings.forget_all(track, self.tracks.entries)
+        self.crossings.forget_all(track)
         if track.face_id is None:
             if track.slot is not None:
                 self._bank.free_slot(track.slot)

@@ -86,7 +86,7 @@ class BayesIdentityManager(IdentityManagerBase):
             low_open=True, high_open=True,
         )
         self.min_observations = check_int("min_observations", min_observations, 1)
-        self._face_threshold = self.posterior_threshold
+        self.crossings.face_log_ratios, self.crossings.face_threshold = self._face_log_ratios, self.posterior_threshold
         self.sinkhorn_tolerance = check_real(
             "sinkhorn_tolerance", sinkhorn_tolerance, 0.0, 1.0, low_open=True, high_open=True
         )
@@ -131,7 +131,8 @@ class BayesIdentityManager(IdentityManagerBase):
         out.update({fid: float(v) for fid, v in zip(self.faces.available, p[1:], strict=True)})
         return out
 
-    def _face_log_ratios(self, rows: F32Array, face_ids: list[int]) -> FloatArray | None:
+    def _face_log_ratios(self, rows: F32Array, face_ids: list[int]) -> FloatArray:
+        """Log likelihood ratios "same person" of face observations (Q, dim) for learned faces: (Q, len)."""
         if not face_ids:
             return np.zeros((rows.shape[0], 0))
         slots = np.array([self.faces.entries[f].slot for f in face_ids], np.intp)

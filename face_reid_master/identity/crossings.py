@@ -12,20 +12,24 @@ observations weigh it likewise against the faces' recent bodies. Once ``d`` pass
 (the face's or the body's posterior threshold) the tracks exchange their identities (and published ids: each
 follows its person again) and the doubt becomes ``1 - d``; once it falls below ``floor`` the crossing is
 forgotten. The association alone never makes a swap the likelier story (``p`` is taken at most one half: it chose
-the assignment it made); while ``d`` is above one half, a track's identity is more likely wrong than right and
-is not published.
+the assignment it made); while a track's doubt over all its crossings is above one half, its identity is more
+likely wrong than right and is not published.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from face_reid_master.identity.entries import TrackRecord
+from face_reid_master.identity.entries import Chunk, TrackRecord, rows_of
+from face_reid_master.identity.evidence import CueChunk, Cues, EvidenceSource
+from face_reid_master.identity.face_list import FaceList
+from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats
+from face_reid_master.identity.track_list import TrackList
 
 __all__ = ["Crossings", "Exchange"]
 
@@ -52,43 +56,81 @@ def _logit(p: float) -> float:
 
 
 class Crossings:
-    """The doubt of each pair of crossed tracks (kept in both tracks' records, ``TrackRecord.crossed``); see the
-    module doc."""
+    """The doubt of each pair of crossed tracks (kept in both tracks' records, ``TrackRecord.crossed``) and the
+    exchanges it leads to, over the identity manager's ``tracks`` and ``faces`` (see the module doc).
+    ``drop_buffer(track)``: an unidentified track about to take a face gives up its classification buffer.
+    ``face_log_ratios`` / ``face_threshold``: the classification method's face likelihood and posterior threshold
+    (None: face observations do not weigh crossings)."""
 
-    def __init__(self, floor: float = 0.01, max_log_ratio: float = 4.0) -> None:
+    def __init__(self, tracks: TrackList, faces: FaceList, sources: Cues, stats: IdentityStats,
+                 drop_buffer: Callable[[TrackRecord], None], floor: float = 0.01, max_log_ratio: float = 4.0) -> None:
+        self.tracks = tracks
+        self.faces = faces
+        self.sources = sources
+        self.stats = stats
+        self.drop_buffer = drop_buffer
         self.floor = floor
         self.max_log_ratio = max_log_ratio
+        self.face_log_ratios: FaceLogRatios | None = None
+        self.face_threshold = 0.95
 
-    def crossed(self, a: TrackRecord, b: TrackRecord, p: float) -> None:
-        """The tracker's association may have swapped the people of ``a`` and ``b`` with probability ``p``."""
-        if a is b or (a.face_id is None and b.face_id is None):
+    # ------------------------------------------------------------------------------ the tracker's report
+    def crossed(self, a: int, b: int, p: float, stamp: float) -> None:
+        """The tracker's association may have swapped the people of tracks ``a`` and ``b`` with probability ``p``
+        (ignored unless one of them carries an identity)."""
+        tracks = self.tracks
+        if a == b or tracks.gone(a) or tracks.gone(b):
             return
+        ra, rb = tracks.entries.get(a), tracks.entries.get(b)
+        if (ra is None or ra.face_id is None) and (rb is None or rb.face_id is None):
+            return
+        ra, rb = ra or tracks.seen(a, stamp, latest=False), rb or tracks.seen(b, stamp, latest=False)
         p = min(p, 0.5)  # the association chose: it alone never makes the swap the likelier story
-        d = a.crossed.get(b.track_id, 0.0)
-        self._set(a, b, d * (1.0 - p) + (1.0 - d) * p)
+        d = ra.crossed.get(b, 0.0)
+        self._set(ra, rb, d * (1.0 - p) + (1.0 - d) * p)
 
-    @staticmethod
-    def withheld(track: TrackRecord) -> bool:
-        """Whether a crossing makes the track's identity more likely wrong than right (it is not published)."""
-        return any(d > 0.5 for d in track.crossed.values())
+    # ------------------------------------------------------------------------------ evidence
+    def weigh_faces(self, pending: dict[int, list[Chunk]], stamp: float) -> list[IdentityEvent]:
+        """The queued face observations of crossed tracks weigh their crossings (each bounded by
+        ``max_log_ratio``); the exchanges they decide (past ``face_threshold``)."""
+        events: list[IdentityEvent] = []
+        log_ratios = self.face_log_ratios
+        for tid, chunks in pending.items() if log_ratios is not None else ():
+            track = self.tracks.entries[tid]
+            if track.crossed:
+                rows = rows_of(chunks)
 
-    def doubt(self, track: TrackRecord) -> float:
-        """The probability that the track's person is not the one its identity was decided on (any crossing)."""
-        keep = 1.0
-        for d in track.crossed.values():
-            keep *= 1.0 - d
-        return 1.0 - keep
+                def of(faces: list[int], rows: F32Array = rows) -> dict[int, float] | None:
+                    lr = log_ratios(rows, faces)
+                    if lr is None:
+                        return None
+                    return dict(zip(faces, np.clip(lr, -self.max_log_ratio, self.max_log_ratio).sum(axis=0).tolist(),
+                                    strict=True))
+                events += self._weigh(track, of, self.face_threshold, stamp)
+        return events
 
-    def weigh(self, track: TrackRecord, partners: dict[int, TrackRecord], log_ratio_of: LogRatioOf,
-              threshold: float) -> list[Exchange]:
-        """Observations of a crossed ``track`` weigh each of its crossings (``partners``: the live records by id;
-        ``log_ratio_of(face ids)``: the observations' summed log ratio "same person" for each of those faces, None
-        when the cue cannot tell); the pairs now swapped with a probability above the cue's ``threshold``."""
-        out = []
+    def weigh_cue(self, source: EvidenceSource, queued: list[tuple[TrackRecord, list[CueChunk]]],
+                  stamp: float) -> list[IdentityEvent]:
+        """A cue's queued observations of crossed tracks weigh their crossings, when the cue can (it has
+        ``face_log_ratios`` and ``posterior_threshold``, as the body); the exchanges they decide."""
+        log_ratios = getattr(source, "face_log_ratios", None)
+        events: list[IdentityEvent] = []
+        for track, parts in queued if log_ratios is not None else ():
+            if track.crossed and track.track_id in self.tracks.entries:
+                events += self._weigh(track, lambda faces, p=parts: log_ratios(p, faces),
+                                      source.posterior_threshold, stamp)  # type: ignore[attr-defined]
+        return events
+
+    def _weigh(self, track: TrackRecord, log_ratio_of: LogRatioOf, threshold: float,
+               stamp: float) -> list[IdentityEvent]:
+        """Observations of a crossed ``track`` weigh each of its crossings (``log_ratio_of(face ids)``: their summed
+        log ratio "same person" for each of those faces, None when the cue cannot tell); the exchanges of the pairs
+        now swapped with a probability above ``threshold``."""
+        events = []
         for pid, d in list(track.crossed.items()):
-            other = partners.get(pid)
+            other = self.tracks.entries.get(pid)
             if other is None:
-                self.forget(track, pid)
+                track.crossed.pop(pid, None)
                 continue
             column = log_ratio_of([f for f in (track.face_id, other.face_id) if f is not None])
             if column is None:
@@ -98,33 +140,48 @@ class Crossings:
             d = 1.0 / (1.0 + math.exp(-max(-700.0, min(700.0, _logit(d) + theirs - own))))
             if d > threshold:
                 self._set(track, other, 1.0 - d)
-                out.append(Exchange(track, other, d))
+                events.append(self.exchange(Exchange(track, other, d), stamp))
             else:
                 self._set(track, other, d)
-        return out
+        return events
 
-    def face_log_ratios(self, rows: F32Array, log_ratios: FaceLogRatios) -> LogRatioOf:
-        """``log_ratio_of`` for face observations ``rows``: each observation's evidence bounded by
-        ``max_log_ratio``."""
-        def of(faces: list[int]) -> dict[int, float] | None:
-            lr = log_ratios(rows, faces)
-            if lr is None:
-                return None
-            np.clip(lr, -self.max_log_ratio, self.max_log_ratio, out=lr)
-            return dict(zip(faces, lr.sum(axis=0).tolist(), strict=True))
-        return of
+    def exchange(self, ex: Exchange, stamp: float) -> IdentityEvent:
+        """Two crossed tracks were swapped: each takes the other's identity (an unidentified one's buffer goes:
+        it was gathered on both people)."""
+        a, b = ex.first, ex.second
+        given = [(b, a.face_id, a.confidence, a.evidence, a.new_face), (a, b.face_id, b.confidence, b.evidence,
+                                                                         b.new_face)]
+        for track, fid, confidence, evidence, new in given:
+            track.inconsistent.clear()
+            if fid is None:
+                track.unassign()
+                continue
+            if track.face_id is None:
+                self.drop_buffer(track)
+            track.give(fid, confidence, evidence, new)
+            track.face_confirmed_s = -math.inf
+            self.faces.entries[fid].track_id = track.track_id
+            self.sources.track_identified(track.track_id, fid)
+        self.stats.crossings_exchanged += 1
+        return IdentityEvent(IdentityEventKind.EXCHANGED, a.track_id, a.face_id or 0, stamp, ex.probability,
+                             partner=b.track_id)
 
-    def forget(self, track: TrackRecord, partner: int, records: dict[int, TrackRecord] | None = None) -> None:
-        """The crossing of ``track`` with ``partner`` is over (both records, when ``records`` has the partner)."""
-        track.crossed.pop(partner, None)
-        other = None if records is None else records.get(partner)
-        if other is not None:
-            other.crossed.pop(track.track_id, None)
+    # ------------------------------------------------------------------------------ queries and ends
+    @staticmethod
+    def doubt(track: TrackRecord) -> float:
+        """The probability that the track's person is not the one its identity was decided on (any crossing)."""
+        keep = 1.0
+        for d in track.crossed.values():
+            keep *= 1.0 - d
+        return 1.0 - keep
 
-    def forget_all(self, track: TrackRecord, records: dict[int, TrackRecord]) -> None:
+    def forget_all(self, track: TrackRecord) -> None:
         """The track is gone or identified afresh: its crossings are over (in its partners' records too)."""
         for pid in list(track.crossed):
-            self.forget(track, pid, records)
+            track.crossed.pop(pid, None)
+            other = self.tracks.entries.get(pid)
+            if other is not None:
+                other.crossed.pop(track.track_id, None)
 
     def _set(self, a: TrackRecord, b: TrackRecord, d: float) -> None:
         if d < self.floor:
@@ -132,8 +189,3 @@ class Crossings:
             b.crossed.pop(a.track_id, None)
         else:
             a.crossed[b.track_id] = b.crossed[a.track_id] = d
-
-    @staticmethod
-    def partners(tracks: Iterable[TrackRecord]) -> set[int]:
-        """The ids of the tracks crossed with any of ``tracks``."""
-        return {pid for t in tracks for pid in t.crossed}

@@ -19,6 +19,7 @@ import numpy as np
 
 from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.face_list import FaceList
+from face_reid_master.identity.records import IdentityStats
 
 __all__ = ["HeldFace", "HeldFaces"]
 
@@ -31,14 +32,20 @@ class HeldFace:
     holder: TrackRecord
     duplicate: bool
 
+    @property
+    def since_s(self) -> float:
+        """Since when the holder may have carried someone else (its last sight of the face, or its start)."""
+        return max(self.holder.face_confirmed_s, self.holder.first_seen_s)
+
 
 class HeldFaces:
     """Finds the held face a "new person" decision would duplicate (a majority of the buffered features within
     ``gate_distance`` of it; None = off, the paper)."""
 
-    def __init__(self, gate_distance: float | None, faces: FaceList) -> None:
+    def __init__(self, gate_distance: float | None, faces: FaceList, stats: IdentityStats) -> None:
         self.gate_distance = gate_distance
         self.faces = faces
+        self.stats = stats
         # metres between two live tracks now (inf: unknown); the master core gives the tracker's
         self.apart: Callable[[int, int], float] = lambda a, b: math.inf
         self.duplicate_within_m = 1.0
@@ -64,4 +71,8 @@ class HeldFaces:
         holder = tracks[face.track_id]  # type: ignore[index]
         duplicate = (holder.face_confirmed_s >= track.buffer_since_s
                      or self.apart(holder.track_id, track.track_id) < self.duplicate_within_m)
+        if duplicate:
+            self.stats.new_ids_held_waiting += 1
+        else:
+            self.stats.held_faces_taken += 1
         return HeldFace(face.face_id, holder, duplicate)

@@ -17,7 +17,8 @@ from itertools import accumulate
 import numpy as np
 import numpy.typing as npt
 
-from face_reid_master.identity.entries import Chunk, TrackRecord
+from face_reid_master.identity.entries import Chunk, FaceEntry, TrackRecord
+from face_reid_master.identity.evidence import Evidence
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityStats
 
@@ -58,6 +59,27 @@ class SwapGuard:
         self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
         ends = list(accumulate(counts))
         return {tid: keep[end - n:end] for tid, n, end in zip(ident, counts, ends, strict=True)}
+
+    def learn(self, track: TrackRecord, face: FaceEntry, chunks: list[Chunk], obs: F32Array,
+              keep: npt.NDArray[np.bool_] | None, stamp: float) -> tuple[F32Array | None, list[Chunk] | None]:
+        """An identified track's observations (``keep``: which its face accepts; None: all): the rows its face
+        learns (None: none) and, when they show a swap, the chunks the released track goes on with (the face then
+        learned what was its person's already)."""
+        face.n_observations += obs.shape[0]
+        face.last_seen_s = max(face.last_seen_s, stamp)
+        if keep is not None:
+            swapped = self.swapped(track, chunks, keep)
+            obs = obs if keep.all() else obs[keep]
+            if swapped is not None:
+                if obs.shape[0]:
+                    self.bank.add_features(face.slot, obs)
+                return None, swapped
+            if obs.shape[0] == 0:
+                return None, None
+        track.face_confirmed_s = max(track.face_confirmed_s, chunks[-1].stamp_s)
+        if track.evidence not in (Evidence.FACE, Evidence.BOTH):
+            track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
+        return obs, None
 
     def swapped(self, track: TrackRecord, chunks: list[Chunk], keep: npt.NDArray[np.bool_]) -> list[Chunk] | None:
         """Follow the identified track's run of inconsistent observations; once it is
