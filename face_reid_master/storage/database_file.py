@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import os
 import sqlite3
 from collections.abc import Iterator
@@ -25,8 +26,10 @@ from face_reid_master.identity.predefined_people import check_person_name
 from face_reid_master.identity.records import LearnedFace
 from face_reid_master.storage.errors import FaceStoreError
 
-__all__ = ["SCHEMA_VERSION", "VECTOR_DTYPE", "CorruptStore", "FaceDatabaseFile", "decode_face", "salvage_faces",
-           "salvage_people", "set_meta", "transaction"]
+__all__ = ["SCHEMA_VERSION", "VECTOR_DTYPE", "CorruptStore", "FaceDatabaseFile", "bump_max_face_id", "decode_face",
+           "salvage_faces", "scrub_wal", "set_meta", "transaction"]
+
+_LOG = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 1
 _DEFAULT_DIM = 128
@@ -108,6 +111,27 @@ def transaction(conn: sqlite3.Connection, path: Path) -> Iterator[sqlite3.Connec
             raise
     except sqlite3.Error as exc:
         raise FaceStoreError(f"face store {path}: {exc}") from exc
+
+
+def bump_max_face_id(conn: sqlite3.Connection, face_id: int) -> None:
+    """Raise the store's ``max_face_id`` (never lowered: new faces get ids above it) to ``face_id``."""
+    conn.execute(
+        "INSERT INTO meta(key, value) VALUES ('max_face_id', ?) ON CONFLICT(key) DO UPDATE SET "
+        "value = CAST(MAX(CAST(value AS INTEGER), CAST(excluded.value AS INTEGER)) AS TEXT)",
+        (str(face_id),),
+    )
+
+
+def scrub_wal(conn: sqlite3.Connection, path: Path) -> None:
+    """Checkpoint every WAL frame into the (zeroed) database pages and truncate the WAL to 0 bytes: what was
+    deleted is then gone from both files."""
+    try:
+        busy, _, _ = conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
+    except sqlite3.Error as exc:
+        raise FaceStoreError(f"face store {path}: WAL checkpoint failed: {exc}") from exc
+    if busy:
+        _LOG.warning("face store %s: WAL checkpoint blocked by a reader; deleted data may stay in %s-wal until the "
+                     "next checkpoint", path, path.name)
 
 
 class FaceDatabaseFile:
@@ -280,31 +304,3 @@ def salvage_faces(backup: Path, dim: int) -> tuple[list[LearnedFace], int | str]
         conn.close()
     return faces, total
 
-
-def salvage_people(backup: Path, dim: int) -> list[tuple[str, np.ndarray, float]]:
-    """Every person named at run time still readable from a corrupt face store moved aside to ``backup``: (name,
-    (k, ``dim``) float32 embeddings, when added)."""
-    out: list[tuple[str, np.ndarray, float]] = []
-    try:
-        conn = sqlite3.connect(f"{backup.as_uri()}?mode=ro", uri=True)
-    except sqlite3.Error:
-        return out
-    width = dim * VECTOR_DTYPE.itemsize
-    try:
-        conn.execute("PRAGMA trusted_schema=OFF")
-        for name, added_s in conn.execute("SELECT name, added_s FROM people ORDER BY name").fetchall():
-            try:
-                blobs = [b for (b,) in conn.execute("SELECT vector FROM person_features WHERE name = ? ORDER BY idx",
-                                                    (name,))]
-                if not blobs or any(not isinstance(b, bytes) or len(b) != width for b in blobs):
-                    continue
-                rows = np.frombuffer(b"".join(blobs), dtype=VECTOR_DTYPE).reshape(len(blobs), -1).astype(np.float32)
-                if np.all(np.isfinite(rows)):
-                    out.append((check_person_name(name), rows, float(added_s)))
-            except (sqlite3.Error, ValueError, TypeError):
-                continue
-    except sqlite3.Error:  # no people tables (an earlier version), or unreadable
-        pass
-    finally:
-        conn.close()
-    return out

@@ -1,8 +1,9 @@
 """Persistent memory of the master: learned faces (biometric data) in one SQLite file, private to the user.
 
 One file (default :func:`default_db_path`) holds every learned face: its id, optional name, counters and
-bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.records`), and the people named at run time
-(``face-reid-faces add``: a name and its photos' embeddings, :meth:`FaceStore.save_person`).  Privacy measures:
+bounded feature set (``LearnedFace`` of :mod:`face_reid_master.identity.records`; written by :mod:`.face_rows`), and
+the people named at run time (``face-reid-faces add``: a name and its photos' embeddings, :mod:`.kept_people`, to
+which :meth:`FaceStore.save_person` and the like delegate).  Privacy measures:
 
 * the file, its ``-wal``/``-shm`` companions and backups are mode 0600, a directory we create is 0700;
   an existing file with broader permissions is fixed and a warning logged;
@@ -31,7 +32,6 @@ import logging
 import math
 import os
 import sqlite3
-import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,16 +45,18 @@ from face_reid_master.identity.predefined_people import check_person_name
 from face_reid_master.identity.records import LearnedFace, check_face_id
 from face_reid_master.storage.database_file import (
     SCHEMA_VERSION,
-    VECTOR_DTYPE,
     CorruptStore,
     FaceDatabaseFile,
+    bump_max_face_id,
     decode_face,
     salvage_faces,
-    salvage_people,
+    scrub_wal,
     transaction,
 )
 from face_reid_master.storage.errors import FaceStoreError, FaceStoreLockedError
+from face_reid_master.storage.face_rows import FaceRows
 from face_reid_master.storage.id_ledger import IdLedger
+from face_reid_master.storage.kept_people import KeptPeople, PersonSummary
 from face_reid_master.storage.private_file import ensure_private_parent, move_aside, open_locked, secure_sidecars
 
 __all__ = [
@@ -79,15 +81,6 @@ class FaceSummary:
     n_observations: int
     created_s: float
     last_seen_s: float
-
-
-@dataclass(frozen=True)
-class PersonSummary:
-    """One person named at run time, without the embeddings (for listings)."""
-
-    name: str
-    n_embeddings: int
-    added_s: float
 
 
 def default_db_path() -> Path:
@@ -164,13 +157,10 @@ class FaceStore:
         self.lost_face_ids: list[int] = []  # saved once, missing from the database at open (reported loudly)
         self.salvaged_face_ids: list[int] = []  # faces read back from a corrupt file moved aside
         self._ledger = IdLedger(self.path)
-        # face id -> (hash of all its features, hash of each row), as this connection last committed them: a face
-        # saved again rewrites only the rows that changed (the feature bank replaces one row at a time), none
-        # when its features did not change (then only its counters)
-        self._row_hashes: dict[int, tuple[int, list[int]]] = {}
+        self._rows = FaceRows()  # a face saved again rewrites only the feature rows that changed
+        self._people = KeptPeople(self._file)
         self._lock_fd: int | None = None
         self._conn: sqlite3.Connection | None = None
-        self._salvaged_people: list[tuple[str, npt.NDArray[np.float32], float]] = []  # of a corrupt file
         if (not create or self.read_only) and not os.path.lexists(self.path):
             raise FaceStoreError(f"no face store at {self.path}")
         ensure_private_parent(self.path, self.read_only)
@@ -183,8 +173,7 @@ class FaceStore:
         if not self.read_only:
             secure_sidecars(self.path)
         self._check_ledger(salvaged)
-        for name, rows, added_s in self._salvaged_people:  # written into the fresh store, as the faces are
-            self.save_person(name, rows, added_s)
+        self._people.restore_salvaged(self._db)  # a corrupt file's people, written into the fresh store as its faces
 
     @property
     def embedding_dim(self) -> int:
@@ -245,10 +234,7 @@ class FaceStore:
         if backup is None:
             return []
         faces, total = salvage_faces(backup, self.embedding_dim)
-        self._salvaged_people = salvage_people(backup, self.embedding_dim)
-        if self._salvaged_people:
-            _LOG.error("FACE STORE CORRUPT: %s: recovered %d person(s) named at run time from %s", self.path,
-                       len(self._salvaged_people), backup)
+        self._people.salvage(backup)
         self.salvaged_face_ids = sorted(f.face_id for f in faces)
         _LOG.error("FACE STORE CORRUPT: %s: recovered %d of %s faces from %s (ids %s)", self.path, len(faces), total,
                    backup, ", ".join(map(str, self.salvaged_face_ids[:50])) or "none")
@@ -260,8 +246,8 @@ class FaceStore:
         if salvaged:
             with self._transaction() as conn:
                 for face in salvaged:
-                    self._write_face(conn, face, self._encode(face))
-                self._bump_max_face_id(conn, max(f.face_id for f in salvaged))
+                    self._rows.write(conn, face, self._rows.encode(face, self.embedding_dim))
+                bump_max_face_id(conn, max(f.face_id for f in salvaged))
         self.lost_face_ids = self._ledger.reconcile(set(self.face_ids()), self._meta_max_face_id(),
                                                     write=not self.read_only)
 
@@ -275,84 +261,15 @@ class FaceStore:
     def _transaction(self) -> contextlib.AbstractContextManager[sqlite3.Connection]:
         return transaction(self._db, self.path)
 
-    def _encode(self, face: LearnedFace) -> npt.NDArray[np.float32]:
-        """The face's features as stored (contiguous little-endian float32); ValueError for an invalid face."""
-        if not isinstance(face, LearnedFace):
-            raise ValueError(f"expected a LearnedFace, got {type(face).__name__}")
-        feats = face.features
-        if feats.shape[1] != self.embedding_dim:
-            raise ValueError(
-                f"face {face.face_id}: features have dim {feats.shape[1]}, expected {self.embedding_dim}"
-            )
-        if not np.all(np.isfinite(feats)):
-            raise ValueError(f"face {face.face_id}: features contain NaN or Inf")
-        return np.ascontiguousarray(feats, dtype=VECTOR_DTYPE)
-
-    def _write_face(self, conn: sqlite3.Connection, face: LearnedFace, raw: npt.NDArray[np.float32]
-                    ) -> tuple[int, list[int]]:
-        """Upsert the face's row and its feature rows; returns the hash of all its features and of each row (for
-        :attr:`_row_hashes` once committed). Only rows that differ from what this connection last committed are
-        written (none when no feature changed), when the stored row count still matches (else, e.g. after
-        another process touched the face, all of them)."""
-        fid = face.face_id
-        conn.execute(
-            "INSERT INTO faces(face_id, name, created_s, last_seen_s, n_observations) VALUES (?, ?, ?, ?, ?) "
-            "ON CONFLICT(face_id) DO UPDATE SET name = excluded.name, created_s = excluded.created_s, "
-            "last_seen_s = excluded.last_seen_s, n_observations = excluded.n_observations",
-            (fid, face.name, face.created_s, face.last_seen_s, face.n_observations),
-        )
-        digest = hash(raw.tobytes())
-        old = self._row_hashes.get(fid)
-        same_count = old is not None and conn.execute("SELECT COUNT(*) FROM features WHERE face_id = ?",
-                                                      (fid,)).fetchone()[0] == len(old[1])
-        if same_count and old is not None and old[0] == digest and len(old[1]) == raw.shape[0]:
-            return old  # the features are stored as they are
-        rows = [(fid, i, raw[i].tobytes()) for i in range(raw.shape[0])]
-        hashes = [hash(r[2]) for r in rows]
-        if same_count and old is not None:
-            changed = [r for i, r in enumerate(rows) if i >= len(old[1]) or old[1][i] != hashes[i]]
-            conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?) "
-                             "ON CONFLICT(face_id, idx) DO UPDATE SET vector = excluded.vector", changed)
-            if len(old[1]) > len(rows):
-                conn.execute("DELETE FROM features WHERE face_id = ? AND idx >= ?", (fid, len(rows)))
-        else:
-            conn.execute("DELETE FROM features WHERE face_id = ?", (fid,))
-            conn.executemany("INSERT INTO features(face_id, idx, vector) VALUES (?, ?, ?)", rows)
-        return digest, hashes
-
-    @staticmethod
-    def _bump_max_face_id(conn: sqlite3.Connection, face_id: int) -> None:
-        conn.execute(
-            "INSERT INTO meta(key, value) VALUES ('max_face_id', ?) ON CONFLICT(key) DO UPDATE SET "
-            "value = CAST(MAX(CAST(value AS INTEGER), CAST(excluded.value AS INTEGER)) AS TEXT)",
-            (str(face_id),),
-        )
-
     def _delete_ids(self, face_ids: list[int]) -> None:
         """Delete faces + features in one transaction, then scrub the WAL (secure_delete zeroed the pages)."""
         if not face_ids:
             return
-        for f in face_ids:
-            self._row_hashes.pop(f, None)
+        self._rows.unknown(face_ids)
         with self._transaction() as conn:
-            conn.executemany("DELETE FROM features WHERE face_id = ?", [(f,) for f in face_ids])
-            conn.executemany("DELETE FROM faces WHERE face_id = ?", [(f,) for f in face_ids])
+            self._rows.delete(conn, face_ids)
         self._ledger.remove(face_ids)
-        self._scrub_wal()
-
-    def _scrub_wal(self) -> None:
-        """Checkpoint every WAL frame into the (zeroed) database pages and truncate the WAL to 0 bytes."""
-        try:
-            busy, _, _ = self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
-        except sqlite3.Error as exc:
-            raise FaceStoreError(f"face store {self.path}: WAL checkpoint failed: {exc}") from exc
-        if busy:
-            _LOG.warning(
-                "face store %s: WAL checkpoint blocked by a reader; deleted data may stay in %s-wal until "
-                "the next checkpoint",
-                self.path,
-                self.path.name,
-            )
+        scrub_wal(self._db, self.path)
 
     # ------------------------------------------------------------------------------ public API
     def save_face(self, face: LearnedFace) -> None:
@@ -361,7 +278,7 @@ class FaceStore:
 
     def save_faces(self, faces: Iterable[LearnedFace]) -> int:
         """Insert or replace several faces in one transaction (all or nothing); returns how many."""
-        batch = [(f, self._encode(f)) for f in faces]
+        batch = [(f, self._rows.encode(f, self.embedding_dim)) for f in faces]
         ids = [f.face_id for f, _ in batch]
         if len(ids) != len(set(ids)):
             raise ValueError("save_faces: duplicate face ids in the batch")
@@ -369,13 +286,12 @@ class FaceStore:
             return 0
         try:
             with self._transaction() as conn:
-                written = {face.face_id: self._write_face(conn, face, raw) for face, raw in batch}
-                self._bump_max_face_id(conn, max(ids))
+                written = {face.face_id: self._rows.write(conn, face, raw) for face, raw in batch}
+                bump_max_face_id(conn, max(ids))
         except BaseException:
-            for fid in ids:  # rolled back: what is stored is not known any more
-                self._row_hashes.pop(fid, None)
+            self._rows.unknown(ids)  # rolled back: what is stored is not known any more
             raise
-        self._row_hashes.update(written)
+        self._rows.committed(written)
         self._ledger.add(ids)
         return len(batch)
 
@@ -425,7 +341,7 @@ class FaceStore:
         if self.read_only:
             raise FaceStoreError(f"face store {self.path} is open read-only: no face id can be reserved")
         with self._transaction() as conn:
-            self._bump_max_face_id(conn, upto)
+            bump_max_face_id(conn, upto)
         self._ledger.reserve(upto)
 
     def _meta_max_face_id(self) -> int:
@@ -502,78 +418,21 @@ class FaceStore:
         ]
 
     # ------------------------------------------------------------------------------ people named at run time
-    def _has_people(self) -> bool:
-        """Whether the file has the people tables (a store of an earlier version opened read-only has not)."""
-        return self._db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'person_features'"
-                                ).fetchone() is not None
-
     def save_person(self, name: str, embeddings: Any, added_s: float | None = None) -> int:
-        """Keep (or replace) a person named at run time: ``name`` and the (k, embedding_dim) embeddings of their
-        photos, committed on return; how many embeddings. ValueError for a bad name or array."""
-        name = check_person_name(name)
-        rows = np.asarray(embeddings)
-        if rows.ndim != 2 or rows.shape[0] < 1 or rows.shape[1] != self.embedding_dim:
-            raise ValueError(f"embeddings of {name!r} must have shape (k >= 1, {self.embedding_dim}), got {rows.shape}")
-        if rows.dtype == np.bool_ or not np.issubdtype(rows.dtype, np.number) or not np.all(np.isfinite(rows)):
-            raise ValueError(f"embeddings of {name!r} must be finite real numbers")
-        if self.read_only:
-            raise FaceStoreError(f"face store {self.path} is open read-only: {name!r} cannot be kept")
-        raw = np.ascontiguousarray(rows, dtype=VECTOR_DTYPE)
-        stamp = time.time() if added_s is None else float(added_s)
-        with self._transaction() as conn:
-            conn.execute("DELETE FROM person_features WHERE name = ?", (name,))
-            conn.execute("INSERT INTO people(name, added_s) VALUES (?, ?) ON CONFLICT(name) DO UPDATE SET "
-                         "added_s = excluded.added_s", (name, stamp))
-            conn.executemany("INSERT INTO person_features(name, idx, vector) VALUES (?, ?, ?)",
-                             [(name, i, raw[i].tobytes()) for i in range(raw.shape[0])])
-        return int(raw.shape[0])
+        """Keep (or replace) a person named at run time: :meth:`KeptPeople.save`."""
+        return self._people.save(self._db, name, embeddings, added_s)
 
     def load_people(self) -> dict[str, npt.NDArray[np.float32]]:
-        """The people named at run time: name -> (k, embedding_dim) float32, names sorted (a person whose stored
-        data is invalid is skipped with an ERROR log)."""
-        if not self._has_people():
-            return {}
-        blobs: dict[str, list[bytes]] = {}
-        for name, blob in self._db.execute("SELECT p.name, v.vector FROM people p JOIN person_features v "
-                                           "ON v.name = p.name ORDER BY p.name, v.idx"):
-            blobs.setdefault(name, []).append(blob)
-        width = self.embedding_dim * VECTOR_DTYPE.itemsize
-        out: dict[str, npt.NDArray[np.float32]] = {}
-        for name, rows in blobs.items():
-            try:
-                check_person_name(name)
-                if any(not isinstance(b, bytes) or len(b) != width for b in rows):
-                    raise ValueError(f"stored vectors are not {width} bytes each")
-                feats = np.frombuffer(b"".join(rows), dtype=VECTOR_DTYPE).reshape(len(rows), -1).astype(np.float32)
-                if not np.all(np.isfinite(feats)):
-                    raise ValueError("stored vectors hold NaN or Inf")
-            except ValueError as exc:
-                _LOG.error("face store %s: skipping an invalid stored person: %s", self.path, exc)
-                continue
-            out[name] = feats
-        return out
+        """The people named at run time, name -> embeddings: :meth:`KeptPeople.load`."""
+        return self._people.load(self._db)
 
     def list_people(self) -> list[PersonSummary]:
-        """Summaries of the people named at run time (no vectors), sorted by name."""
-        if not self._has_people():
-            return []
-        rows = self._db.execute("SELECT p.name, COUNT(v.idx), p.added_s FROM people p LEFT JOIN person_features v "
-                                "ON v.name = p.name GROUP BY p.name ORDER BY p.name").fetchall()
-        return [PersonSummary(str(r[0]), int(r[1]), float(r[2])) for r in rows]
+        """Summaries of the people named at run time, sorted by name: :meth:`KeptPeople.summaries`."""
+        return self._people.summaries(self._db)
 
     def forget_person(self, name: str) -> bool:
-        """Delete a person named at run time and their embeddings for good (zeroed pages, WAL truncated); False
-        if no such person is kept."""
-        if not isinstance(name, str) or not name:
-            raise ValueError(f"name must be a non-empty str, got {name!r}")
-        if not self._has_people() or not self._db.execute("SELECT 1 FROM people WHERE name = ?", (name,)).fetchone():
-            return False
-        with self._transaction() as conn:
-            conn.execute("DELETE FROM person_features WHERE name = ?", (name,))
-            conn.execute("DELETE FROM people WHERE name = ?", (name,))
-        self._scrub_wal()
-        _LOG.info("face store %s: forgot the person %r", self.path, name)
-        return True
+        """Delete a person named at run time for good: :meth:`KeptPeople.forget`."""
+        return self._people.forget(self._db, name)
 
     def integrity_ok(self) -> bool:
         """Run ``PRAGMA integrity_check`` now (diagnostics)."""
