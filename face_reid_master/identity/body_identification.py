@@ -61,8 +61,7 @@ class BodyIdentification:
         for track, parts in queued:
             for emb, t, source, heights in parts:
                 if track.face_id is not None:
-                    if not track.crossed:  # a track maybe swapped does not teach its face's gallery
-                        self.evidence.add_face_bodies(track.face_id, emb, t, heights)
+                    self.evidence.add_face_bodies(track.face_id, emb, t, heights)
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
                     self.evidence.observe(track.track_id, emb, t, face_ids if track.slot is None else [], source,
                                           heights)

@@ -1,19 +1,20 @@
 """Crossings carry doubt: two tracks the tracker could have swapped share the probability that it did, until the
 evidence on either track decides it.
 
-The tracker reports, per frame, the pairs of tracks its association could have given each other's person, with
-the probability ``p`` that it did. For a pair of which at least one track carries an identity, the doubt ``d``
-(the probability that the two tracks' people are exchanged) follows the frames as an odd number of swaps:
+The tracker reports, per frame, the pairs of tracks its association could have given each other's person, with the
+probability ``p`` that it did. For a pair of which at least one track carries an identity, the doubt ``d`` (the
+probability that the two tracks' people are exchanged) follows the frames as an odd number of swaps:
 ``d <- d (1 - p) + (1 - d) p``. A face observation on either track then weighs the two hypotheses with the face
-likelihood: observed on track A, it is A's identity's person if they were not swapped and B's if they were
-(an unidentified track's identity is "someone not learned", log ratio 0), so
+likelihood: observed on track A, it is A's identity's person if they were not swapped and B's if they were (an
+unidentified track's identity is "someone not learned", log ratio 0), so
 ``logit d += log_ratio(B's face) - log_ratio(A's face)``, each observation bounded by ``max_log_ratio``; body
 observations weigh it likewise against the faces' recent bodies. Once ``d`` passes the cue's decision threshold
 (the face's or the body's posterior threshold) the tracks exchange their identities (and published ids: each
-follows its person again) and the doubt becomes ``1 - d``; once it falls below ``floor`` the crossing is
-forgotten. The association alone never makes a swap the likelier story (``p`` is taken at most one half: it chose
-the assignment it made); while a track's doubt over all its crossings is above one half, its identity is more
-likely wrong than right and is not published.
+follows its person again) and the doubt becomes ``1 - d``; when the evidence came from an identified track whose
+partner has no identity, it shows only whom the track is not: the track lets its face go, undecided. Below
+``floor`` the crossing is forgotten. The association alone never makes a swap the likelier story (``p`` is taken
+at most one half: it chose the assignment it made); while a track's doubt over all its crossings is above one half,
+its identity is more likely wrong than right and is not published.
 """
 
 from __future__ import annotations
@@ -138,7 +139,11 @@ class Crossings:
             own = column.get(track.face_id, 0.0) if track.face_id is not None else 0.0
             theirs = column.get(other.face_id, 0.0) if other.face_id is not None else 0.0
             d = 1.0 / (1.0 + math.exp(-max(-700.0, min(700.0, _logit(d) + theirs - own))))
-            if d > threshold:
+            if d > threshold and track.face_id is not None and other.face_id is None:
+                track.crossed.pop(pid, None)  # its evidence says only whom it is not: it lets its face go
+                other.crossed.pop(track.track_id, None)
+                events.append(self.release(track, stamp))
+            elif d > threshold:
                 self._set(track, other, 1.0 - d)
                 events.append(self.exchange(Exchange(track, other, d), stamp))
             else:
@@ -165,6 +170,17 @@ class Crossings:
         self.stats.crossings_exchanged += 1
         return IdentityEvent(IdentityEventKind.EXCHANGED, a.track_id, a.face_id or 0, stamp, ex.probability,
                              partner=b.track_id)
+
+    def release(self, track: TrackRecord, stamp: float) -> IdentityEvent:
+        """A crossed track's evidence shows it is not its face's person, and its partner had no identity to give:
+        the face returns to face_list, the track goes on undecided (as a swap the swap guard found)."""
+        assert track.face_id is not None
+        fid, confidence = track.face_id, track.confidence
+        self.faces.make_available(fid)
+        track.unassign()
+        track.inconsistent.clear()
+        self.stats.swaps_released += 1
+        return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, stamp)
 
     # ------------------------------------------------------------------------------ queries and ends
     @staticmethod
