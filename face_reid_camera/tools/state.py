@@ -30,9 +30,10 @@ EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[1].replace("``", ""))
     parser.add_argument("node", help="the node's full name, e.g. /face_reid_master or /cam_a/face_reid_camera")
-    parser.add_argument("transition", choices=[*TRANSITIONS, QUERY])
+    parser.add_argument("transition", choices=[*TRANSITIONS, QUERY],
+                        help="the lifecycle transition to ask for, or get (print the node's state)")
     parser.add_argument("--key", default="", help="the network key file (a secured node takes nothing else)")
-    parser.add_argument("--timeout-s", type=float, default=20.0, help="how long to wait for the node (s)")
+    parser.add_argument("--timeout-s", type=float, default=20.0, help="how long to wait for the node (s; default 20)")
     return parser
 
 
