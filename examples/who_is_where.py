@@ -39,7 +39,8 @@ def main() -> int:
 
     def on_tracks(msg: NamedTrackArray) -> None:
         lines = [line for line in map(describe, msg.tracks) if line]
-        print(f"{len(lines)} people in '{msg.header.frame_id}':", *lines, sep="\n  ", flush=True)
+        # one write per message: a Ctrl-C while printing cuts no message in half
+        print("\n  ".join([f"{len(lines)} people in '{msg.header.frame_id}':", *lines]), flush=True)
         seen[0] += 1
 
     rclpy.init()
