@@ -39,14 +39,17 @@ def main() -> int:
 
     def on_tracks(msg: NamedTrackArray) -> None:
         lines = [line for line in map(describe, msg.tracks) if line]
-        print(f"{len(lines)} people in '{msg.header.frame_id}':", *lines, sep="\n  ", flush=True)
+        # one write per message: a Ctrl-C while printing cuts no message in half
+        print("\n  ".join([f"{len(lines)} people in '{msg.header.frame_id}':", *lines]), flush=True)
         seen[0] += 1
 
     rclpy.init()
     node = rclpy.create_node("who_is_where")
     try:
-        tracks = subscribe_tracks(node, on_tracks, "/tracks_named", key)  # checks sealed tracks; says when a key
-        print(f"who_is_where: waiting for {'sealed ' if key else ''}tracks on {tracks.listening} "  # is needed
+        # checks sealed tracks; says when a key is needed, and how to give it
+        tracks = subscribe_tracks(node, on_tracks, "/tracks_named", key,
+                                  key_hint="give the network's key file as KEYFILE (who_is_where.py 0 KEYFILE)")
+        print(f"who_is_where: waiting for {'sealed ' if key else ''}tracks on {tracks.listening} "
               f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}); Ctrl-C ends", file=sys.stderr, flush=True)
         while rclpy.ok() and (count == 0 or seen[0] < count):
             rclpy.spin_once(node, timeout_sec=0.5)

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 
 from face_reid_camera.common.sealing import Opener, Sealed, SealError
 
-__all__ = ["SEALED_SUFFIX", "TRACKS_PURPOSE", "NetworkCheck", "TracksVerifier", "check_network", "sealed_topic"]
+__all__ = ["KEY_HINT", "SEALED_SUFFIX", "TRACKS_PURPOSE", "NetworkCheck", "TracksVerifier", "check_network",
+           "sealed_topic"]
 
 TRACKS_PURPOSE = "tracks"  # the seal's purpose (in its authenticated data): not "frames", not a request's
 SEALED_SUFFIX = "_sealed"
@@ -76,17 +77,21 @@ class NetworkCheck:
     problem: str  # '' = none; else one line for the log (an error without the key, a warning with it)
 
 
+KEY_HINT = "set network_key_path (the key file of the network)"  # how a node is given the key
+
+
 def check_network(topics: Iterable[tuple[str, Iterable[str]]], topic: str, have_key: bool,
-                  plain_publishers: int) -> NetworkCheck:
+                  plain_publishers: int, key_hint: str = KEY_HINT) -> NetworkCheck:
     """The state of the tracks topics for a consumer of ``topic`` (with or without the network key), from the
-    graph's ``(name, types)`` pairs and the plain topic's publisher count."""
+    graph's ``(name, types)`` pairs and the plain topic's publisher count; ``key_hint``: how this consumer is
+    given the key (a node's parameter, a tool's argument)."""
     sealed = sealed_topic(topic)
     secured = any(name == sealed and SEALED_TYPE in types for name, types in topics)
     problem = ""
     if not have_key and secured:
-        problem = (f"tracks are sealed: {sealed} carries this network's tracks sealed with its key; set "
-                   f"network_key_path (the key file of the network) to read them. Tracks on {topic} are refused "
-                   "meanwhile: a secured master does not publish there, so they can only be spoofed")
+        problem = (f"tracks are sealed: {sealed} carries this network's tracks sealed with its key; {key_hint} "
+                   f"to read them. Tracks on {topic} are refused meanwhile: a secured master does not publish there, "
+                   "so they can only be spoofed")
     elif have_key and plain_publishers:
         problem = (f"{plain_publishers} publisher(s) of unsealed tracks on {topic}: ignored (this consumer has the "
                    f"network key and takes only tracks sealed with it, on {sealed}); an unsecured master, or a "

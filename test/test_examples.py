@@ -105,6 +105,42 @@ def test_the_examples_run_as_commands_say_what_they_wait_for_and_end_cleanly_on_
     assert out == ""
 
 
+def test_who_is_where_without_the_key_on_a_secured_network_says_how_to_give_it(ros_context,
+                                                                               ros_domain_id: int) -> None:
+    """A secured master's sealed tracks topic exists: the example, run without KEYFILE, says that the tracks are
+    sealed and that the key file is its KEYFILE argument (a node's network_key_path means nothing to its user)."""
+    import signal
+    import time
+
+    import rclpy
+
+    from face_reid_master.demo.children import child_env
+    from face_reid_msgs.msg import Sealed
+
+    node = rclpy.create_node("secured_master_stand_in", context=ros_context())
+    node.create_publisher(Sealed, "/tracks_named_sealed", 10)  # its topic in the graph is what the example checks
+    proc = subprocess.Popen([sys.executable, str(EXAMPLE)], env=child_env(ros_domain_id), cwd=REPO_ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    said: list[str] = []
+    try:
+        assert proc.stderr is not None
+        deadline = time.monotonic() + 120.0  # a barrier: read its lines until it says the tracks are sealed
+        while time.monotonic() < deadline and not any("tracks are sealed" in line for line in said):
+            line = proc.stderr.readline()
+            if not line:
+                break
+            said.append(line)
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+    sealed = [line for line in said if "tracks are sealed" in line]
+    assert sealed and "who_is_where.py 0 KEYFILE" in sealed[0], said  # before: "set network_key_path"
+    assert "network_key_path" not in sealed[0] and proc.returncode == 0
+
+
 def test_who_is_where_names_an_unusable_key_file_in_one_line(tmp_path, ros_domain_id: int) -> None:
     from face_reid_master.demo.children import child_env
 

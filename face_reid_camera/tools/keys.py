@@ -19,10 +19,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="face-reid-keys", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     new = sub.add_parser("new", help="write a new random network key (mode 0600)")
-    new.add_argument("path")
+    new.add_argument("path", help="the key file to write, e.g. ~/.config/face_reid/network.key")
     new.add_argument("--force", action="store_true", help="overwrite an existing key (every host needs the new one)")
     check = sub.add_parser("check", help="check that a key file is usable (private, well-formed)")
-    check.add_argument("path")
+    check.add_argument("path", help="the key file to check")
     args = parser.parse_args(argv)
     try:
         if args.command == "new":

@@ -21,7 +21,7 @@ from typing import Any
 from face_reid_camera.common.ros.service_call import SealedCaller, call_service
 from face_reid_camera.common.transitions import QUERY, TRANSITIONS, TransitionError, plan
 
-__all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main", "outcome_line"]
+__all__ = ["EXIT_OK", "EXIT_REFUSED", "EXIT_UNREACHABLE", "EXIT_USAGE", "main", "outcome_line", "unreachable_line"]
 
 PROG = "face-reid-state"
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
@@ -30,9 +30,10 @@ EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_UNREACHABLE = 0, 1, 2, 5
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[1].replace("``", ""))
     parser.add_argument("node", help="the node's full name, e.g. /face_reid_master or /cam_a/face_reid_camera")
-    parser.add_argument("transition", choices=[*TRANSITIONS, QUERY])
+    parser.add_argument("transition", choices=[*TRANSITIONS, QUERY],
+                        help="the lifecycle transition to ask for, or get (print the node's state)")
     parser.add_argument("--key", default="", help="the network key file (a secured node takes nothing else)")
-    parser.add_argument("--timeout-s", type=float, default=20.0, help="how long to wait for the node (s)")
+    parser.add_argument("--timeout-s", type=float, default=20.0, help="how long to wait for the node (s; default 20)")
     return parser
 
 
@@ -91,7 +92,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except TimeoutError as exc:
-        print(f"{PROG}: {exc}", file=sys.stderr)
+        services = [name for name, _ in node.get_service_names_and_types()]
+        print(unreachable_line(str(exc), target, services, bool(args.key)), file=sys.stderr)
         return EXIT_UNREACHABLE
     finally:
         node.destroy_node()
@@ -101,6 +103,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OK
     print(f"{PROG}: {outcome_line(target, message, state)}", file=sys.stderr)
     return EXIT_REFUSED
+
+
+def unreachable_line(message: str, target: str, services: Sequence[str], keyed: bool) -> str:
+    """The line for a node that did not answer: without --key, a node offering only its sealed control (seen among
+    ``services``, the graph's service names) is secured: say to give --key instead of what else to check."""
+    if not keyed and f"{target}/change_state_sealed" in services:
+        return (f"{PROG}: {target} is secured (it offers only change_state_sealed): give --key with the network's "
+                "key file")
+    return f"{PROG}: {message}"
 
 
 def outcome_line(target: str, message: str, state: str) -> str:

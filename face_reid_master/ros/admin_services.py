@@ -60,6 +60,9 @@ class AdminServices:
         if not secured:
             log.warning("admin services on (admin_services: true) without a network key: any participant of this "
                         "DDS domain can call ~/add_person and ~/forget_face")
+        else:
+            log.info("admin services on (admin_services: true): ~/add_person and ~/forget_face for requests sealed "
+                     "with the network key (face-reid-faces --master NODE --key KEYFILE)")
 
     def destroy(self) -> None:
         for srv in self._services:

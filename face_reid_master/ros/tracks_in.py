@@ -22,7 +22,7 @@ from rclpy.serialization import deserialize_message
 from face_reid_camera.common.checks import shown
 from face_reid_camera.common.ros.sealed import unpack
 from face_reid_camera.common.sealing import SealError, load_network_key
-from face_reid_master.tracks_auth import NetworkCheck, TracksVerifier, check_network, sealed_topic
+from face_reid_master.tracks_auth import KEY_HINT, NetworkCheck, TracksVerifier, check_network, sealed_topic
 from face_reid_msgs.msg import NamedTrackArray
 from face_reid_msgs.msg import Sealed as SealedMsg
 
@@ -41,8 +41,8 @@ class TracksSubscription:
     def __init__(self, node: Any, callback: Callable[[Any], None], topic: str = "/tracks_named",
                  key_path: str | Path = "", qos: QoSProfile | None = None, max_age_s: float = 30.0,
                  check_period_s: float = 2.0, on_refused: Callable[[str, str], None] | None = None,
-                 callback_group: Any = None) -> None:
-        self.node, self.topic = node, topic
+                 callback_group: Any = None, key_hint: str = KEY_HINT) -> None:
+        self.node, self.topic, self.key_hint = node, topic, key_hint
         self._callback, self._on_refused = callback, on_refused
         self.verifier = TracksVerifier(load_network_key(key_path), max_age_s) if key_path else None
         self.refused: dict[str, int] = self.verifier.refused if self.verifier is not None else {}
@@ -70,7 +70,7 @@ class TracksSubscription:
         """Look at the tracks topics on the network; log a problem when it appears, then every 30 s (an ERROR
         without the key, a warning with it)."""
         self.network = check_network(self.node.get_topic_names_and_types(), self.topic, self.verifier is not None,
-                                     self.node.count_publishers(self.topic))
+                                     self.node.count_publishers(self.topic), self.key_hint)
         problem, now = self.network.problem, time.monotonic()
         if problem and (problem != self._problem or now - self._problem_logged_s >= _REPEAT_PROBLEM_S):
             if self.verifier is not None:  # a line per severity: rclpy refuses another severity from the same line
@@ -97,7 +97,7 @@ class TracksSubscription:
         network = self.network if self.network is not None else self.check()
         if network.secured_network:
             self._refuse("unauthenticated", f"tracks on {self.topic} refused: this network's tracks are sealed "
-                                            f"(on {sealed_topic(self.topic)}): set network_key_path")
+                                            f"(on {sealed_topic(self.topic)}): {self.key_hint}")
             return
         self.accepted += 1
         self._callback(msg)

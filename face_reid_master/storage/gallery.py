@@ -107,6 +107,8 @@ def save_gallery_npz(people: Mapping[str, npt.ArrayLike], path: str | Path) -> N
 
 def _load_npz(path: Path) -> GalleryResult:
     try:
+        if not zipfile.is_zipfile(path):  # np.load would take a .npy as one array, or offer to unpickle the rest
+            raise ValueError("not a zip of .npy arrays (one NAME.npy of embeddings per person)")
         with np.load(path, allow_pickle=False) as data:
             people = {name: data[name] for name in data.files}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:

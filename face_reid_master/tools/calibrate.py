@@ -214,13 +214,14 @@ def main(argv: list[str] | None = None) -> int:
                                      epilog=__doc__.split("\n\n", 1)[1])
     sub = parser.add_subparsers(dest="command", required=True)
     rec = sub.add_parser("record", help="record the camera nodes' frames while one person walks")
-    rec.add_argument("--out", type=Path, required=True)
+    rec.add_argument("--out", type=Path, required=True, help="the recording to write (JSON lines)")
     rec.add_argument("--seconds", type=float, default=60.0, help="how long to record (s; default 60)")
     rec.add_argument("--max-frames", type=int, default=10**9, help="stop after this many frames")
-    rec.add_argument("--topic-regex", default=DEFAULT_TOPIC_REGEX)
+    rec.add_argument("--topic-regex", default=DEFAULT_TOPIC_REGEX,
+                     help="record the camera topics matching this (default: every camera's frames topic)")
     rec.add_argument("--key", default="", help="network key file: record sealed frames (secured network)")
     sol = sub.add_parser("solve", help="solve every camera's x, y, yaw from a recording")
-    sol.add_argument("recording", type=Path)
+    sol.add_argument("recording", type=Path, help="a recording of face-reid-calibrate record")
     sol.add_argument("--anchor", required=True, help="the camera whose pose defines the world frame (kept)")
     sol.add_argument("--out-dir", type=Path, default=None, help="write <camera>.yaml params files here")
     sol.add_argument("--min-pairs", type=int, default=20,

@@ -60,7 +60,7 @@ def _common_options(parser: argparse.ArgumentParser, suppress: bool) -> None:
     parser.add_argument("--key", default=default(""),
                         help="with --master: seal the requests with this network key file")
     parser.add_argument("--timeout-s", type=float, default=default(20.0),
-                        help="with --master: how long to wait for it (s)")
+                        help="with --master: how long to wait for it (s; default 20)")
 
 
 def build_parser() -> argparse.ArgumentParser:

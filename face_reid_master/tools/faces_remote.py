@@ -53,6 +53,15 @@ def format_remote_list(rows: list[tuple[int, str, int, float]], master: str) -> 
     return "\n".join(lines)
 
 
+def refusal_line(prog: str, message: str, keyed: bool) -> str:
+    """The one line for a request the master refused: its reason once (a sealing refusal already starts with
+    'refused:'), and, when no --key was given and the master wants sealed requests, how to seal them."""
+    line = f"{prog}: refused: {message.removeprefix('refused: ')}"
+    if not keyed and "network key" in message:
+        line += " (give --key with the network's key file)"
+    return line
+
+
 def photo_embeddings(photos: list[str], space: str) -> tuple[list[float], list[str]]:
     """The embeddings (of embedder space ``space``, flattened) of the largest face of each photo, and a note per
     photo left out (unreadable, no face); the photos are read here and go nowhere else."""
@@ -122,6 +131,6 @@ def run_remote(args: argparse.Namespace, prog: str) -> int:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    print(reply.message if reply.success else f"{prog}: refused: {reply.message}",
+    print(reply.message if reply.success else refusal_line(prog, reply.message, key is not None),
           file=sys.stdout if reply.success else sys.stderr)
     return EXIT_OK if reply.success else EXIT_NOT_FOUND

@@ -9,7 +9,8 @@ face_reid_master/tools/network_file.py for the format), its log in --log-dir. Be
 host's nodes are checked as their start would check them: params files exist, parse and hold declared parameters
 of the right type and range (the `set:` values too), the key file, the model files, and every camera of the
 network on its own topics and node names; each problem is one line and nothing starts (--dry-run: the same
-checks, then the commands; exit 2 on a problem). A node that crashes is started again after 1 s, then 2, 4, ...
+checks, then the commands; exit 2 on a problem). A camera of the network that the master's known_camera_ids would
+not hear is a warning. A node that crashes is started again after 1 s, then 2, 4, ...
 up to --max-backoff-s (back to 1 s once it ran a minute); one that refuses its configuration (exit status 2,
 a FATAL line) is not: its own error line is printed, and face-reid-up exits 2 once no node runs. Ctrl-C (or
 SIGTERM) stops every node and exits 0 (2 if a node refused its configuration). The same file drives every PC.
@@ -122,27 +123,64 @@ def _master_file_problems(values: dict[str, Any]) -> list[str]:
     return problems
 
 
-def _topic_problems(network: dict[str, Any]) -> list[str]:
-    """Every camera of the network (all hosts) on its own node name and output topic: two in one namespace would
-    run as one node name and publish into one topic, the master unable to tell their frames apart."""
+@dataclass(frozen=True)
+class _Camera:
+    """A camera of the network as its node would run: its name in face-reid-up's lines, id, node and topic."""
+
+    name: str
+    camera_id: str
+    node: str
+    topic: str
+
+
+def _network_cameras(network: dict[str, Any]) -> list[_Camera]:
+    """Every camera of the network (all hosts), with its node name and output topic resolved."""
     keyed = bool(network_key_path(network))
-    seen_nodes: dict[str, str] = {}
-    seen_topics: dict[str, str] = {}
-    problems = []
+    cameras = []
     for host in network["hosts"]:
         for spec in node_specs(network, host, ("camera",)):
             check = check_ros_args(_table(spec), spec.args)  # another host's files may be there only: values only
             ns = check.namespace.rstrip("/")
             topic = str(check.values["sealed_output_topic" if keyed else "output_topic"])
-            topic = topic if topic.startswith("/") else f"{ns}/{topic}"
-            node = f"{ns}/{_table(spec).node_name}"
-            for seen, key, what in ((seen_nodes, node, "run as the same node"),
-                                    (seen_topics, topic, "publish on the same topic")):
-                if key in seen:
-                    problems.append(f"{seen[key]} and {spec.name} {what} {key}: give each camera its own namespace "
-                                    "(or output topic)")
-                seen.setdefault(key, spec.name)
+            cameras.append(_Camera(spec.name, str(check.values["camera_id"]), f"{ns}/{_table(spec).node_name}",
+                                   topic if topic.startswith("/") else f"{ns}/{topic}"))
+    return cameras
+
+
+def _topic_problems(network: dict[str, Any]) -> list[str]:
+    """Every camera of the network (all hosts) on its own node name and output topic: two in one namespace would
+    run as one node name and publish into one topic, the master unable to tell their frames apart."""
+    seen_nodes: dict[str, str] = {}
+    seen_topics: dict[str, str] = {}
+    problems = []
+    for camera in _network_cameras(network):
+        for seen, key, what in ((seen_nodes, camera.node, "run as the same node"),
+                                (seen_topics, camera.topic, "publish on the same topic")):
+            if key in seen:
+                problems.append(f"{seen[key]} and {camera.name} {what} {key}: give each camera its own namespace "
+                                "(or output topic)")
+            seen.setdefault(key, camera.name)
     return problems
+
+
+def _cameras_unheard(network: dict[str, Any], master: dict[str, Any]) -> list[str]:
+    """The network's cameras a master with ``known_camera_ids`` (its values ``master``) would not hear: an id it
+    does not list (their frames refused), or a topic not under /<a listed id>/ (never subscribed)."""
+    from face_reid_master.camera_slots import camera_of_topic
+    from face_reid_master.ros.params import clean_list
+
+    known = clean_list(master["known_camera_ids"])
+    if not known:  # any camera is accepted
+        return []
+    lines = []
+    for camera in _network_cameras(network):
+        if camera.camera_id not in known:
+            lines.append(f"known_camera_ids {list(known)} leaves out {camera.name}: the master would refuse its "
+                         f"frames (add {camera.camera_id!r})")
+        elif camera_of_topic(camera.topic) not in known and camera.topic not in clean_list(master["camera_topics"]):
+            lines.append(f"{camera.name} publishes on {camera.topic}, not under /<a known_camera_ids entry>/: the "
+                         "master would not subscribe to it (list it in the master's camera_topics)")
+    return lines
 
 
 def preflight(network: dict[str, Any], specs: list[NodeSpec]) -> tuple[list[str], list[str]]:
@@ -175,6 +213,8 @@ def preflight(network: dict[str, Any], specs: list[NodeSpec]) -> tuple[list[str]
         camera = spec.args[1] == "face_reid_camera.ros.node"
         found = (_camera_file_problems if camera else _master_file_problems)(check.values)
         problems += [f"{spec.name}: {p}" for p in found]
+        if not camera:
+            warnings += [f"{spec.name}: {w}" for w in _cameras_unheard(network, check.values)]
     if any(spec.args[1] == "face_reid_camera.ros.node" for spec in specs):
         problems += _topic_problems(network)
     return problems, warnings
@@ -259,7 +299,9 @@ def supervise(specs: list[NodeSpec], log_dir: Path, max_backoff_s: float = 30.0,
             time.sleep(0.1)
     finally:
         stop_processes([n.proc for n in nodes if n.proc is not None])
-        say(f"face-reid-up: stopped {len(nodes)} nodes")
+        stopped = sum(not n.refused for n in nodes)  # running or waiting to restart; a refused node is gone already
+        if stopped:
+            say(f"face-reid-up: stopped {stopped} node{'s' if stopped > 1 else ''}")
     return CONFIG_EXIT_STATUS if any(node.refused for node in nodes) else 0
 
 
@@ -270,10 +312,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("network", type=Path, help="the network file (YAML)")
     parser.add_argument("--host", default=socket.gethostname(), help="this host's name in the file (default: the "
                         "machine's host name)")
-    parser.add_argument("--role", choices=("all", "camera", "master"), default="all")
+    parser.add_argument("--role", choices=("all", "camera", "master"), default="all",
+                        help="start only this host's cameras or only its master (default: all its nodes)")
     parser.add_argument("--log-dir", type=Path, default=Path("face_reid_logs"),
                         help="node logs (default ./face_reid_logs)")
-    parser.add_argument("--max-backoff-s", type=float, default=30.0, help="longest wait before a restart (s)")
+    parser.add_argument("--max-backoff-s", type=float, default=30.0,
+                        help="longest wait before a restart (s; default 30)")
     parser.add_argument("--dry-run", action="store_true",
                         help="make every check a start makes, print the commands and exit (2 on a problem)")
     args = parser.parse_args(argv)

@@ -66,6 +66,8 @@ def test_check_network_tells_a_keyless_consumer_the_tracks_are_sealed() -> None:
     keyless = check_network(sealed, "/tracks_named", have_key=False, plain_publishers=0)
     assert keyless.secured_network and "set network_key_path" in keyless.problem
     assert "/tracks_named_sealed" in keyless.problem
+    tool = check_network(sealed, "/tracks_named", False, 0, key_hint="give KEYFILE")  # a tool's own way
+    assert "; give KEYFILE to read them" in tool.problem and "network_key_path" not in tool.problem
     assert check_network(sealed, "/tracks_named", have_key=True, plain_publishers=0).problem == ""
     spoof = check_network(sealed, "/tracks_named", have_key=True, plain_publishers=1)
     assert "ignored" in spoof.problem and "spoof" in spoof.problem

@@ -134,6 +134,14 @@ def test_unusable_galleries_give_clear_errors(tmp_path: Path, photo_embedder: Ph
     (tmp_path / "corrupt.npz").write_bytes(b"PK\x03\x04 not a zip")
     with pytest.raises(ValueError, match=r"not a readable \.npz"):
         load_gallery(tmp_path / "corrupt.npz")
+    (tmp_path / "text.npz").write_text("garbage")  # before: numpy's hint to load it unsafely with allow_pickle
+    with pytest.raises(ValueError, match=r"not a readable \.npz of embeddings: not a zip") as text:
+        load_gallery(tmp_path / "text.npz")
+    assert "pickle" not in str(text.value)
+    np.save(tmp_path / "array.npy", np.zeros((2, 128)))
+    (tmp_path / "array.npy").rename(tmp_path / "array.npz")  # before: a TypeError (an array is no context manager)
+    with pytest.raises(ValueError, match=r"not a readable \.npz of embeddings: not a zip"):
+        load_gallery(tmp_path / "array.npz")
     np.savez(tmp_path / "flat.npz", bob=np.zeros(128))
     with pytest.raises(ValueError, match=r"shape \(k >= 1, 128 or 256\)"):
         load_gallery(tmp_path / "flat.npz")

@@ -20,6 +20,7 @@ from rclpy.lifecycle import TransitionCallbackReturn
 
 from face_reid_camera.common.sealing import write_network_key
 from face_reid_master.ros.node import MasterNode
+from face_reid_master.tools.faces_remote import refusal_line
 
 
 def _start_master(ctx) -> tuple[MasterNode, SingleThreadedExecutor, threading.Thread]:
@@ -40,6 +41,15 @@ def _stop_master(master: MasterNode, executor: SingleThreadedExecutor, spinning:
         master.trigger_deactivate()
         master.trigger_cleanup()
     master.destroy_node()
+
+
+def test_a_refusal_is_one_line_with_its_reason_once_and_the_key_hint_when_no_key_was_given() -> None:
+    unsealed = "refused: this node has a network key: requests must be sealed with it"  # the master's reply
+    assert refusal_line("face-reid-faces", unsealed, keyed=False) == (  # before: "refused: refused: ..."
+        "face-reid-faces: refused: this node has a network key: requests must be sealed with it (give --key with "
+        "the network's key file)")
+    assert refusal_line("face-reid-faces", "no such face or person", keyed=True) == \
+        "face-reid-faces: refused: no such face or person"
 
 
 @pytest.mark.slow
@@ -71,6 +81,7 @@ def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_con
         assert master.admin.refusals["list_faces"] == 1 and master.admin.calls["list_faces"] == 2
         run = faces("add", "Mallory", *photos, "--space", "dlib_resnet_v1")  # no key: a secured master refuses
         assert run.returncode == 1 and "must be sealed" in run.stderr and master.core.people.names() == ["Alice"]
+        assert "refused: refused" not in run.stderr and "give --key" in run.stderr, run.stderr
         _stop_master(*running)  # a restart (face-reid-up restarts a master on its own): Alice is still known
         running = _start_master(ctx)
         master = running[0]

@@ -336,6 +336,24 @@ def test_a_clean_network_passes_the_dry_run_with_a_warning_for_an_unknown_name(
                    "face_reid_camera: ignored"]
 
 
+def test_the_dry_run_warns_of_cameras_the_masters_known_camera_ids_would_not_hear(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: no word; the master then refused cam2's frames and never subscribed to the hall camera's topic."""
+    cams = (f"[{{id: cam1, set: {_NO_MODELS}}}, {{id: cam2, set: {_NO_MODELS}}}, "
+            f"{{id: cam3, namespace: /hall, set: {_NO_MODELS}}}]")
+    status, err = _dry_run(tmp_path, f"    cameras: {cams}\n    master: {{set: {{known_camera_ids: [cam1, cam3]}}}}\n",
+                           capsys)
+    assert status == 0
+    assert err == ["face-reid-up: warning: master: known_camera_ids ['cam1', 'cam3'] leaves out camera cam2: the "
+                   "master would refuse its frames (add 'cam2')",
+                   "face-reid-up: warning: master: camera cam3 publishes on /hall/face_reid/frames, not under /<a "
+                   "known_camera_ids entry>/: the master would not subscribe to it (list it in the master's "
+                   "camera_topics)"]
+    status, err = _dry_run(tmp_path, f"    cameras: {cams}\n    master: {{set: {{known_camera_ids: [cam1, cam2, cam3], "
+                           "camera_topics: [/hall/face_reid/frames]}}\n", capsys)
+    assert (status, err) == (0, [])
+
+
 def test_a_start_with_a_problem_starts_no_node(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     from face_reid_master.tools import up
@@ -366,6 +384,7 @@ def test_a_node_refusing_its_configuration_is_started_once_and_its_error_line_sa
     runner.join(timeout=30)
     assert result == [2], said
     assert len([line for line in said if "started camera cam1" in line]) == 1, said
+    assert not any("stopped" in line for line in said), said  # before: "stopped 1 nodes" of a node already gone
     assert any("camera cam1 refused its configuration (exit status 2 after" in line and "not restarted" in line
                for line in said), said
     assert any(line.startswith("face-reid-up:   [face-reid-camera] FATAL: cannot start: params file ") and
