@@ -304,8 +304,6 @@ class MasterCore:
             if ev.kind == IdentityEventKind.SWAPPED:
                 self.stats.faces_released_swapped += 1
                 self._split_track(ev.track_id, stamp)
-            if ev.kind == IdentityEventKind.EXCHANGED:
-                self._exchange_public(ev.track_id, ev.partner)
         self.identity.tracks.retired.clear()  # the records of the tracks deleted at this step are read: they go
         return kept
 
@@ -321,14 +319,6 @@ class MasterCore:
         """Metres between two live tracks at the tracker's time (inf when either is unknown)."""
         where = {s.track_id: s.position_xy for s in self.tracker.snapshots() if s.track_id in (a, b)}
         return float(np.hypot(*(where[a] - where[b]))) if len(where) == 2 else math.inf
-
-    def _exchange_public(self, a: TrackerId, b: TrackerId) -> None:
-        """Two crossed tracks exchanged identities: their published ids go with them (each follows its person)."""
-        ra, rb = self.identity.tracks.record(a), self.identity.tracks.record(b)
-        assert ra is not None and rb is not None, "an EXCHANGED event names two tracks of this step"
-        ra.public_id, rb.public_id = rb.public_id, ra.public_id
-        ra.public_since_s, rb.public_since_s = rb.public_since_s, ra.public_since_s
-        ra.face_observations, rb.face_observations = rb.face_observations, ra.face_observations
 
     def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""

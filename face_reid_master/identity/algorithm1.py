@@ -102,7 +102,7 @@ class IdentityManagerBase:
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
         self._held = HeldFaces(feature_gate_distance, self.faces, self.stats)
-        self.crossings = Crossings(self.tracks, self.faces, self.sources, self.stats, self._drop_buffer)
+        self.crossings = Crossings(self.tracks)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
         self._merges: list[tuple[int, list[int]]] = []  # (kept face, faces of one person) found by _decide
 
@@ -177,8 +177,8 @@ class IdentityManagerBase:
         events: list[IdentityEvent] = []
         self._learn(stamp, events)
         decisions = self._decide()
-        for keep, others in self._merges:  # faces of one person: the older keeps them
-            for fid in self.faces.merge(keep, others):
+        for keep, others in self._merges:  # faces of one person: the older keeps them (not one a LOST track lent)
+            for fid in self.faces.merge(keep, [f for f in others if f not in self._lent.lender]):
                 self.sources.forget_face(fid)
                 events.append(IdentityEvent(IdentityEventKind.MERGED, 0, fid, stamp, 1.0, merged_into=keep))
         self._merges = []
@@ -206,7 +206,6 @@ class IdentityManagerBase:
         """The queued observations: an identified track's join its face (those its face accepts; a swap releases
         the track, :class:`SwapGuard`); an unassigned track's join its buffer and go to the classification."""
         pending = self.tracks.take_pending()
-        events += self.crossings.weigh_faces(pending, stamp)
         unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
         singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
         rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
@@ -251,20 +250,13 @@ class IdentityManagerBase:
         track = self.tracks.entries.get(track_id)
         return 0.0 if track is None else self.crossings.doubt(track)
 
-    def _drop_buffer(self, track: TrackRecord) -> None:
-        """An unidentified track takes a face without a decision of its own: its buffer and table row go."""
-        if track.slot is not None:
-            self._bank.free_slot(track.slot)
-            track.slot = None
-        self._on_track_identified(track)
-
     def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
         """One cue's observations: an identified track's describe its face's person; faceless tracks gather
         evidence against every learned face and are given one of face_list when it is strong enough (their own
         face, once seen, overrules it)."""
         queued = self.tracks.take_cue(source.kind)
-        events = self.crossings.weigh_cue(source, queued, stamp)
         source.observe(queued, list(self.faces.entries))
+        events = []
         for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:

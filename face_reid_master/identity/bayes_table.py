@@ -86,7 +86,7 @@ class BayesIdentityManager(IdentityManagerBase):
             low_open=True, high_open=True,
         )
         self.min_observations = check_int("min_observations", min_observations, 1)
-        self.crossings.face_log_ratios, self.crossings.face_threshold = self._face_log_ratios, self.posterior_threshold
+        self._held.face_log_ratios, self._held.face_threshold = self._face_log_ratios, self.posterior_threshold
         self.sinkhorn_tolerance = check_real(
             "sinkhorn_tolerance", sinkhorn_tolerance, 0.0, 1.0, low_open=True, high_open=True
         )
@@ -273,7 +273,7 @@ class BayesIdentityManager(IdentityManagerBase):
         if not same:
             return None
         group = [top, *same]
-        total = float(sum(row[1 + available.index(f)] for f in group))
+        total = min(float(sum(row[1 + available.index(f)] for f in group)), 1.0 - self.clamp_probability)
         if total <= self.posterior_threshold:
             return None
         keep = min(group, key=lambda f: (self.faces.entries[f].created_s, f))

@@ -151,25 +151,6 @@ class BodyEvidence:
             track.log_ratio[face_id] = track.log_ratio.get(face_id, 0.0) + value
             track.counts[face_id] = track.counts.get(face_id, 0) + embeddings.shape[0]
 
-    def face_log_ratios(self, embeddings: F32, stamp_s: float, face_ids: list[int],
-                        heights: npt.ArrayLike | None = None) -> dict[int, float]:
-        """The summed log-likelihood ratio ("same person") of body observations for each of ``face_ids`` with
-        recent bodies (the others are left out: no evidence either way)."""
-        pool = self._faces
-        known = [f for f in face_ids if f in pool.slot_of]
-        if not known or embeddings.shape[1] != pool.dim:
-            return {}
-        slots = np.array([pool.slot_of[f] for f in known], dtype=np.intp)
-        recent = pool.stamps >= stamp_s - self.window_s
-        best = pool.nearest(embeddings, recent)[0][:, slots]
-        seen = np.isfinite(best).all(axis=0)
-        if not seen.any():
-            return {}
-        h = _heights(heights, embeddings.shape[0])
-        face_heights = pool.slot_heights(recent)[slots[seen]]
-        lr = self._log_ratios(np.sqrt(best[:, seen]), np.abs(h[:, None] - face_heights[None, :])).sum(axis=0)
-        return dict(zip([f for f, ok in zip(known, seen, strict=True) if ok], lr.tolist(), strict=True))
-
     def _log_ratios(self, appearance: FloatArray, height_difference: FloatArray) -> FloatArray:
         """Per observation and face, the log-likelihood ratio of "same person" from the appearance distances
         and head-height differences (NaN: not measured, no evidence), fused by the feature funnel."""

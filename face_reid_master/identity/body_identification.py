@@ -42,11 +42,6 @@ class BodyIdentification:
         row = appearance[detection]
         return row[None, :] if np.isfinite(row[0]) else None  # NaN rows: not described
 
-    @property
-    def posterior_threshold(self) -> float:
-        """The body's decision threshold (also what a crossing's body evidence must pass)."""
-        return self.evidence.posterior_threshold
-
     def forget_track(self, track_id: int) -> None:
         """The track was deleted: its evidence goes (its queued bodies went with its record)."""
         self.evidence.forget_track(track_id)
@@ -65,15 +60,6 @@ class BodyIdentification:
                 else:  # faceless tracks are compared; the others only keep their bodies for their face
                     self.evidence.observe(track.track_id, emb, t, face_ids if track.slot is None else [], source,
                                           heights)
-
-    def face_log_ratios(self, parts: list[CueChunk], face_ids: list[int]) -> dict[int, float]:
-        """The summed log-likelihood ratio ("same person") of a track's queued bodies for each of ``face_ids``
-        with recent bodies (what weighs a crossing, :mod:`~face_reid_master.identity.crossings`)."""
-        out: dict[int, float] = {}
-        for emb, t, _, heights in parts:
-            for fid, value in self.evidence.face_log_ratios(emb, t, face_ids, heights).items():
-                out[fid] = out.get(fid, 0.0) + value
-        return out
 
     def decide(self, available: list[int], stamp: float,
                alike: Callable[[int, list[int]], list[bool]]) -> list[tuple[int, int, float]]:

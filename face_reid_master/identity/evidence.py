@@ -54,7 +54,6 @@ class TrackView(Protocol):
     track_id: int
     face_id: int | None  # None: not identified
     slot: int | None  # not None: the track shows a face and is being classified by it
-    crossed: dict[int, float]  # tracks the tracker may have swapped it with (their people), with that probability
 
 
 class EvidenceSource(Protocol):
@@ -83,10 +82,6 @@ class EvidenceSource(Protocol):
 
     def forget_face(self, face_id: int) -> None:
         """The face was forgotten."""
-
-    # Optional: a cue that also has ``face_log_ratios(parts, face_ids) -> {face_id: log ratio}`` (its queued
-    # observations of one track against those faces) and ``posterior_threshold`` weighs crossings
-    # (:mod:`~face_reid_master.identity.crossings`), as the body does.
 
 
 class Cues:

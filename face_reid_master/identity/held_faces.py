@@ -16,12 +16,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.records import IdentityStats
 
 __all__ = ["HeldFace", "HeldFaces"]
+
+F32Array = npt.NDArray[np.float32]
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,7 +33,7 @@ class HeldFace:
 
     face_id: int
     holder: TrackRecord
-    duplicate: bool
+    duplicate: bool  # one person twice, or unsure whether it is that face's person: the track waits
 
     @property
     def since_s(self) -> float:
@@ -39,13 +42,18 @@ class HeldFace:
 
 
 class HeldFaces:
-    """Finds the held face a "new person" decision would duplicate (a majority of the buffered features within
-    ``gate_distance`` of it; None = off, the paper)."""
+    """Finds the held face a "new person" decision would duplicate: the one a majority of the buffered features lie
+    within ``gate_distance`` of (None = off, the paper), weighed by ``face_log_ratios`` (the classification method's
+    face likelihood: the buffer is that face's person past ``face_threshold``, someone else below one minus it,
+    unsure between: the track waits; None: the majority decides)."""
 
     def __init__(self, gate_distance: float | None, faces: FaceList, stats: IdentityStats) -> None:
         self.gate_distance = gate_distance
         self.faces = faces
         self.stats = stats
+        self.face_log_ratios: Callable[[F32Array, list[int]], npt.NDArray[np.float64]] | None = None
+        self.face_threshold = 0.95
+        self.max_log_ratio = 4.0  # one feature's evidence, as a crossing's
         # metres between two live tracks now (inf: unknown); the master core gives the tracker's
         self.apart: Callable[[int, int], float] = lambda a, b: math.inf
         self.duplicate_within_m = 1.0
@@ -69,7 +77,15 @@ class HeldFaces:
             return None
         face = held[best]
         holder = tracks[face.track_id]  # type: ignore[index]
-        duplicate = (holder.face_confirmed_s >= track.buffer_since_s
+        sure = True
+        if self.face_log_ratios is not None:
+            cap = self.max_log_ratio
+            lr = float(np.clip(self.face_log_ratios(obs, [face.face_id]), -cap, cap).sum())
+            p = 1.0 / (1.0 + math.exp(-max(-700.0, min(700.0, lr))))
+            if p < 1.0 - self.face_threshold:
+                return None  # a look-alike: the new person is new
+            sure = p > self.face_threshold
+        duplicate = (not sure or holder.face_confirmed_s >= track.buffer_since_s
                      or self.apart(holder.track_id, track.track_id) < self.duplicate_within_m)
         if duplicate:
             self.stats.new_ids_held_waiting += 1

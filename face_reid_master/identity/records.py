@@ -36,8 +36,6 @@ class IdentityEventKind(str, enum.Enum):
     RELEASED = "released"  # the track died: its face goes back to face_list (assignable again)
     SWAPPED = "swapped"  # the track's faces stopped matching its face (a tracker swap): face back to face_list,
     # the track is classified afresh
-    EXCHANGED = "exchanged"  # the tracker had swapped the track's person with track ``partner``'s: they exchange
-    # identities (face_id: the face the track carries now, 0 = none)
     MERGED = "merged"  # the face was one person with face ``merged_into`` (older): it is gone, its features there
 
 
@@ -53,7 +51,6 @@ class IdentityEvent:
     since_s: float | None = None  # SWAPPED: stamp of the first observation that was not the face's person
     evidence: str = Evidence.FACE  # ASSIGNED_KNOWN / NEW_FACE: what decided it (the face or another cue's kind)
     merged_into: int = 0  # MERGED: the face that absorbed it
-    partner: int = 0  # EXCHANGED: the other track
 
 
 @dataclass
@@ -110,6 +107,5 @@ class IdentityStats:
     assigned_by_body: int = 0
     lent_faces_taken: int = 0  # faces of LOST tracks given to another track (the person came back as it)
     held_faces_taken: int = 0  # faces a swapped track held, taken by the track that showed them (held_faces)
-    crossings_exchanged: int = 0  # pairs of crossed tracks whose evidence showed them swapped: identities exchanged
     faces_merged: int = 0  # faces found to be one person with an older face (a split posterior) and merged into it
     new_ids_held_waiting: int = 0  # "new person" decisions held back: another live track shows that face too

@@ -122,4 +122,4 @@ def test_there_are_scenarios_for_each_behaviour() -> None:
     names = {p.stem for p in SCENARIOS}
     assert {"leave_and_return", "swap", "stranger", "look_alikes", "body_only", "second_day", "forget",
             "restart", "held_by_swapped_track", "held_by_duplicate_track", "split_person_merged",
-            "buffer_across_a_swap", "crossing_then_a_face", "crossing_then_bodies"} <= names
+            "buffer_across_a_swap"} <= names
