@@ -665,12 +665,14 @@ def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, 
             stamp[0] += 0.1
             pub_a.publish(_frame(stamp[0], camera="cam_a"))
             pub_b.publish(_frame(stamp[0], camera="cam_a"))  # cam_b started with camera_id cam_a by mistake
-            said = got[-1].status[0] if got else None
-            return (said is not None and said.level == b"\x01" and "camera id 'cam_a' is used by 2 cameras" in
-                    said.message and "camera topic '/cam_a/face_reid/frames' is published by 2 nodes" in said.message)
+            return any(said.level == b"\x01" and "camera id 'cam_a' is used by 2 cameras" in said.message
+                       and "camera topic '/cam_a/face_reid/frames' is published by 2 nodes" in said.message
+                       for said in (d.status[0] for d in got if d.status))
 
-        assert spin_until(executor, publish_and_said, 60.0), got[-1].status[0].message if got else "no diagnostics"
-        message = got[-1].status[0].message
+        # a loaded machine may discover the twin participant late: wait for a report naming both (any of them)
+        assert spin_until(executor, publish_and_said, 180.0), got[-1].status[0].message if got else "no diagnostics"
+        message = next(d.status[0].message for d in reversed(got) if d.status and "published by 2 nodes" in
+                       d.status[0].message and "is used by 2 cameras" in d.status[0].message)
         assert f"'{CAM}' and '{cam_b}'" in message  # both topics named
         assert message.count("/cam_a/face_reid_camera (participant") == 2  # both nodes named, by participant
     finally:
