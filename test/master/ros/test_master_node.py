@@ -8,6 +8,7 @@ leave and return, kill -9) is test_master_node_dds.py.
 from __future__ import annotations
 
 import math
+import re
 import time
 from pathlib import Path
 
@@ -636,6 +637,10 @@ def test_a_retention_that_will_delete_stored_faces_is_a_warning_with_their_numbe
         node.destroy_node()
 
 
+_BOTH_CAMERAS = re.compile(r"camera id 'cam_a' is used by [2-9] cameras")
+_BOTH_NODES = re.compile(r"camera topic '/cam_a/face_reid/frames' is published by [2-9] nodes")
+
+
 def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, tmp_path: Path) -> None:
     """Two camera nodes given one camera_id in two namespaces, and two started in one namespace: /diagnostics
     WARNs naming both topics, and both publishing nodes (before: no warning anywhere)."""
@@ -665,16 +670,16 @@ def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, 
             stamp[0] += 0.1
             pub_a.publish(_frame(stamp[0], camera="cam_a"))
             pub_b.publish(_frame(stamp[0], camera="cam_a"))  # cam_b started with camera_id cam_a by mistake
-            return any(said.level == b"\x01" and "camera id 'cam_a' is used by 2 cameras" in said.message
-                       and "camera topic '/cam_a/face_reid/frames' is published by 2 nodes" in said.message
+            return any(said.level == b"\x01" and _BOTH_CAMERAS.search(said.message) and _BOTH_NODES.search(said.message)
                        for said in (d.status[0] for d in got if d.status))
 
         # a loaded machine may discover the twin participant late: wait for a report naming both (any of them)
         assert spin_until(executor, publish_and_said, 180.0), got[-1].status[0].message if got else "no diagnostics"
-        message = next(d.status[0].message for d in reversed(got) if d.status and "published by 2 nodes" in
-                       d.status[0].message and "is used by 2 cameras" in d.status[0].message)
+        message = next(d.status[0].message for d in reversed(got) if d.status and _BOTH_CAMERAS.search(
+            d.status[0].message) and _BOTH_NODES.search(d.status[0].message))
         assert f"'{CAM}' and '{cam_b}'" in message  # both topics named
-        assert message.count("/cam_a/face_reid_camera (participant") == 2  # both nodes named, by participant
+        # both nodes named, by participant (a participant another test left on this domain may add a third)
+        assert message.count("/cam_a/face_reid_camera (participant") >= 2
     finally:
         executor.shutdown()
         for n in (twin, camera_a, camera_b):
