@@ -75,13 +75,6 @@ class FaceMemory:
         self.save([face_id])
         self._name_checked.pop(face_id, None)
 
-    def merged(self, face_id: int, into: int) -> None:
-        """Face ``face_id`` was one person with face ``into``, which absorbed it: it goes from memory and the store,
-        ``into`` is written now."""
-        self._drop(face_id)
-        self._forget_stored([face_id])
-        self.changed(into)
-
     def learned(self, face_id: int, stamp: float) -> None:
         """The face learned features at ``stamp``: it is written within save_interval_s."""
         self._dirty_faces.setdefault(face_id, stamp)

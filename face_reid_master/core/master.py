@@ -106,7 +106,6 @@ class MasterCore:
         self.name_threshold = _derived("name_threshold", cfg.name_threshold, model.name_threshold) \
             if gallery else cfg.name_threshold or model.name_threshold
         self.identity = self._identity_manager(model, evidence_sources)
-        self.identity._held.apart = self._apart
         dim = space_dim(cfg.embedding_space)
         self.people = PredefinedPeople(
             {name: model.scale(np.asarray(rows, dtype=np.float32)) for name, rows in (gallery or {}).items()},
@@ -184,8 +183,6 @@ class MasterCore:
         self.stats.detections_rejected_position += len(update.rejected_detections)
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
-        for a, b, p in update.swaps:
-            self.identity.tracks_crossed(a, b, p, stamp)
         self._observe(update.associations, detections, stamp, frame)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
         self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)
@@ -287,11 +284,6 @@ class MasterCore:
         for ev in self.identity.step(stamp):
             if ev.kind == IdentityEventKind.NEW_FACE and not self.memory.room_for(ev.face_id):
                 continue  # not learned (its id not durable, or max_faces): the track stays unidentified
-            if ev.kind == IdentityEventKind.MERGED:
-                self.memory.merged(ev.face_id, ev.merged_into)
-                self.stats.faces_merged += 1
-                kept.append(ev)
-                continue
             public = self.public_id(ev.track_id)
             kept.append(ev if public == ev.track_id else dataclasses.replace(ev, track_id=public))
             if ev.kind == IdentityEventKind.NEW_FACE:
@@ -315,32 +307,20 @@ class MasterCore:
         track.public_id, track.public_since_s = self.tracker.reserve_id(), stamp
         track.face_observations = 0
 
-    def _apart(self, a: TrackerId, b: TrackerId) -> float:
-        """Metres between two live tracks at the tracker's time (inf when either is unknown)."""
-        where = {s.track_id: s.position_xy for s in self.tracker.snapshots() if s.track_id in (a, b)}
-        return float(np.hypot(*(where[a] - where[b]))) if len(where) == 2 else math.inf
-
     def public_id(self, track_id: TrackerId) -> PublicId:
         """The id a tracker track is published under: its own until a swap split it, then a new one per swap."""
         track = self.identity.tracks.record(track_id)
         return PublicId(track_id if track is None else track.public_id)
-
-    def published_face_id(self, track_id: TrackerId) -> int:
-        """The face id a track is published with: its face, or 0 while undecided or while a crossing makes its
-        identity more likely wrong than right."""
-        fid = self.identity.face_id_of(track_id)
-        return 0 if fid is None or self.identity.doubt_of(track_id) > 0.5 else fid
 
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
         (how often such decisions were right); 0 for an undecided track (it claims no face: its candidates' raw
         posteriors are the overconfident numbers the map exists to correct)."""
         evidence = self.identity.evidence_of(track_id)
-        if not evidence or self.identity.doubt_of(track_id) > 0.5:
+        if not evidence:
             return 0.0
         raw = float(self.identity.confidence_of(track_id))
-        mapped = float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
-        return mapped * (1.0 - self.identity.doubt_of(track_id))  # a crossing since may have swapped the person
+        return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
 
     # ------------------------------------------------------------------------------ people and faces
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
@@ -391,7 +371,7 @@ class MasterCore:
         for snap in snaps:
             if snap.track_id in clutter:
                 continue
-            fid = self.published_face_id(snap.track_id)
+            fid = self.identity.face_id_of(snap.track_id) or 0
             track = records.get(snap.track_id)
             since = None if track is None else track.public_since_s
             out.append(
@@ -400,7 +380,7 @@ class MasterCore:
                     face_id=fid,
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=self.published_confidence(snap.track_id),
-                    identity_evidence=self.identity.evidence_of(snap.track_id) if fid else "",
+                    identity_evidence=self.identity.evidence_of(snap.track_id),
                     face_observations=0 if track is None else track.face_observations,
                     position_xy=snap.position_xy,
                     velocity_xy=snap.velocity_xy,

@@ -44,7 +44,6 @@ class MasterStats:
     faces_reidentified: int = 0
     faces_released: int = 0
     faces_released_swapped: int = 0  # of which: the track was swapped onto someone else (published under a new id)
-    faces_merged: int = 0  # faces found to be one person with an older face and merged into it (the older id stays)
     faces_pruned: int = 0
     faces_evicted: int = 0  # unnamed faces forgotten to keep max_faces (least recently seen first)
     faces_refused_cap: int = 0  # new faces not learned: max_faces reached and every face named or on a track

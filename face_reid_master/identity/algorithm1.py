@@ -29,7 +29,6 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
-from face_reid_master.identity.crossings import Crossings
 from face_reid_master.identity.entries import (
     Chunk,
     FaceEntry,
@@ -41,7 +40,6 @@ from face_reid_master.identity.entries import (
 from face_reid_master.identity.evidence import CueChunk, Cues, Evidence, EvidenceSource
 from face_reid_master.identity.face_list import FaceList
 from face_reid_master.identity.feature_bank import FeatureBank
-from face_reid_master.identity.held_faces import HeldFaces
 from face_reid_master.identity.lent_faces import LentFaces
 from face_reid_master.identity.records import IdentityEvent, IdentityEventKind, IdentityStats
 from face_reid_master.identity.swap_guard import SwapGuard
@@ -56,14 +54,21 @@ F32Array = npt.NDArray[np.float32]
 class IdentityManagerBase:
     """Algorithm 1 of the paper, shared by the Bayesian method and the threshold baseline.
 
-    ``embedding_dim``: length of the face descriptors; ``max_features_per_face``: bound of every face's (and
-    unidentified track's) feature set, kept diverse; eq. 4 is exact up to ``exact_search_max_features`` features
-    in face_list, beyond only the ``shortlist_faces`` faces with the nearest centroids are compared. Track ids
-    are never reused after :meth:`track_deleted`. Our extensions, each off by default (the paper):
-    ``feature_gate_distance`` / ``release_after_inconsistent`` (:mod:`~.swap_guard`, which the held faces,
-    merges and crossings need too), ``body_evidence`` (:mod:`~.body_identification`), ``lend_lost_faces``
-    (:mod:`~.lent_faces`). Subclasses (the classification methods) implement ``_ingest_unassigned``,
-    ``_decide``, ``_current_confidence`` and may override the ``_on_*`` notifications.
+    ``embedding_dim``: length of the face descriptors.  ``max_features_per_face``: bound of every face's
+    (and unidentified track's) feature set, kept diverse
+    (:func:`~face_reid_master.identity.feature_bank.select_diverse_subset`).  Eq. 4 is exact
+    while face_list holds at most ``exact_search_max_features`` features; beyond, only the
+    ``shortlist_faces`` faces with the nearest centroids are compared per observation.  Track ids must not
+    be reused after :meth:`track_deleted` (late observations of a deleted id are ignored).
+
+    Our extensions, each off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
+    (:mod:`~face_reid_master.identity.swap_guard`), ``body_evidence``
+    (:mod:`~face_reid_master.identity.body_identification`) and ``lend_lost_faces``
+    (:mod:`~face_reid_master.identity.lent_faces`).
+
+    Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
+    ``_current_confidence`` and may override the ``_on_*`` notifications; they read :attr:`tracks`,
+    :attr:`faces` and the feature bank ``_bank``.
     """
 
     def __init__(
@@ -101,10 +106,7 @@ class IdentityManagerBase:
                               self._on_face_available, self._on_faces_unavailable)
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
-        self._held = HeldFaces(feature_gate_distance, self.faces, self.stats)
-        self.crossings = Crossings(self.tracks)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
-        self._merges: list[tuple[int, list[int]]] = []  # (kept face, faces of one person) found by _decide
 
     # ------------------------------------------------------------------------------ public inputs
     def add_observations(self, track_id: int, embeddings: npt.ArrayLike, stamp_s: float,
@@ -150,11 +152,6 @@ class IdentityManagerBase:
         if kind == Evidence.BODY:
             self.stats.body_observations += values.shape[0]
 
-    def tracks_crossed(self, a: int, b: int, probability: float, stamp_s: float) -> None:
-        """The tracker's association may have swapped the people of tracks ``a`` and ``b`` (``probability``):
-        their identities carry that doubt until evidence decides it (:mod:`~face_reid_master.identity.crossings`)."""
-        self.crossings.crossed(a, b, float(probability), stamp_s)
-
     def track_deleted(self, track_id: int, stamp_s: float) -> None:
         """The tracker dropped this track; handled at the next :meth:`step` (after its last evidence)."""
         self.tracks.died(check_int("track_id", track_id, -(2**63)), check_stamp(stamp_s))
@@ -168,6 +165,17 @@ class IdentityManagerBase:
         """The LOST track was detected again: it takes its face back from face_list if nobody took it."""
         self._lent.give_back(self.tracks.entries.get(track_id))
 
+    def _take_lent(self, fid: int, stamp: float) -> None:
+        """Face ``fid`` goes to another track: a LOST track that lent it is no longer identified."""
+        lender = self._lent.take(fid)
+        track = None if lender is None else self.tracks.entries.get(lender)
+        if track is None or track.face_id != fid:
+            return
+        confidence = track.confidence
+        track.unassign()
+        self.stats.lent_faces_taken += 1
+        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
+
     def step(self, stamp_s: float) -> list[IdentityEvent]:
         """Run one update of Algorithm 1: learn the queued observations, classify the unassigned tracks (by face,
         then by body), then handle deaths."""
@@ -176,20 +184,7 @@ class IdentityManagerBase:
         self.tracks.retired.clear()
         events: list[IdentityEvent] = []
         self._learn(stamp, events)
-        decisions = self._decide()
-        for keep, others in self._merges:  # faces of one person: the older keeps them (not one a LOST track lent)
-            for fid in self.faces.merge(keep, [f for f in others if f not in self._lent.lender]):
-                self.sources.forget_face(fid)
-                events.append(IdentityEvent(IdentityEventKind.MERGED, 0, fid, stamp, 1.0, merged_into=keep))
-        self._merges = []
-        for tid, face_or_new, confidence in decisions:
-            if face_or_new == 0:  # a new person, or one whose face another live track holds
-                held = self._held.shown_by(self.tracks.entries[tid], self.tracks.entries)
-                if held is not None and held.duplicate:
-                    continue  # one person twice: it waits
-                if held is not None:  # the holder was swapped: it gives the face up
-                    events.append(self._release_swapped(held.holder, stamp, held.since_s))
-                    face_or_new = held.face_id
+        for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for source in self.sources:
             events.extend(self._cue_step(source, stamp))
@@ -217,20 +212,13 @@ class IdentityManagerBase:
             slot: int | None = None
             obs: F32Array | None = rows[tid]
             if track.face_id is not None:
-                face = self.faces.entries[track.face_id]
-                obs, swapped = self._swaps.learn(track, face, chunks, rows[tid], near.get(tid), stamp)
-                slot = face.slot
-                if swapped is not None:  # the face kept what was its person's; the track goes on as someone else
-                    events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
-                    slot, chunks, obs = None, swapped, rows_of(swapped)
-                    track.n_observations = obs.shape[0]
+                slot, chunks, obs = self._learn_identified(track, chunks, rows[tid], near.get(tid), stamp, events)
             if obs is None:
                 continue
             if track.face_id is None:
                 slot = track.slot
                 if slot is None:
                     track.slot = bank.new_slot(obs)
-                    track.buffer_since_s = min(c.stamp_s for c in chunks)
                 unassigned[0].append(tid)
                 unassigned[1].append(obs)
                 unassigned[2].append(eye_rows(chunks))
@@ -245,26 +233,51 @@ class IdentityManagerBase:
         if unassigned[0]:
             self._ingest_unassigned(*unassigned)
 
-    def doubt_of(self, track_id: int) -> float:
-        """The probability that a live track's person is not the one its identity was decided on (crossings)."""
-        track = self.tracks.entries.get(track_id)
-        return 0.0 if track is None else self.crossings.doubt(track)
+    def _learn_identified(self, track: TrackRecord, chunks: list[Chunk], obs: F32Array,
+                          keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
+                          ) -> tuple[int | None, list[Chunk], F32Array | None]:
+        """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
+        the rows it learns (None: none), or, when they show a swap, the released track's chunks and rows."""
+        assert track.face_id is not None
+        face = self.faces.entries[track.face_id]
+        face.n_observations += obs.shape[0]
+        face.last_seen_s = max(face.last_seen_s, stamp)
+        if keep is not None:
+            swapped = self._swaps.swapped(track, chunks, keep)
+            obs = obs if keep.all() else obs[keep]
+            if swapped is not None:  # the face keeps what was its person's, then lets the track go
+                if obs.shape[0]:
+                    self._bank.add_features(face.slot, obs)
+                events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
+                obs = rows_of(swapped)
+                track.n_observations = obs.shape[0]
+                return None, swapped, obs
+            if obs.shape[0] == 0:
+                return face.slot, chunks, None
+        if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
+            track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
+        return face.slot, chunks, obs
 
     def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
         """One cue's observations: an identified track's describe its face's person; faceless tracks gather
         evidence against every learned face and are given one of face_list when it is strong enough (their own
         face, once seen, overrules it)."""
-        queued = self.tracks.take_cue(source.kind)
-        source.observe(queued, list(self.faces.entries))
+        source.observe(self.tracks.take_cue(source.kind), list(self.faces.entries))
         events = []
         for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
-                self._give_face(track, fid, p, stamp, source.kind, new=False)  # no features to add
-                self.stats.assigned_by_body += source.kind == Evidence.BODY
-                events.append(IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, tid, fid, stamp, float(p),
-                                            evidence=source.kind))
+                events.append(self._apply_cue_decision(track, fid, p, stamp, source.kind))
         return events
+
+    def _apply_cue_decision(self, track: TrackRecord, fid: int, confidence: float, stamp: float,
+                            evidence: str) -> IdentityEvent:
+        """A faceless track is face ``fid``'s person by another cue: it carries the face (no features to add)."""
+        self._give_face(track, fid, confidence, stamp, evidence, new=False)
+        if evidence == Evidence.BODY:
+            self.stats.assigned_by_body += 1
+        return IdentityEvent(IdentityEventKind.ASSIGNED_KNOWN, track.track_id, fid, stamp, float(confidence),
+                             evidence=evidence)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
         """Which of ``others`` are learned ``face``'s person: closer than the body evidence's
@@ -313,16 +326,22 @@ class IdentityManagerBase:
         return sorted(self.faces.entries)
 
     def forget_face(self, face_id: int) -> bool:
-        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown. A live track
-        carrying it is unidentified again, its queued observations dropped: it is classified afresh (and
-        normally becomes a *new* face). Face ids are never reused within this manager."""
+        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
+
+        The face leaves face_list (its table column / threshold votes go) and its bank slot is zeroed.
+        If a live track carries it, that track becomes unidentified again: its assignment, confidence
+        and queued observations are dropped (they were merged into / meant for the forgotten face), so
+        while the person stays in view new observations are classified afresh and normally create a
+        *new* face id after ``min_observations``.  Face ids are never reused within this manager.
+        """
         fid = check_int("face_id", face_id, -(2**63))
         face = self.faces.entries.get(fid)
         if face is None:
             return False
-        lender = self._lent.take_from(fid, self.tracks.entries)
-        if lender is not None:
-            lender.unassign()  # a LOST track lent it: it holds nothing now
+        lent_by = self._lent.take(fid)
+        lender = None if lent_by is None else self.tracks.entries.get(lent_by)
+        if lender is not None and lender.face_id == fid:
+            lender.face_id, lender.confidence = None, 0.0  # a LOST track lent it: it holds nothing now
         track = None if face.track_id is None else self.tracks.entries.get(face.track_id)
         if track is not None and track.face_id == fid:
             track.unassign()
@@ -344,26 +363,20 @@ class IdentityManagerBase:
         face, which absorbs them."""
         track = self.tracks.entries[tid]
         assert track.slot is not None, "a track is only classified after observations"
-        buffer = self._bank.features(track.slot)
         if face_or_new == 0:
-            fid = self.faces.new_id()  # the track's buffer (its person's part) becomes the new face's feature set
-            core = self._swaps.core(buffer)
-            if core.shape[0] < buffer.shape[0]:
-                self._bank.free_slot(track.slot)
-                track.slot = self._bank.new_slot(core)
+            fid = self.faces.new_id()  # the track's buffer becomes the new face's feature set
             self.faces.entries[fid] = FaceEntry(fid, track.slot, None, stamp, stamp, track.n_observations)
             kind = IdentityEventKind.NEW_FACE
             self.stats.new_faces += 1
         else:
             fid = face_or_new
             face = self.faces.entries[fid]
-            self._bank.add_features(face.slot, self._swaps.agreeing(buffer, face.slot))  # add result.face_images
+            self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
             self._bank.free_slot(track.slot)
             face.n_observations += track.n_observations
             kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
         self._give_face(track, fid, confidence, stamp, Evidence.FACE, new=kind == IdentityEventKind.NEW_FACE)
-        track.face_confirmed_s = stamp
         track.slot = None
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
@@ -374,18 +387,12 @@ class IdentityManagerBase:
         lent it); the bodies it gathered join the face's gallery."""
         face = self.faces.entries[fid]
         if not new:
-            lender = self._lent.take_from(fid, self.tracks.entries)  # a LOST track that lent it holds nothing now
-            if lender is not None:
-                self.stats.lent_faces_taken += 1
-                self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, lender.track_id, fid, stamp,
-                                                       lender.confidence))
-                lender.unassign()
+            self._take_lent(fid, stamp)
             self.faces.make_unavailable([fid])
         face.track_id = track.track_id
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track)
         track.give(fid, confidence, evidence, new)
-        self.crossings.forget_all(track)  # decided on what it showed since
         self.sources.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
@@ -402,7 +409,6 @@ class IdentityManagerBase:
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None
-        self.crossings.forget_all(track)
         if track.face_id is None:
             if track.slot is not None:
                 self._bank.free_slot(track.slot)

@@ -86,7 +86,6 @@ class BayesIdentityManager(IdentityManagerBase):
             low_open=True, high_open=True,
         )
         self.min_observations = check_int("min_observations", min_observations, 1)
-        self._held.face_log_ratios, self._held.face_threshold = self._face_log_ratios, self.posterior_threshold
         self.sinkhorn_tolerance = check_real(
             "sinkhorn_tolerance", sinkhorn_tolerance, 0.0, 1.0, low_open=True, high_open=True
         )
@@ -130,14 +129,6 @@ class BayesIdentityManager(IdentityManagerBase):
         out = {0: float(p[0])}
         out.update({fid: float(v) for fid, v in zip(self.faces.available, p[1:], strict=True)})
         return out
-
-    def _face_log_ratios(self, rows: F32Array, face_ids: list[int]) -> FloatArray:
-        """Log likelihood ratios "same person" of face observations (Q, dim) for learned faces: (Q, len)."""
-        if not face_ids:
-            return np.zeros((rows.shape[0], 0))
-        slots = np.array([self.faces.entries[f].slot for f in face_ids], np.intp)
-        d = self._bank.exact_min_distances(rows, slots)
-        return self.likelihood.log_ratio_rows(d, self._bank.count[slots].astype(np.float64)[None, :], None)
 
     def _current_confidence(self, track: TrackRecord) -> float:
         row = track.bayes_row
@@ -244,39 +235,11 @@ class BayesIdentityManager(IdentityManagerBase):
         idx = np.arange(len(self._rows))
         p = body[idx, best]
         n_obs = self._counts[1:][idx, best]
-        enough = n_obs >= self.min_observations
-        ok = np.flatnonzero((p > self.posterior_threshold) & enough)
+        ok = np.flatnonzero((p > self.posterior_threshold) & (n_obs >= self.min_observations))
         decisions = []
         for r in ok:
             col = int(best[r])
             face = 0 if col == 0 else self.faces.available[col - 1]
             decisions.append((self._rows[r].track_id, face, float(p[r])))
-        split = np.flatnonzero((p <= self.posterior_threshold) & enough & (best > 0)
-                               & (body[:, 1:].sum(axis=1) > self.posterior_threshold))
-        for r in split:
-            decision = self._one_person(body[r], int(best[r]))
-            if decision is not None:
-                decisions.append((self._rows[r].track_id, *decision))
         return decisions
-
-    def _one_person(self, row: FloatArray, best: int) -> tuple[int, float] | None:
-        """A row whose posterior splits between learned faces of one person (features within half the decision
-        distance of its best face's): (the oldest of them, their summed posterior) when that passes the threshold,
-        the others queued for merging into it; else None."""
-        available = self.faces.available
-        top = available[best - 1]
-        if self.feature_gate_distance is None:
-            return None
-        others = [f for f, p in zip(available, row[1:], strict=True) if f != top and p > self.clamp_probability]
-        same = [f for f, alike in zip(others, self.faces.alike(top, others, 0.5 * self.feature_gate_distance),
-                                      strict=True) if alike]
-        if not same:
-            return None
-        group = [top, *same]
-        total = min(float(sum(row[1 + available.index(f)] for f in group)), 1.0 - self.clamp_probability)
-        if total <= self.posterior_threshold:
-            return None
-        keep = min(group, key=lambda f: (self.faces.entries[f].created_s, f))
-        self._merges.append((keep, [f for f in group if f != keep]))
-        return keep, total
 

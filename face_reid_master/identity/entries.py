@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -74,9 +73,6 @@ class TrackRecord:
     public_id: int = 0  # the id it is published under (core.records.PublicId): track_id until a swap split it
     public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
     face_observations: int = 0  # face embeddings the master used since it got its public id
-    buffer_since_s: float = math.inf  # unassigned: stamp of the first face observation in its buffer
-    face_confirmed_s: float = -math.inf  # identified: last stamp its own face was seen on it (decided or agreeing)
-    crossed: dict[int, float] = field(default_factory=dict)  # track id -> probability the tracker swapped them
 
     def __post_init__(self) -> None:
         if not self.public_id:
@@ -85,12 +81,10 @@ class TrackRecord:
     def give(self, face_id: int, confidence: float, evidence: str, new: bool) -> None:
         """The track carries face ``face_id`` from now on, decided by ``evidence`` (``new``: it created it)."""
         self.face_id, self.confidence, self.evidence, self.new_face = face_id, float(confidence), evidence, new
-        self.buffer_since_s = math.inf
 
     def unassign(self) -> None:
         """The track holds no face any more: it is classified afresh from its next observations."""
         self.face_id, self.confidence, self.evidence = None, 0.0, Evidence.NONE
-        self.face_confirmed_s = -math.inf
         self.votes.clear()
         self.n_observations = 0
 

@@ -133,25 +133,6 @@ class FaceList:
             return [False] * len(others)
         return (self.min_distances(face_id, others) < limit).tolist()
 
-    def merge(self, keep: int, others: list[int]) -> list[int]:
-        """Faces ``others`` of face_list are face ``keep``'s person: their features and counts join it, a name
-        it lacks comes with them, and they are forgotten; the ids merged."""
-        face = self.entries[keep]
-        merged = []
-        for fid in others:
-            other = self.entries.get(fid)
-            if other is None or other.track_id is not None or fid == keep:
-                continue
-            self.bank.add_features(face.slot, self.bank.features(other.slot))
-            face.n_observations += other.n_observations
-            face.last_seen_s = max(face.last_seen_s, other.last_seen_s)
-            face.created_s = min(face.created_s, other.created_s)
-            face.name = face.name or other.name
-            self.forget(fid)
-            self.stats.faces_merged += 1
-            merged.append(fid)
-        return merged
-
     def forget(self, face_id: int) -> None:
         """Delete a learned face: out of face_list, its bank slot freed (its id is never given again)."""
         face = self.entries.pop(face_id)

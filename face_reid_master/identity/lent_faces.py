@@ -42,13 +42,6 @@ class LentFaces:
         """The face goes to another track (or is forgotten): the LOST track that lent it, if one did."""
         return self.lender.pop(face_id, None)
 
-    def take_from(self, face_id: int, tracks: dict[int, TrackRecord]) -> TrackRecord | None:
-        """The face goes to another track: the LOST track that lent it and still carries it (its record), if one
-        does (the caller unassigns it)."""
-        lender = self.lender.pop(face_id, None)
-        track = None if lender is None else tracks.get(lender)
-        return track if track is not None and track.face_id == face_id else None
-
     def returned(self, face_id: int, track_id: int) -> bool:
         """Whether the dying track had lent its face (then it is in face_list already, and no longer lent)."""
         if self.lender.get(face_id) != track_id:

@@ -36,7 +36,6 @@ class IdentityEventKind(str, enum.Enum):
     RELEASED = "released"  # the track died: its face goes back to face_list (assignable again)
     SWAPPED = "swapped"  # the track's faces stopped matching its face (a tracker swap): face back to face_list,
     # the track is classified afresh
-    MERGED = "merged"  # the face was one person with face ``merged_into`` (older): it is gone, its features there
 
 
 @dataclass(frozen=True)
@@ -50,7 +49,6 @@ class IdentityEvent:
     confidence: float  # posterior (Bayes) or vote fraction (threshold) when the decision was made
     since_s: float | None = None  # SWAPPED: stamp of the first observation that was not the face's person
     evidence: str = Evidence.FACE  # ASSIGNED_KNOWN / NEW_FACE: what decided it (the face or another cue's kind)
-    merged_into: int = 0  # MERGED: the face that absorbed it
 
 
 @dataclass
@@ -106,6 +104,3 @@ class IdentityStats:
     body_observations: int = 0
     assigned_by_body: int = 0
     lent_faces_taken: int = 0  # faces of LOST tracks given to another track (the person came back as it)
-    held_faces_taken: int = 0  # faces a swapped track held, taken by the track that showed them (held_faces)
-    faces_merged: int = 0  # faces found to be one person with an older face (a split posterior) and merged into it
-    new_ids_held_waiting: int = 0  # "new person" decisions held back: another live track shows that face too

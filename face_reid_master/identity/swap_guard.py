@@ -17,8 +17,7 @@ from itertools import accumulate
 import numpy as np
 import numpy.typing as npt
 
-from face_reid_master.identity.entries import Chunk, FaceEntry, TrackRecord
-from face_reid_master.identity.evidence import Evidence
+from face_reid_master.identity.entries import Chunk, TrackRecord
 from face_reid_master.identity.feature_bank import FeatureBank
 from face_reid_master.identity.records import IdentityStats
 
@@ -60,27 +59,6 @@ class SwapGuard:
         ends = list(accumulate(counts))
         return {tid: keep[end - n:end] for tid, n, end in zip(ident, counts, ends, strict=True)}
 
-    def learn(self, track: TrackRecord, face: FaceEntry, chunks: list[Chunk], obs: F32Array,
-              keep: npt.NDArray[np.bool_] | None, stamp: float) -> tuple[F32Array | None, list[Chunk] | None]:
-        """An identified track's observations (``keep``: which its face accepts; None: all): the rows its face
-        learns (None: none) and, when they show a swap, the chunks the released track goes on with (the face then
-        learned what was its person's already)."""
-        face.n_observations += obs.shape[0]
-        face.last_seen_s = max(face.last_seen_s, stamp)
-        if keep is not None:
-            swapped = self.swapped(track, chunks, keep)
-            obs = obs if keep.all() else obs[keep]
-            if swapped is not None:
-                if obs.shape[0]:
-                    self.bank.add_features(face.slot, obs)
-                return None, swapped
-            if obs.shape[0] == 0:
-                return None, None
-        track.face_confirmed_s = max(track.face_confirmed_s, chunks[-1].stamp_s)
-        if track.evidence not in (Evidence.FACE, Evidence.BOTH):
-            track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
-        return obs, None
-
     def swapped(self, track: TrackRecord, chunks: list[Chunk], keep: npt.NDArray[np.bool_]) -> list[Chunk] | None:
         """Follow the identified track's run of inconsistent observations; once it is
         ``release_after`` long, the chunks from the run's start on (None: no swap)."""
@@ -109,26 +87,3 @@ class SwapGuard:
             return None
         track.inconsistent = []
         return run
-
-    def agreeing(self, rows: F32Array, slot: int) -> F32Array:
-        """The rows of a decided buffer that lie within the gate of the face in bank ``slot`` (all when the gate is
-        off): a buffer that spans a swap teaches the face only its person's features."""
-        if self.gate_distance is None or not rows.shape[0]:
-            return rows
-        keep = self.bank.exact_min_distances(rows, np.array([slot], np.intp))[:, 0] <= self.gate_distance
-        self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
-        return rows if keep.all() else rows[keep]
-
-    def core(self, rows: F32Array) -> F32Array:
-        """The rows of a buffer that becomes a new face within the gate of its most central row (the one with most
-        rows within the gate): a buffer that spans a swap founds the face on one person (all when the gate is
-        off)."""
-        if self.gate_distance is None or rows.shape[0] < 2:
-            return rows
-        sq = np.einsum("ij,ij->i", rows, rows)
-        d2 = sq[:, None] + sq[None, :] - 2.0 * (rows @ rows.T)
-        near = d2 <= self.gate_distance ** 2
-        keep = near[int(np.argmax(near.sum(axis=1)))]
-        self.stats.observations_not_learned_inconsistent += int(keep.size - np.count_nonzero(keep))
-        return rows if keep.all() else rows[keep]
-

@@ -8,7 +8,7 @@ import pytest
 from face_reid_master.identity.bayes_table import BayesIdentityManager
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
-from face_reid_master.identity.records import IdentityEventKind, LearnedFace
+from face_reid_master.identity.records import IdentityEventKind
 
 BODY_LIKELIHOOD = LikelihoodModel(SkewNormal(0.0, 0.4, 0.15), SkewNormal(0.0, 1.2, 0.25))  # N_p = N_n near 0.75
 DIM = 4
@@ -125,13 +125,22 @@ def test_body_evidence_never_creates_a_face_nor_decides_a_track_that_showed_a_fa
 def test_the_identity_layer_takes_two_close_faces_for_one_person_only() -> None:
     ids = BayesIdentityManager(BODY_LIKELIHOOD, embedding_dim=DIM, min_observations=2, body_evidence=_evidence(),
                                feature_gate_distance=0.75)  # alike: closer than 0.375
-    rows = np.repeat(_face(0), 3, axis=0).astype(np.float32)  # Alice twice in the store: 0.02 apart
-    ids.faces.import_faces([LearnedFace(1, rows), LearnedFace(2, rows * 1.2), LearnedFace(3, rows * 0 + _face(1) * 5)])
-    assert ids._faces_alike(1, [2]) == [True]  # much closer than half the decision distance
-    bob = 3  # another person, 0.51 away
-    assert ids._faces_alike(1, [bob, 999]) == [False, False]  # 999: no such face
-    for fid in (1, 2):  # she wore red on both
-        ids.body_evidence.add_face_bodies(fid, RED, 0.5)
+    ids.add_observations(1, np.repeat(_face(0), 3, axis=0), 0.0)  # Alice, in red
+    ids.add_body_observations(1, RED, 0.0)
+    ids.step(0.0)
+    ids.add_observations(2, np.repeat(_face(0) * 1.2, 3, axis=0), 0.5)  # a duplicate track of her: 0.02 away,
+    ids.add_body_observations(2, RED, 0.5)  # but her face is held by track 1, so a second face is learned
+    ids.step(0.5)
+    assert len(ids.face_ids()) == 2
+    first, second = ids.face_ids()
+    assert ids._faces_alike(first, [second]) == [True]  # much closer than half the decision distance
+    ids.add_observations(3, np.repeat(_face(1) * 5, 3, axis=0), 0.6)  # Bob: another person, 0.51 away
+    ids.step(0.6)
+    (bob,) = set(ids.face_ids()) - {ids.face_id_of(1), ids.face_id_of(2)}
+    assert ids._faces_alike(ids.face_id_of(1), [bob, 999]) == [False, False]  # 999: no such face
+    for tid in (1, 2, 3):
+        ids.track_deleted(tid, 1.0)
+    ids.step(1.0)
     for k in range(3):  # she comes back, faceless: the two faces split her body evidence
         ids.add_body_observations(4, RED, 2.0 + k)
         ids.step(2.0 + k)

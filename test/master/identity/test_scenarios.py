@@ -3,13 +3,11 @@ identity events expected out, read as a story. Each file says what it shows in i
 
 A step at time ``at`` (s) may show faces (``faces: {track: "alice x3"}``: three noisy face embeddings of
 Alice on that track), bodies (``bodies: {track: "red x2"}``), and tell the tracker's ``lost`` / ``found`` /
-``deleted`` tracks, the pairs of tracks it may have swapped (``crossed: [[1, 2, 0.4]]``: with probability
-0.4), ``forget`` face ids, ``restart`` (the learned faces saved and loaded into a new
-manager, as the face store does), or load ``stored`` faces (``["alice x5", ...]``: learned faces as a face store
-holds them, given the next free ids). ``expect`` lists the step's identity events in order as
-``"<kind> track <T> face <F>"`` (``by body`` when the body decided it) or ``"merged face <F> into <G>"``; none
-expected when left out. ``faces_of`` checks which face each track carries then (null: none). ``manager`` in the
-file header overrides the identity manager's arguments.
+``deleted`` tracks, ``forget`` face ids, or ``restart`` (the learned faces saved and loaded into a new
+manager, as the face store does). ``expect`` lists the step's identity events in order as
+``"<kind> track <T> face <F>"`` (``by body`` when the body decided it); none expected when left out. ``faces_of``
+checks which face each track carries then (null: none). ``manager`` in the file header overrides the identity
+manager's arguments.
 
 People's faces are points of a 128-d space ~0.99 apart (another person) with ~0.3 between two views of one
 person; ``alike`` names a look-alike of Alice 0.7 from her. Clothes are colours of a 4-d body space.
@@ -29,7 +27,6 @@ import yaml
 from face_reid_master.identity.bayes_table import BayesIdentityManager
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
-from face_reid_master.identity.records import LearnedFace
 
 SCENARIOS = sorted((Path(__file__).parent / "scenarios").glob("*.yaml"))
 DIM = 128
@@ -38,7 +35,7 @@ COLOURS = ("red", "blue", "green", "black")
 _NOISE = 0.3 / math.sqrt(2 * DIM)  # two views of one person ~0.3 apart
 _BODY_LIKELIHOOD = LikelihoodModel(SkewNormal(0.0, 0.4, 0.15), SkewNormal(0.0, 1.2, 0.25))  # equal near 0.75
 _OBSERVED = re.compile(r"^(\w+)(?: x(\d+))?$")
-_EVENT = re.compile(r"^(\w+) track (\d+) face (\d+)( by body)?$|^merged face \d+ into \d+$")
+_EVENT = re.compile(r"^(\w+) track (\d+) face (\d+)( by body)?$")
 
 
 def _face_centre(name: str) -> np.ndarray:
@@ -73,10 +70,6 @@ class ScenarioRun:
 
     def step(self, step: dict[str, Any]) -> list[str]:
         m, t = self.manager, float(step["at"])
-        for seen in step.get("stored") or ():
-            name, n = _observed(seen)
-            rows = _face_centre(name) + self.rng.normal(0.0, _NOISE, (n, DIM))
-            m.faces.import_faces([LearnedFace(m.faces.new_id(), rows.astype(np.float32), None, t, t, n)])
         for track, seen in (step.get("faces") or {}).items():
             name, n = _observed(seen)
             m.add_observations(int(track), _face_centre(name) + self.rng.normal(0.0, _NOISE, (n, DIM)), t)
@@ -84,16 +77,13 @@ class ScenarioRun:
             colour, n = _observed(worn)
             rows = np.repeat(np.eye(4, dtype=np.float32)[COLOURS.index(colour)][None, :], n, axis=0)
             m.add_body_observations(int(track), rows + self.rng.normal(0.0, 0.02, rows.shape).astype(np.float32), t)
-        for a, b, p in step.get("crossed") or ():
-            m.tracks_crossed(int(a), int(b), float(p), t)
         for track in step.get("lost") or ():
             m.track_lost(int(track))
         for track in step.get("found") or ():
             m.track_recovered(int(track))
         for track in step.get("deleted") or ():
             m.track_deleted(int(track), t)
-        events = [f"merged face {e.face_id} into {e.merged_into}" if e.kind.value == "merged" else
-                  f"{e.kind.value} track {e.track_id} face {e.face_id}" + (" by body" if e.evidence == "body" else "")
+        events = [f"{e.kind.value} track {e.track_id} face {e.face_id}" + (" by body" if e.evidence == "body" else "")
                   for e in m.step(t)]
         for face in step.get("forget") or ():
             assert m.forget_face(int(face)), f"face {face} to forget is not learned"
@@ -121,5 +111,4 @@ def test_scenario(path: Path) -> None:
 def test_there_are_scenarios_for_each_behaviour() -> None:
     names = {p.stem for p in SCENARIOS}
     assert {"leave_and_return", "swap", "stranger", "look_alikes", "body_only", "second_day", "forget",
-            "restart", "held_by_swapped_track", "held_by_duplicate_track", "split_person_merged",
-            "buffer_across_a_swap"} <= names
+            "restart"} <= names
