@@ -8,7 +8,10 @@ leave and return, kill -9) is test_master_node_dds.py.
 from __future__ import annotations
 
 import math
+import os
 import re
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -652,8 +655,12 @@ def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, 
     node = MasterNode(context=ctx)
     camera_a, camera_b = Node("face_reid_camera", namespace="/cam_a", context=ctx), Node(
         "face_reid_camera", namespace="/cam_b", context=ctx)
-    twin_ctx = ros_context()  # a second process (participant) started in /cam_a as well
-    twin = Node("face_reid_camera", namespace="/cam_a", context=twin_ctx)
+    frame_type = type(_frame(1.0))
+    twin = subprocess.Popen(  # a second camera process started in /cam_a as well
+        [sys.executable, "-c", f"import rclpy; from rclpy.node import Node; "
+         f"from {frame_type.__module__} import {frame_type.__name__} as T; rclpy.init(); "
+         f"n = Node('face_reid_camera', namespace='/cam_a'); n.create_publisher(T, '{CAM}', 10); rclpy.spin(n)"],
+        env=os.environ.copy(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     executor = SingleThreadedExecutor(context=ctx)
     for n in (node, camera_a, camera_b):
         executor.add_node(n)
@@ -663,7 +670,6 @@ def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, 
         assert node.trigger_configure() == OK and node.trigger_activate() == OK
         pub_a = camera_a.create_publisher(type(_frame(1.0)), CAM, 10)
         pub_b = camera_b.create_publisher(type(_frame(1.0)), cam_b, 10)
-        twin.create_publisher(type(_frame(1.0)), CAM, 10)
         stamp = [10.0]
 
         def publish_and_said() -> bool:
@@ -682,6 +688,8 @@ def test_two_cameras_under_one_camera_id_are_a_warning_naming_both(ros_context, 
         assert message.count("/cam_a/face_reid_camera (participant") >= 2
     finally:
         executor.shutdown()
-        for n in (twin, camera_a, camera_b):
+        twin.terminate()
+        twin.wait(30)
+        for n in (camera_a, camera_b):
             n.destroy_node()
         node.destroy_node()
