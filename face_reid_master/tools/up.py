@@ -75,6 +75,12 @@ def _camera_file_problems(values: dict[str, Any]) -> list[str]:
         from face_reid_camera.body.projection import load_body_projection
 
         loads.append(lambda: load_body_projection(str(values["body_projection_path"])))
+    return problems + _load_problems(loads)
+
+
+def _load_problems(loads: list[Callable[[], object]]) -> list[str]:
+    """Run each load as the node would at configure; the one-line reason of each that fails."""
+    problems = []
     for load in loads:
         try:
             load()
@@ -115,12 +121,7 @@ def _master_file_problems(values: dict[str, Any]) -> list[str]:
         from face_reid_master.identity.confidence_map import load_confidence_map
 
         loads.append(lambda: load_confidence_map(str(values["confidence_map_path"])))
-    for load in loads:
-        try:
-            load()
-        except _FILE_ERRORS as exc:
-            problems.append(str(exc))
-    return problems
+    return problems + _load_problems(loads)
 
 
 @dataclass(frozen=True)
