@@ -6,12 +6,13 @@ Usage: diagnostics.py [SECONDS]: listen this long (default 5; the nodes publish 
 earlier. Exit status 0 when some node was heard, 1 when none was."""
 
 import os
+import signal
 import sys
 import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.utilities import remove_ros_args
 
 LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
@@ -36,16 +37,20 @@ def main() -> int:
     domain = os.environ.get("ROS_DOMAIN_ID", "0")
     rclpy.init()
     node = rclpy.create_node("diagnostics_peek")
+    executor = SingleThreadedExecutor()  # made before the waiting line: a Ctrl-C then never meets a half-made one
+    executor.add_node(node)
     try:
         node.create_subscription(DiagnosticArray, "/diagnostics", show, 10)
         print(f"diagnostics: listening to /diagnostics for {seconds} s (ROS_DOMAIN_ID={domain}); Ctrl-C ends",
               file=sys.stderr, flush=True)
         deadline = time.monotonic() + seconds
         while rclpy.ok() and time.monotonic() < deadline:
-            rclpy.spin_once(node, timeout_sec=0.2)
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0  # Ctrl-C: the way to end it early
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C during the cleanup ends nothing half-way
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     if not seen:

@@ -9,7 +9,7 @@ import signal
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.utilities import remove_ros_args
 
 from face_reid_master.ros.tracks_in import subscribe_tracks
@@ -45,6 +45,8 @@ def main() -> int:
 
     rclpy.init()
     node = rclpy.create_node("who_is_where")
+    executor = SingleThreadedExecutor()  # made before the waiting line: a Ctrl-C then never meets a half-made one
+    executor.add_node(node)
     try:
         # checks sealed tracks; says when a key is needed, and how to give it
         tracks = subscribe_tracks(node, on_tracks, "/tracks_named", key,
@@ -52,7 +54,7 @@ def main() -> int:
         print(f"who_is_where: waiting for {'sealed ' if key else ''}tracks on {tracks.listening} "
               f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}); Ctrl-C ends", file=sys.stderr, flush=True)
         while rclpy.ok() and (count == 0 or seen[0] < count):
-            rclpy.spin_once(node, timeout_sec=0.5)
+            executor.spin_once(timeout_sec=0.5)
     except ValueError as exc:  # an unusable key file: one line
         print(f"who_is_where: {exc}", file=sys.stderr)
         return 2
@@ -60,6 +62,7 @@ def main() -> int:
         pass  # Ctrl-C: the way to end it
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C during the cleanup ends nothing half-way
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
