@@ -183,6 +183,8 @@ class MasterCore:
         self.stats.detections_rejected_position += len(update.rejected_detections)
         self.clutter.follow(update.associations, detections.positions, stamp)
         self._last_stamp = max(self._last_stamp, stamp)
+        for a, b, p in update.swaps:
+            self.identity.crossings.crossed(a, b, p, stamp)
         self._observe(update.associations, detections, stamp, frame)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
         self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)
@@ -312,15 +314,23 @@ class MasterCore:
         track = self.identity.tracks.record(track_id)
         return PublicId(track_id if track is None else track.public_id)
 
+    def published_face_id(self, track_id: TrackerId) -> int:
+        """The face id a track is published with: its face, or 0 while undecided or while a crossing makes its
+        identity more likely wrong than right."""
+        fid = self.identity.face_id_of(track_id)
+        return 0 if fid is None or self.identity.crossings.withholds(track_id) else fid
+
     def published_confidence(self, track_id: int) -> float:
         """``identity_confidence`` of a track: a decided track's decision posterior through the confidence map
-        (how often such decisions were right); 0 for an undecided track (it claims no face: its candidates' raw
-        posteriors are the overconfident numbers the map exists to correct)."""
+        (how often such decisions were right), times the chance that no crossing since swapped its person; 0 for an
+        undecided track (it claims no face: its candidates' raw posteriors are the overconfident numbers the map
+        exists to correct) and for one whose identity is withheld."""
         evidence = self.identity.evidence_of(track_id)
-        if not evidence:
+        if not evidence or self.identity.crossings.withholds(track_id):
             return 0.0
+        doubt = self.identity.crossings.doubt_of(track_id)
         raw = float(self.identity.confidence_of(track_id))
-        return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id)))
+        return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id))) * (1.0 - doubt)
 
     # ------------------------------------------------------------------------------ people and faces
     def add_person(self, name: str, embeddings: NDArray[np.floating]) -> None:
@@ -371,7 +381,7 @@ class MasterCore:
         for snap in snaps:
             if snap.track_id in clutter:
                 continue
-            fid = self.identity.face_id_of(snap.track_id) or 0
+            fid = self.published_face_id(snap.track_id)
             track = records.get(snap.track_id)
             since = None if track is None else track.public_since_s
             out.append(
@@ -380,7 +390,7 @@ class MasterCore:
                     face_id=fid,
                     name=self.face_name(fid) if fid else "",
                     identity_confidence=self.published_confidence(snap.track_id),
-                    identity_evidence=self.identity.evidence_of(snap.track_id),
+                    identity_evidence=self.identity.evidence_of(snap.track_id) if fid else "",
                     face_observations=0 if track is None else track.face_observations,
                     position_xy=snap.position_xy,
                     velocity_xy=snap.velocity_xy,

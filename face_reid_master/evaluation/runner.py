@@ -294,7 +294,7 @@ def run_master(
                     log.face_gt.append((stamp, int(gt[j])))
                     if log.first_face_s is None:
                         log.first_face_s = stamp
-                fid = core.identity.face_id_of(inner) or 0
+                fid = core.published_face_id(inner)
                 if fid:
                     name = core.face_name(fid)
                     if name:

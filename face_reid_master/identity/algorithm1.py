@@ -29,6 +29,7 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
+from face_reid_master.identity.crossings import Crossings
 from face_reid_master.identity.entries import (
     Chunk,
     FaceEntry,
@@ -105,6 +106,7 @@ class IdentityManagerBase:
         self.faces = FaceList(self._bank, self.stats, self.exact_search_max_features, self.shortlist_faces,
                               self._on_face_available, self._on_faces_unavailable)
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
+        self.crossings = Crossings(self.tracks)  # the doubt a possible tracker swap leaves on identities
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
 
@@ -237,7 +239,12 @@ class IdentityManagerBase:
                           keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
                           ) -> tuple[int | None, list[Chunk], F32Array | None]:
         """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
-        the rows it learns (None: none), or, when they show a swap, the released track's chunks and rows."""
+        the rows it learns (None: none), or, when they show a swap or its identity is withheld (a crossing made it
+        more likely wrong than right: its face re-decides it), the released track's chunks and rows."""
+        if self.crossings.withholds(track.track_id):
+            events.append(self._release_swapped(track, stamp, stamp))
+            track.n_observations = obs.shape[0]
+            return None, chunks, obs
         assert track.face_id is not None
         face = self.faces.entries[track.face_id]
         face.n_observations += obs.shape[0]
@@ -328,12 +335,10 @@ class IdentityManagerBase:
     def forget_face(self, face_id: int) -> bool:
         """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
 
-        The face leaves face_list (its table column / threshold votes go) and its bank slot is zeroed.
-        If a live track carries it, that track becomes unidentified again: its assignment, confidence
-        and queued observations are dropped (they were merged into / meant for the forgotten face), so
-        while the person stays in view new observations are classified afresh and normally create a
-        *new* face id after ``min_observations``.  Face ids are never reused within this manager.
-        """
+        The face leaves face_list (its table column / threshold votes go) and its bank slot is zeroed. A live track
+        carrying it becomes unidentified: its assignment, confidence and queued observations are dropped (meant for
+        the forgotten face), so while the person stays in view new observations are classified afresh and normally
+        create a *new* face id after ``min_observations``.  Face ids are never reused within this manager."""
         fid = check_int("face_id", face_id, -(2**63))
         face = self.faces.entries.get(fid)
         if face is None:
@@ -393,6 +398,7 @@ class IdentityManagerBase:
         face.last_seen_s = max(face.last_seen_s, stamp)
         self._on_track_identified(track)
         track.give(fid, confidence, evidence, new)
+        self.crossings.forget_all(track)  # decided on what it showed since
         self.sources.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
@@ -409,6 +415,7 @@ class IdentityManagerBase:
         track = self.tracks.remove(tid, stamp)
         if track is None:
             return None
+        track.crossed.clear()  # its partners keep their doubt: its end does not say whether they were swapped
         if track.face_id is None:
             if track.slot is not None:
                 self._bank.free_slot(track.slot)

@@ -17,6 +17,10 @@ Body appearance (where a track and a detection both have an embedding, see
 pass, ``appearance_weight`` x the distance is added to the pass-1 cost, and LOST tracks left over get a
 third pass: a detection within walking reach of their last one (no position gate) that looks like them and
 like no other track.
+
+Crossings: for two tracks the association could have given each other's detection (both pairs within the wide
+gate), the probability that it swapped them is the likelihood of the exchanged pairs over both assignments'
+(``Matches.swaps``); likewise for a track that took a detection another, undetected, track could have had.
 """
 
 from __future__ import annotations
@@ -68,11 +72,13 @@ def gnn(cost: FloatArray, feasible: NDArray[np.bool_]) -> tuple[IndexArray, Inde
 @dataclass(frozen=True, slots=True)
 class Matches:
     """``rows`` (tracks) matched to ``cols`` (detections); ``near``: (M,) detections within
-    ``min_person_separation_m`` of some track's predicted position."""
+    ``min_person_separation_m`` of some track's predicted position; ``swaps``: (track, track, probability that
+    this association swapped their people) for the pairs it could have swapped (tracks as in ``rows``)."""
 
     rows: IndexArray
     cols: IndexArray
     near: NDArray[np.bool_]
+    swaps: tuple[tuple[int, int, float], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +95,41 @@ class _Costs:
     nll: FloatArray
     other_person: NDArray[np.bool_] | None
     looks_alike: NDArray[np.bool_] | None
+
+
+_MIN_SWAP_PROBABILITY = 1e-3  # pairs less likely swapped than this are not reported
+
+
+def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: IndexArray, cols: IndexArray,
+                       carries: NDArray[np.bool_]) -> tuple[tuple[int, int, float], ...]:
+    """(track, track, p) for every two tracks that could have taken each other's detection: p, the probability
+    that the assignment swapped them, is the likelihood of the exchanged pairs over both (``nll``: -2 log
+    likelihood per pair, up to a constant; ``possible``: pairs the association could have made). A track that
+    carries an identity (``carries``) and was not matched counts too, against the track that took the detection
+    it could have had. Pairs below 1e-3 are left out."""
+    out: list[tuple[int, int, float]] = []
+    if rows.shape[0]:
+        own = nll[rows, cols]
+        alt = nll[rows][:, cols]  # alt[k, l]: track rows[k] with detection cols[l]
+        ok = possible[rows][:, cols] & possible[rows][:, cols].T
+        np.fill_diagonal(ok, False)
+        k, l_ = np.nonzero(np.triu(ok))
+        if k.shape[0]:
+            delta = alt[k, l_] + alt[l_, k] - own[k] - own[l_]
+            p = 1.0 / (1.0 + np.exp(np.minimum(0.5 * delta, 700.0)))
+            out.extend((int(rows[a]), int(rows[b]), float(q)) for a, b, q in zip(k, l_, p, strict=True)
+                       if q >= _MIN_SWAP_PROBABILITY)
+    unmatched = np.ones(nll.shape[0], dtype=bool)
+    unmatched[rows] = False
+    idle = np.flatnonzero(unmatched & carries)
+    if idle.shape[0] and rows.shape[0]:
+        j, m = np.nonzero(possible[idle][:, cols])
+        if j.shape[0]:
+            delta = nll[idle[j], cols[m]] - nll[rows[m], cols[m]]
+            p = 1.0 / (1.0 + np.exp(np.minimum(0.5 * delta, 700.0)))
+            out.extend((int(rows[b]), int(idle[a]), float(q)) for a, b, q in zip(j, m, p, strict=True)
+                       if q >= _MIN_SWAP_PROBABILITY)
+    return tuple(out)
 
 
 class Associator:
@@ -162,7 +203,11 @@ class Associator:
             self._reattach(c.looks_alike, unique, appearance, state, t_last, z_last, z, stamp, free_c, rows_l, cols_l)
         rows = np.concatenate(rows_l) if rows_l else _EMPTY
         cols = np.concatenate(cols_l) if cols_l else _EMPTY
-        return Matches(rows, cols, close.any(axis=0))
+        possible = (close | (d2 <= self._wide_gate)) & in_metric_gate
+        if c.other_person is not None:
+            possible &= ~c.other_person
+        swaps = swap_probabilities(nll, possible, rows, cols, state != _TENTATIVE)
+        return Matches(rows, cols, close.any(axis=0), swaps)
 
     def _costs(self, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, r2: FloatArray,
                appearance: FloatArray | None) -> _Costs:

@@ -81,7 +81,8 @@ class UpdateResult:
     ``max_tracks`` limit.  ``suppressed_detections``: unassociated detections that started no track
     because they lie within ``min_person_separation_m`` of a track (whose person was already matched:
     a duplicate detection).  ``clock_resync``: this frame re-based the clock after a run of rejected
-    frames (on a backward jump all tracks are deleted first).
+    frames (on a backward jump all tracks are deleted first).  ``swaps``: pairs of tracks this frame's association
+    could have given each other's person, with the probability that it did (crossings).
     """
 
     stamp_s: float
@@ -96,6 +97,7 @@ class UpdateResult:
     rejected_detections: tuple[int, ...] = ()
     suppressed_detections: tuple[int, ...] = ()
     clock_resync: bool = False
+    swaps: tuple[tuple[int, int, float], ...] = ()  # (track id, track id, probability this frame swapped them)
 
     @property
     def accepted(self) -> bool:

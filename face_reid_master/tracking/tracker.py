@@ -185,6 +185,7 @@ class Tracker:
             rejected_detections=tuple(dropped),
             suppressed_detections=tuple(suppressed),
             clock_resync=resync,
+            swaps=matched.matches.swaps,
         )
 
     def advance(self, stamp_s: float) -> UpdateResult:
@@ -296,7 +297,9 @@ class Tracker:
         x_pred, P_pred = self._model.predict(x_a[cand], P_a[cand], stamp - t_a[cand])
         local = self._associate(x_pred, P_pred, self._tab.state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike)
         rows = local.rows
-        return _Matched(Matches(cand[rows], local.cols, local.near), x_pred[rows], P_pred[rows], late)
+        ids = self._tab.ids[cand]
+        swaps = tuple((int(ids[a]), int(ids[b]), p) for a, b, p in local.swaps)
+        return _Matched(Matches(cand[rows], local.cols, local.near, swaps), x_pred[rows], P_pred[rows], late)
 
     def _candidates(self, x_a: FloatArray, t_a: FloatArray, z_a: FloatArray, z: FloatArray, stamp: float,
                     reattach: bool) -> IndexArray:

@@ -3,11 +3,13 @@ identity events expected out, read as a story. Each file says what it shows in i
 
 A step at time ``at`` (s) may show faces (``faces: {track: "alice x3"}``: three noisy face embeddings of
 Alice on that track), bodies (``bodies: {track: "red x2"}``), and tell the tracker's ``lost`` / ``found`` /
-``deleted`` tracks, ``forget`` face ids, or ``restart`` (the learned faces saved and loaded into a new
+``deleted`` tracks, the pairs of tracks it may have swapped (``crossed: [[1, 2, 0.4]]``: with probability
+0.4), ``forget`` face ids, or ``restart`` (the learned faces saved and loaded into a new
 manager, as the face store does). ``expect`` lists the step's identity events in order as
-``"<kind> track <T> face <F>"`` (``by body`` when the body decided it); none expected when left out. ``faces_of``
-checks which face each track carries then (null: none). ``manager`` in the file header overrides the identity
-manager's arguments.
+``"<kind> track <T> face <F>"`` (``by body`` when the body decided it); none expected when left out.
+``faces_of`` checks which face each track carries then (null: none), ``published`` which face a robot reads for it
+(null: none, or withheld while a crossing makes it more likely wrong than right). ``manager`` in the file header
+overrides the identity manager's arguments.
 
 People's faces are points of a 128-d space ~0.99 apart (another person) with ~0.3 between two views of one
 person; ``alike`` names a look-alike of Alice 0.7 from her. Clothes are colours of a 4-d body space.
@@ -77,6 +79,8 @@ class ScenarioRun:
             colour, n = _observed(worn)
             rows = np.repeat(np.eye(4, dtype=np.float32)[COLOURS.index(colour)][None, :], n, axis=0)
             m.add_body_observations(int(track), rows + self.rng.normal(0.0, 0.02, rows.shape).astype(np.float32), t)
+        for a, b, p in step.get("crossed") or ():
+            m.crossings.crossed(int(a), int(b), float(p), t)
         for track in step.get("lost") or ():
             m.track_lost(int(track))
         for track in step.get("found") or ():
@@ -106,9 +110,12 @@ def test_scenario(path: Path) -> None:
         assert run.step(step) == expected, f"{path.name} step {k} (at {step['at']} s)"
         for track, face in (step.get("faces_of") or {}).items():
             assert run.manager.face_id_of(int(track)) == face, f"{path.name} step {k}: track {track}"
+        for track, face in (step.get("published") or {}).items():
+            withheld = run.manager.crossings.withholds(int(track))
+            assert (None if withheld else run.manager.face_id_of(int(track))) == face, f"{path.name} step {k}: {track}"
 
 
 def test_there_are_scenarios_for_each_behaviour() -> None:
     names = {p.stem for p in SCENARIOS}
     assert {"leave_and_return", "swap", "stranger", "look_alikes", "body_only", "second_day", "forget",
-            "restart"} <= names
+            "restart", "crossing_with_no_face_after"} <= names

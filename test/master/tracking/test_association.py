@@ -18,7 +18,7 @@ from trajectories import (
     random_walkers,
 )
 
-from face_reid_master.tracking.association import gnn
+from face_reid_master.tracking.association import gnn, swap_probabilities
 from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.kalman import mahalanobis_sq
 from face_reid_master.tracking.records import TrackState
@@ -231,3 +231,39 @@ def test_hidden_persons_track_does_not_take_a_bystander_who_appears_next_to_it(
     tracker, results = run(frames)
     assert_one_track_per_person(frames, results)
     assert tracker.stats.tracks_confirmed == 2
+
+
+def test_the_swap_probability_of_two_tracks_is_the_exchanged_pairs_likelihood() -> None:
+    nll = np.array([[1.0, 1.0], [1.0, 1.0]])  # each detection as likely for either track: a coin
+    possible = np.ones((2, 2), dtype=bool)
+    rows, cols = np.array([0, 1]), np.array([0, 1])
+    carries = np.ones(2, dtype=bool)
+    ((a, b, p),) = swap_probabilities(nll, possible, rows, cols, carries)
+    assert (a, b) == (0, 1) and p == pytest.approx(0.5)
+    nll = np.array([[0.0, 4.0], [4.0, 0.0]])  # exchanged pairs 8 (-2 log L) worse: exp(-4) / (1 + exp(-4))
+    assert swap_probabilities(nll, possible, rows, cols, carries)[0][2] == pytest.approx(1 / (1 + math.exp(4)))
+    nll = np.array([[0.0, 30.0], [30.0, 0.0]])  # far apart: below 1e-3, not reported
+    assert swap_probabilities(nll, possible, rows, cols, carries) == ()
+    apart = np.eye(2, dtype=bool)  # the association could not have exchanged them
+    assert swap_probabilities(np.ones((2, 2)), apart, rows, cols, carries) == ()
+
+
+def test_a_track_left_without_its_detection_counts_against_the_one_that_took_it() -> None:
+    nll = np.array([[2.0], [2.0]])  # one detection, taken by track 0; track 1 (confirmed) as close, undetected
+    pairs = swap_probabilities(nll, np.ones((2, 1), dtype=bool), np.array([0]), np.array([0]), np.ones(2, bool))
+    assert pairs == ((0, 1, pytest.approx(0.5)),)
+    tentative = np.array([True, False])  # an unconfirmed track carries no identity: nothing to doubt
+    assert swap_probabilities(nll, np.ones((2, 1), dtype=bool), np.array([0]), np.array([0]), tentative) == ()
+
+
+def test_the_tracker_reports_the_pairs_it_may_have_swapped_at_a_crossing() -> None:
+    tracker = Tracker(TrackerConfig())
+    swaps = []
+    for k in range(40):  # two people walk towards each other along x and cross at t = 2 s
+        t = k * 0.1
+        xa, xb = -2.0 + t, 2.0 - t
+        result = tracker.update([det(xa, 0.0), det(xb, 0.05)], t, "cam")
+        swaps.extend(result.swaps)
+    assert swaps, "the crossing was never reported"
+    assert max(p for _, _, p in swaps) > 0.1  # at the crossing the association had a real doubt
+    assert all(a != b for a, b, _ in swaps)

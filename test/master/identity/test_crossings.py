@@ -1,0 +1,86 @@
+"""Crossings (identity.crossings): the doubt a tracker's possible swap leaves on two identities; it lowers what is
+published, never moves an identity."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from face_reid_master.identity.bayes_table import BayesIdentityManager
+from face_reid_master.identity.likelihood import LikelihoodModel, SkewNormal
+
+DIM = 16
+LIKELIHOOD = LikelihoodModel(SkewNormal(0.0, 0.3, 0.1), SkewNormal(0.0, 1.0, 0.2))
+
+
+def _face(k: int, n: int, rng: np.random.Generator) -> np.ndarray:
+    centre = np.zeros(DIM, np.float32)
+    centre[k] = 0.7
+    return (centre + rng.normal(0.0, 0.02, (n, DIM))).astype(np.float32)
+
+
+def _alice_and_bob() -> tuple[BayesIdentityManager, np.random.Generator]:
+    rng = np.random.default_rng(3)
+    ids = BayesIdentityManager(LIKELIHOOD, embedding_dim=DIM, feature_gate_distance=0.5, release_after_inconsistent=3)
+    ids.add_observations(1, _face(0, 3, rng), 0.0)
+    ids.add_observations(2, _face(1, 3, rng), 0.0)
+    ids.step(0.0)
+    assert ids.assigned_tracks() == {1: 1, 2: 2}
+    return ids, rng
+
+
+def test_a_crossing_leaves_doubt_that_the_association_alone_never_makes_likelier_than_not() -> None:
+    ids, _ = _alice_and_bob()
+    assert ids.crossings.doubt_of(1) == 0.0
+    ids.crossings.crossed(1, 2, 0.3, 1.0)
+    assert ids.crossings.doubt_of(1) == pytest.approx(0.3) and ids.crossings.doubt_of(2) == pytest.approx(0.3)
+    for k in range(20):  # side by side for a long while: a coin at most
+        ids.crossings.crossed(1, 2, 0.9, 1.0 + k)
+    assert ids.crossings.doubt_of(1) == pytest.approx(0.5)
+    assert ids.assigned_tracks() == {1: 1, 2: 2}  # doubt never moves an identity
+
+
+def test_a_decision_of_the_track_on_what_it_showed_since_clears_its_doubt() -> None:
+    ids, rng = _alice_and_bob()
+    ids.crossings.crossed(1, 3, 0.4, 1.0)  # Alice's track and a new one, unidentified yet
+    assert ids.crossings.doubt_of(1) == pytest.approx(0.4) and ids.crossings.doubt_of(3) == pytest.approx(0.4)
+    ids.add_observations(3, _face(2, 3, rng), 2.0)  # Carol shows her face on the new track: decided new
+    ids.step(2.0)
+    assert ids.assigned_tracks() == {1: 1, 2: 2, 3: 3}
+    assert ids.crossings.doubt_of(1) == 0.0 and ids.crossings.doubt_of(3) == 0.0
+
+
+def test_a_crossing_probability_outside_0_1_is_refused() -> None:
+    ids, _ = _alice_and_bob()
+    with pytest.raises(ValueError):
+        ids.crossings.crossed(1, 2, float("nan"), 1.0)
+    with pytest.raises(ValueError):
+        ids.crossings.crossed(1, 2, 1.5, 1.0)
+
+
+def test_a_crossing_of_two_unidentified_tracks_is_no_doubt_and_a_deleted_partner_leaves_it() -> None:
+    ids, _ = _alice_and_bob()
+    ids.crossings.crossed(7, 8, 0.5, 1.0)  # neither carries an identity
+    assert ids.crossings.doubt_of(7) == 0.0 and 7 not in ids.tracks.entries
+    ids.crossings.crossed(1, 9, 0.4, 1.0)  # track 9 has shown nothing yet
+    assert ids.crossings.doubt_of(1) == pytest.approx(0.4)
+    ids.track_deleted(9, 2.0)
+    ids.step(2.0)
+    assert ids.crossings.doubt_of(1) == pytest.approx(0.4)  # its end says nothing of a swap before it
+    ids.crossings.crossed(1, 9, 0.4, 3.0)  # a late report about the deleted track changes nothing
+    assert ids.crossings.doubt_of(1) == pytest.approx(0.4)
+
+
+def test_the_master_publishes_an_identity_more_likely_wrong_than_right_as_undecided() -> None:
+    from face_reid_master.core import MasterCore
+    from face_reid_master.identity.evidence import Evidence
+
+    core = MasterCore()
+    track = core.identity.tracks.seen(5, 0.0)
+    track.give(3, 0.99, Evidence.FACE, new=False)
+    assert core.published_face_id(5) == 3
+    full = core.published_confidence(5)
+    track.crossed[6] = 0.3
+    assert core.published_face_id(5) == 3 and core.published_confidence(5) == pytest.approx(0.7 * full)
+    track.crossed[7] = 0.4  # two crossings: 1 - 0.7 * 0.6 = 0.58 that it is someone else
+    assert core.published_face_id(5) == 0 and core.published_confidence(5) == 0.0
