@@ -55,21 +55,17 @@ F32Array = npt.NDArray[np.float32]
 class IdentityManagerBase:
     """Algorithm 1 of the paper, shared by the Bayesian method and the threshold baseline.
 
-    ``embedding_dim``: length of the face descriptors.  ``max_features_per_face``: bound of every face's
-    (and unidentified track's) feature set, kept diverse
-    (:func:`~face_reid_master.identity.feature_bank.select_diverse_subset`).  Eq. 4 is exact
-    while face_list holds at most ``exact_search_max_features`` features; beyond, only the
-    ``shortlist_faces`` faces with the nearest centroids are compared per observation.  Track ids must not
-    be reused after :meth:`track_deleted` (late observations of a deleted id are ignored).
+    ``embedding_dim``: length of the face descriptors.  ``max_features_per_face``: bound of every face's (and
+    unidentified track's) feature set, kept diverse (:func:`~.feature_bank.select_diverse_subset`).  Eq. 4 is
+    exact while face_list holds at most ``exact_search_max_features`` features; beyond, only the ``shortlist_faces``
+    faces with the nearest centroids are compared.  Track ids must not be reused after :meth:`track_deleted`.
 
-    Our extensions, each off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
-    (:mod:`~face_reid_master.identity.swap_guard`), ``body_evidence``
-    (:mod:`~face_reid_master.identity.body_identification`) and ``lend_lost_faces``
-    (:mod:`~face_reid_master.identity.lent_faces`).
+    Our extensions, off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
+    (:mod:`~.swap_guard`), ``body_evidence`` (:mod:`~.body_identification`), ``lend_lost_faces`` (:mod:`~.lent_faces`);
+    always on: the doubt that crossings leave on identities (:attr:`crossings`, :mod:`~.crossings`).
 
-    Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and
-    ``_current_confidence`` and may override the ``_on_*`` notifications; they read :attr:`tracks`,
-    :attr:`faces` and the feature bank ``_bank``.
+    Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and ``_current_confidence``
+    and may override the ``_on_*`` notifications; they read :attr:`tracks`, :attr:`faces` and the bank ``_bank``.
     """
 
     def __init__(
