@@ -326,9 +326,9 @@ class MasterCore:
         undecided track (it claims no face: its candidates' raw posteriors are the overconfident numbers the map
         exists to correct) and for one whose identity is withheld."""
         evidence = self.identity.evidence_of(track_id)
-        if not evidence or self.identity.crossings.withholds(track_id):
-            return 0.0
         doubt = self.identity.crossings.doubt_of(track_id)
+        if not evidence or self.identity.crossings.withheld_at(doubt):
+            return 0.0
         raw = float(self.identity.confidence_of(track_id))
         return float(self.confidence_map(evidence, raw, self.identity.decided_new(track_id))) * (1.0 - doubt)
 

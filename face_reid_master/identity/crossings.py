@@ -59,7 +59,12 @@ class Crossings:
 
     def withholds(self, track_id: int) -> bool:
         """Whether the track's identity is more likely wrong than right: published as undecided."""
-        return self.doubt_of(track_id) > 0.5
+        return self.withheld_at(self.doubt_of(track_id))
+
+    @staticmethod
+    def withheld_at(doubt: float) -> bool:
+        """Whether an identity with this doubt is withheld (more likely wrong than right)."""
+        return doubt > 0.5
 
     @staticmethod
     def doubt(track: TrackRecord) -> float:
