@@ -141,17 +141,18 @@ class MasterCore:
                 posterior_threshold=cfg.body_posterior_threshold, min_observations=cfg.body_min_observations,
                 max_log_ratio=cfg.body_max_log_ratio,
                 funnel_alpha=cfg.body_funnel_alpha, height_same_std_m=cfg.body_height_same_std_m,
-                height_other_std_m=cfg.body_height_other_std_m,
-                alike_face_distance=cfg.body_alike_face_distance or None)
+                height_other_std_m=cfg.body_height_other_std_m)
         if cfg.new_person_scale_c != model.new_person_scale_c:
             model = model.with_new_person_scale(cfg.new_person_scale_c)
         return make_identity_manager(
             "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
             prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
-            max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
+            observation_weight=cfg.face_observation_weight, max_features_per_face=cfg.max_features_per_face,
+            embedding_dim=dim,
             feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
-            lend_lost_faces=cfg.lend_lost_faces, evidence_sources=sources,
+            lend_lost_faces=cfg.lend_lost_faces, alike_face_distance=cfg.alike_face_distance or None,
+            evidence_sources=sources,
         )
 
     @property

@@ -61,7 +61,8 @@ class IdentityManagerBase:
     faces with the nearest centroids are compared.  Track ids must not be reused after :meth:`track_deleted`.
 
     Our extensions, off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
-    (:mod:`~.swap_guard`), ``body_evidence`` (:mod:`~.body_identification`), ``lend_lost_faces`` (:mod:`~.lent_faces`);
+    (:mod:`~.swap_guard`), ``body_evidence`` (:mod:`~.body_identification`), ``lend_lost_faces`` (:mod:`~.lent_faces`),
+    ``alike_face_distance`` (faces this close are one person, :mod:`~.alike_group`; None = half the gate distance);
     always on: the doubt that crossings leave on identities (:attr:`crossings`, :mod:`~.crossings`).
 
     Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and ``_current_confidence``
@@ -79,6 +80,7 @@ class IdentityManagerBase:
         release_after_inconsistent: int = 0,
         body_evidence: BodyEvidence | None = None,
         lend_lost_faces: bool = False,
+        alike_face_distance: float | None = None,
         evidence_sources: Sequence[EvidenceSource] = (),
     ) -> None:
         self.embedding_dim = check_int("embedding_dim", embedding_dim, 1)
@@ -92,6 +94,9 @@ class IdentityManagerBase:
                 "feature_gate_distance", feature_gate_distance, 0.0, math.inf, low_open=True, high_open=True
             )
         self.feature_gate_distance = feature_gate_distance
+        half_gate = None if feature_gate_distance is None else 0.5 * feature_gate_distance
+        self.alike_face_distance = half_gate if alike_face_distance is None else check_real(
+            "alike_face_distance", alike_face_distance, 0.0, math.inf, low_open=True)
         self.release_after_inconsistent = check_int("release_after_inconsistent", release_after_inconsistent, 0)
         self.max_features_per_face = check_int("max_features_per_face", max_features_per_face, 1)
         self.exact_search_max_features = check_int("exact_search_max_features", exact_search_max_features, 0)
@@ -283,11 +288,8 @@ class IdentityManagerBase:
                              evidence=evidence)
 
     def _faces_alike(self, face: int, others: list[int]) -> list[bool]:
-        """Which of ``others`` are learned ``face``'s person: closer than the body evidence's
-        ``alike_face_distance`` (default: half the decision distance)."""
-        limit = None if self.body_evidence is None else self.body_evidence.alike_face_distance
-        return self.faces.alike(face, others, 0.5 * self.feature_gate_distance
-                                if limit is None and self.feature_gate_distance is not None else limit)
+        """Which of ``others`` are learned ``face``'s person: closer than ``alike_face_distance``."""
+        return self.faces.alike(face, others, self.alike_face_distance)
 
     # ------------------------------------------------------------------------------ queries
     def evidence_of(self, track_id: int) -> str:

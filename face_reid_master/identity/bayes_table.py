@@ -31,6 +31,7 @@ import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
 from face_reid_master.identity.algorithm1 import IdentityManagerBase
+from face_reid_master.identity.alike_group import alike_group
 from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.likelihood import LikelihoodModel
 from face_reid_master.identity.sinkhorn import sinkhorn_with_slack
@@ -49,8 +50,9 @@ class BayesIdentityManager(IdentityManagerBase):
     ``posterior_threshold`` to decide [0.95], ``min_observations`` compared with the decided column [3],
     ``clamp_probability`` applied after normalisation [1e-3], ``sinkhorn_tolerance`` on row sums [1e-3]
     and ``sinkhorn_max_iterations`` [10]; ``sinkhorn_solver`` "newton" (same fixed point in a few
-    iterations) or "sinkhorn" (the paper's alternations).  ``max_abs_log_likelihood_ratio`` (None = the
-    paper) optionally bounds the evidence of a single observation, against wrong crops / track swaps.
+    iterations) or "sinkhorn" (the paper's alternations).  ``observation_weight`` (1 = the paper) scales each
+    observation's log likelihood ratio: a track's face observations are frames of a few glances, far from
+    independent, and counted at full weight they make the table sure long before it is right.
     The remaining arguments are those of
     :class:`IdentityManagerBase`.
     """
@@ -66,7 +68,7 @@ class BayesIdentityManager(IdentityManagerBase):
         sinkhorn_tolerance: float = 1e-6,
         sinkhorn_max_iterations: int = 100,
         sinkhorn_solver: str = "newton",
-        max_abs_log_likelihood_ratio: float | None = None,
+        observation_weight: float = 1.0,
         **bank_args: Any,
     ) -> None:
         super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
@@ -93,12 +95,7 @@ class BayesIdentityManager(IdentityManagerBase):
         if sinkhorn_solver not in ("newton", "sinkhorn"):
             raise ValueError(f"sinkhorn_solver must be 'newton' or 'sinkhorn', got {sinkhorn_solver!r}")
         self.sinkhorn_solver = sinkhorn_solver
-        if max_abs_log_likelihood_ratio is not None:
-            max_abs_log_likelihood_ratio = check_real(
-                "max_abs_log_likelihood_ratio", max_abs_log_likelihood_ratio, 0.0, math.inf,
-                low_open=True, high_open=True,
-            )
-        self.max_abs_log_likelihood_ratio = max_abs_log_likelihood_ratio
+        self.observation_weight = check_real("observation_weight", observation_weight, 0.0, 1.0, low_open=True)
         self._log_c = math.log(self.likelihood.new_person_scale_c)
         self._table = np.zeros((1, 1))  # row 0 / column 0 slack; P[0, 0] unused (0)
         self._counts = np.zeros((1, 1), dtype=np.int64)
@@ -195,8 +192,8 @@ class BayesIdentityManager(IdentityManagerBase):
                 if model.conditioned else None
             # faces outside the search shortlist (inf) get the weakest evidence: clipped to distance d_hi
             lr = model.log_ratio_rows(d, n_feats, buckets)
-            if self.max_abs_log_likelihood_ratio is not None:
-                np.clip(lr, -self.max_abs_log_likelihood_ratio, self.max_abs_log_likelihood_ratio, out=lr)
+            if self.observation_weight != 1.0:
+                lr *= self.observation_weight
         if m and len(sizes) == obs.shape[0]:
             log_ev[:, 1:] = lr
         elif m:
@@ -234,12 +231,20 @@ class BayesIdentityManager(IdentityManagerBase):
         best = np.argmax(body, axis=1)
         idx = np.arange(len(self._rows))
         p = body[idx, best]
-        n_obs = self._counts[1:][idx, best]
-        ok = np.flatnonzero((p > self.posterior_threshold) & (n_obs >= self.min_observations))
-        decisions = []
-        for r in ok:
-            col = int(best[r])
-            face = 0 if col == 0 else self.faces.available[col - 1]
+        counts = self._counts[1:]
+        thr = self.posterior_threshold
+        decisions, taken = [], set()
+        for r in np.flatnonzero((p > thr) & (counts[idx, best] >= self.min_observations)):
+            face = self.faces.available[best[r] - 1] if best[r] else 0
+            taken.add(face)
             decisions.append((self._rows[r].track_id, face, float(p[r])))
+        split = (p <= thr) & (best > 0) & (body[:, 0] < 1.0 - thr)  # a person split over faces: their sum may decide
+        for r in np.flatnonzero(split):
+            cols = np.flatnonzero(body[r] > (1.0 - thr) / body.shape[1])  # the others cannot change the verdict
+            post = {(self.faces.available[c - 1] if c else 0): float(body[r, c]) for c in cols}
+            column = {f: int(c) for f, c in zip(post, cols, strict=True)}
+            face, total = alike_group(post, self.faces.available[best[r] - 1], post.keys(), self._faces_alike, thr)
+            if total > thr and face not in taken and counts[r, column[face]] >= self.min_observations:
+                taken.add(face)
+                decisions.append((self._rows[r].track_id, face, min(total, 1.0 - self.clamp_probability)))
         return decisions
-

@@ -13,20 +13,18 @@ threshold after enough observations. Body evidence never creates a face: only a 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from face_reid_camera.common.checks import check_int, check_real
+from face_reid_master.identity.alike_group import Alike, alike_group
 from face_reid_master.identity.body_gallery import FaceBodyPool
 from face_reid_master.identity.feature_funnel import funnel_survivors, gaussian_log_ratio
 from face_reid_master.identity.likelihood import LikelihoodModel
 
 __all__ = ["BodyEvidence"]
-
-_ALIKE_BATCH = 8  # candidate faces compared with the top face per batched distance computation
 
 F32 = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
@@ -59,17 +57,15 @@ class BodyEvidence:
     than ``funnel_alpha`` x the nearest face's is abandoned for that observation, the others are also judged
     by height. ``height_same_std_m`` /
     ``height_other_std_m``: spread of the difference between a person's head height and their face's recent
-    median, for the same person / another person (m). ``alike_face_distance`` (face-embedding distance; None =
-    half the identity layer's decision distance): two learned faces with features closer than this are taken
-    for one person when a decision weighs them (a person gets a second face while another track holds the
-    first); their posteriors are added up.
+    median, for the same person / another person (m). Learned faces of one person (the caller's ``alike``) count
+    as one: their posteriors are added up (:mod:`~face_reid_master.identity.alike_group`).
     """
 
     def __init__(self, likelihood: LikelihoodModel, *, window_s: float = 3600.0, gallery_size: int = 64,
                  posterior_threshold: float = 0.99, min_observations: int = 10, max_log_ratio: float = 0.3,
                  other_log_odds: float = 0.0, track_buffer: int = 64, min_interval_s: float = 0.5,
                  funnel_alpha: float = 1.5, height_same_std_m: float = 0.05,
-                 height_other_std_m: float = 0.12, alike_face_distance: float | None = None) -> None:
+                 height_other_std_m: float = 0.12) -> None:
         if not isinstance(likelihood, LikelihoodModel):
             raise ValueError(f"likelihood must be a LikelihoodModel, got {type(likelihood).__name__}")
         self.likelihood = likelihood
@@ -86,8 +82,6 @@ class BodyEvidence:
         self.height_same_std_m = check_real("height_same_std_m", height_same_std_m, 0.0, math.inf, low_open=True)
         self.height_other_std_m = check_real("height_other_std_m", height_other_std_m, self.height_same_std_m,
                                              math.inf, low_open=True)
-        self.alike_face_distance = None if alike_face_distance is None else check_real(
-            "alike_face_distance", alike_face_distance, 0.0, math.inf, low_open=True)
         self._faces = FaceBodyPool(self.gallery_size)
         self._tracks: dict[int, _TrackBodies] = {}
 
@@ -187,7 +181,7 @@ class BodyEvidence:
         return dict(zip([0, *faces], p.tolist(), strict=True))
 
     def decide(self, available: list[int], now_s: float,
-               alike: Callable[[int, list[int]], list[bool]] | None = None) -> list[tuple[int, int, float]]:
+               alike: Alike | None = None) -> list[tuple[int, int, float]]:
         """(track id, face id, posterior) of the faceless tracks decided now: one face per track and one track
         per face (the most confident first). The posterior is over every face with recent bodies (those held
         by live tracks too: a track that looks most like someone already tracked is not decided), and only an
@@ -205,7 +199,7 @@ class BodyEvidence:
             if face == 0:
                 continue
             if face not in free or p <= self.posterior_threshold:
-                face, p = self._alike_group(post, face, free, alike)
+                face, p = alike_group(post, face, free, alike, self.posterior_threshold)
             if face in free and p > self.posterior_threshold and track.counts.get(face, 0) >= self.min_observations:
                 wanted.append((p, track_id, face))
         out, taken = [], set()
@@ -214,30 +208,6 @@ class BodyEvidence:
                 taken.add(face)
                 out.append((track_id, face, p))
         return out
-
-    def _alike_group(self, post: dict[int, float], top: int, free: set[int],
-                     alike: Callable[[int, list[int]], list[bool]] | None) -> tuple[int, float]:
-        """The most likely available face of the top face's person and that person's summed posterior (the
-        top face alone when ``alike`` is None or "someone else" already holds too much). Candidates are checked
-        most likely first, in small batches, and no further once even all the rest could not lift the sum above
-        the threshold (the verdict is then "undecided" whatever they are)."""
-        if alike is None or post[0] >= 1.0 - self.posterior_threshold:
-            return top, post[top]
-        floor = (1.0 - self.posterior_threshold) / len(post)  # faces below this cannot change the verdict
-        candidates = sorted(((q, g) for g, q in post.items() if g not in (0, top) and q > floor), reverse=True)
-        group, total = [top], post[top]
-        remaining = sum(q for q, _ in candidates)
-        for k in range(0, len(candidates), _ALIKE_BATCH):
-            if total + remaining <= self.posterior_threshold:
-                break
-            batch = candidates[k:k + _ALIKE_BATCH]
-            for (q, g), same in zip(batch, alike(top, [g for _, g in batch]), strict=True):
-                remaining -= q
-                if same:
-                    group.append(g)
-                    total += q
-        given = max((g for g in group if g in free), key=post.__getitem__, default=top)
-        return given, float(total)
 
 
 def _heights(heights: npt.ArrayLike | None, n: int) -> FloatArray:

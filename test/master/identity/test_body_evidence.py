@@ -147,8 +147,7 @@ def test_the_identity_layer_takes_two_close_faces_for_one_person_only() -> None:
     assert ids.face_id_of(4) in (ids.face_ids()[0], ids.face_ids()[1]) and ids.evidence_of(4) == "body"
 
 
-@pytest.mark.parametrize("bad", [{"window_s": 0.0}, {"posterior_threshold": 1.0}, {"min_observations": 0},
-                                 {"alike_face_distance": 0.0}])
+@pytest.mark.parametrize("bad", [{"window_s": 0.0}, {"posterior_threshold": 1.0}, {"min_observations": 0}])
 def test_arguments_are_checked(bad: dict) -> None:
     with pytest.raises(ValueError, match=next(iter(bad))):
         BodyEvidence(BODY_LIKELIHOOD, **bad)
