@@ -18,7 +18,9 @@ all learned faces (OpenPTrack applies c once per learned face, this once per obs
 the paper's c = 1), at O(M) instead of O(M^2) per observation.  Evidence is summed in log space and
 rescaled by the row maximum, so nothing under/overflows.  Then Sinkhorn normalisation
 (:mod:`~face_reid_master.identity.sinkhorn`), clamping to [clamp, 1 - clamp], and a decision when
-p(x_ij) > posterior_threshold and the track has >= min_observations compared with j.
+p(x_ij) > posterior_threshold and the track has >= min_observations compared with j.  Ours: each observation's
+log ratio is weighted (``observation_weight``; 1 = the paper), and a person split over learned faces that are
+alike is decided on their summed posterior (:mod:`~face_reid_master.identity.alike_group`).
 """
 
 from __future__ import annotations
