@@ -147,8 +147,7 @@ class MasterCore:
         return make_identity_manager(
             "bayes", likelihood=model, posterior_threshold=cfg.posterior_threshold,
             prior_probability=cfg.prior_probability, min_observations=cfg.min_observations,
-            observation_weight=cfg.face_observation_weight, max_features_per_face=cfg.max_features_per_face,
-            embedding_dim=dim,
+            max_features_per_face=cfg.max_features_per_face, embedding_dim=dim,
             feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
             lend_lost_faces=cfg.lend_lost_faces, alike_face_distance=cfg.alike_face_distance or None,

@@ -35,8 +35,7 @@ from face_reid_master.identity.confidence_map import ConfidenceMap, default_conf
 from face_reid_master.identity.size_likelihood import FaceLikelihood, default_face_likelihood, load_face_likelihood
 
 _IDENTITY_FIELDS = {
-    "bayes": ("posterior_threshold", "prior_probability", "min_observations", "face_observation_weight",
-              "new_person_scale_c",
+    "bayes": ("posterior_threshold", "prior_probability", "min_observations", "new_person_scale_c",
               "max_features_per_face", "learn_only_consistent_features",
               "release_after_inconsistent"),
     "threshold": ("threshold_distance", "threshold_votes", "max_features_per_face", "learn_only_consistent_features",

@@ -18,9 +18,8 @@ all learned faces (OpenPTrack applies c once per learned face, this once per obs
 the paper's c = 1), at O(M) instead of O(M^2) per observation.  Evidence is summed in log space and
 rescaled by the row maximum, so nothing under/overflows.  Then Sinkhorn normalisation
 (:mod:`~face_reid_master.identity.sinkhorn`), clamping to [clamp, 1 - clamp], and a decision when
-p(x_ij) > posterior_threshold and the track has >= min_observations compared with j.  Ours: each observation's
-log ratio is weighted (``observation_weight``; 1 = the paper), and a person split over learned faces that are
-alike is decided on their summed posterior (:mod:`~face_reid_master.identity.alike_group`).
+p(x_ij) > posterior_threshold and the track has >= min_observations compared with j.  Ours: a person split
+over learned faces that are alike is decided on their summed posterior (:mod:`~face_reid_master.identity.alike_group`).
 """
 
 from __future__ import annotations
@@ -52,9 +51,7 @@ class BayesIdentityManager(IdentityManagerBase):
     ``posterior_threshold`` to decide [0.95], ``min_observations`` compared with the decided column [3],
     ``clamp_probability`` applied after normalisation [1e-3], ``sinkhorn_tolerance`` on row sums [1e-3]
     and ``sinkhorn_max_iterations`` [10]; ``sinkhorn_solver`` "newton" (same fixed point in a few
-    iterations) or "sinkhorn" (the paper's alternations).  ``observation_weight`` (1 = the paper) scales each
-    observation's log likelihood ratio: a track's face observations are frames of a few glances, far from
-    independent, and counted at full weight they make the table sure long before it is right.
+    iterations) or "sinkhorn" (the paper's alternations).
     The remaining arguments are those of
     :class:`IdentityManagerBase`.
     """
@@ -70,7 +67,6 @@ class BayesIdentityManager(IdentityManagerBase):
         sinkhorn_tolerance: float = 1e-6,
         sinkhorn_max_iterations: int = 100,
         sinkhorn_solver: str = "newton",
-        observation_weight: float = 1.0,
         **bank_args: Any,
     ) -> None:
         super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
@@ -97,7 +93,6 @@ class BayesIdentityManager(IdentityManagerBase):
         if sinkhorn_solver not in ("newton", "sinkhorn"):
             raise ValueError(f"sinkhorn_solver must be 'newton' or 'sinkhorn', got {sinkhorn_solver!r}")
         self.sinkhorn_solver = sinkhorn_solver
-        self.observation_weight = check_real("observation_weight", observation_weight, 0.0, 1.0, low_open=True)
         self._log_c = math.log(self.likelihood.new_person_scale_c)
         self._table = np.zeros((1, 1))  # row 0 / column 0 slack; P[0, 0] unused (0)
         self._counts = np.zeros((1, 1), dtype=np.int64)
@@ -194,8 +189,6 @@ class BayesIdentityManager(IdentityManagerBase):
                 if model.conditioned else None
             # faces outside the search shortlist (inf) get the weakest evidence: clipped to distance d_hi
             lr = model.log_ratio_rows(d, n_feats, buckets)
-            if self.observation_weight != 1.0:
-                lr *= self.observation_weight
         if m and len(sizes) == obs.shape[0]:
             log_ev[:, 1:] = lr
         elif m:

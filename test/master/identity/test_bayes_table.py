@@ -16,7 +16,6 @@ from identity_test_helpers import (
     NOISE,
     event_kinds,
     manager_with_faces,
-    person_obs,
     unit_vector,
 )
 from scipy import optimize, stats
@@ -189,18 +188,6 @@ def test_min_of_k_likelihood_prevents_merging_a_stranger_into_a_well_learned_fac
     assert outcomes["min_of_k"] == [(NEW, 5, 2)]
 
 
-def test_observation_weight_scales_the_evidence_of_one_observation() -> None:
-    rng = np.random.default_rng(21)
-    odds = []
-    for weight in (1.0, 0.5):
-        m = manager_with_faces(3, np.random.default_rng(22), observation_weight=weight)
-        m.add_observations(10, person_obs(1, 1, rng), 0.0)
-        m.step(0.0)
-        post = m.posterior_of(10)
-        odds.append(post[2] / post[0])  # face 2 (the person's) against "new person", before any clamping
-    assert odds[0] > 1.0 and odds[1] < odds[0]
-
-
 @pytest.mark.parametrize(
     "kw",
     [
@@ -212,8 +199,6 @@ def test_observation_weight_scales_the_evidence_of_one_observation() -> None:
         {"clamp_probability": 0.6},
         {"sinkhorn_tolerance": 0.0},
         {"sinkhorn_max_iterations": 0},
-        {"observation_weight": 0.0},
-        {"observation_weight": 1.5},
         {"max_features_per_face": 0},
         {"embedding_dim": 0},
         {"shortlist_faces": 0},
