@@ -62,8 +62,7 @@ class IdentityManagerBase:
 
     Our extensions, off by default (the paper): ``feature_gate_distance`` / ``release_after_inconsistent``
     (:mod:`~.swap_guard`), ``body_evidence`` (:mod:`~.body_identification`), ``lend_lost_faces`` (:mod:`~.lent_faces`),
-    ``alike_face_distance`` (faces this close are one person, :mod:`~.alike_group`; None = half the gate distance);
-    always on: the doubt that crossings leave on identities (:attr:`crossings`, :mod:`~.crossings`).
+    ``alike_face_distance`` (:mod:`~.alike_group`; None: half the gate); always on: crossing doubt (:mod:`~.crossings`).
 
     Subclasses (the classification methods) implement ``_ingest_unassigned``, ``_decide`` and ``_current_confidence``
     and may override the ``_on_*`` notifications; they read :attr:`tracks`, :attr:`faces` and the bank ``_bank``.
@@ -90,9 +89,8 @@ class IdentityManagerBase:
         self.sources = Cues(body + list(evidence_sources))  # the cues besides the face, the body first
         self.lend_lost_faces = bool(lend_lost_faces)
         if feature_gate_distance is not None:
-            feature_gate_distance = check_real(
-                "feature_gate_distance", feature_gate_distance, 0.0, math.inf, low_open=True, high_open=True
-            )
+            feature_gate_distance = check_real("feature_gate_distance", feature_gate_distance, 0.0, math.inf,
+                                               low_open=True, high_open=True)
         self.feature_gate_distance = feature_gate_distance
         half_gate = None if feature_gate_distance is None else 0.5 * feature_gate_distance
         self.alike_face_distance = half_gate if alike_face_distance is None else check_real(
