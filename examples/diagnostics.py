@@ -12,7 +12,8 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
 LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
@@ -35,7 +36,9 @@ def main() -> int:
                 print("   ", ", ".join(f"{v.key}={v.value}" for v in status.values), flush=True)
 
     domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    rclpy.init()
+    stop = []  # Ctrl-C only asks the loop to end (a KeyboardInterrupt inside rclpy could surface as another error)
+    signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("diagnostics_peek")
     executor = SingleThreadedExecutor()  # made before the waiting line: a Ctrl-C then never meets a half-made one
     executor.add_node(node)
@@ -44,16 +47,13 @@ def main() -> int:
         print(f"diagnostics: listening to /diagnostics for {seconds} s (ROS_DOMAIN_ID={domain}); Ctrl-C ends",
               file=sys.stderr, flush=True)
         deadline = time.monotonic() + seconds
-        while rclpy.ok() and time.monotonic() < deadline:
+        while not stop and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0  # Ctrl-C: the way to end it early
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C during the cleanup ends nothing half-way
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-    if not seen:
+    if not seen and not stop:  # Ctrl-C: the way to end it early
         print(f"diagnostics: no node heard in {seconds} s on ROS_DOMAIN_ID={domain}: are the nodes running, with "
               "this domain id, and does discovery reach their hosts (ROS_AUTOMATIC_DISCOVERY_RANGE)?",
               file=sys.stderr)

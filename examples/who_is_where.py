@@ -9,7 +9,8 @@ import signal
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
 from face_reid_master.ros.tracks_in import subscribe_tracks
@@ -43,7 +44,9 @@ def main() -> int:
         print("\n  ".join([f"{len(lines)} people in '{msg.header.frame_id}':", *lines]), flush=True)
         seen[0] += 1
 
-    rclpy.init()
+    stop = []  # Ctrl-C only asks the loop to end (a KeyboardInterrupt inside rclpy could surface as another error)
+    signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("who_is_where")
     executor = SingleThreadedExecutor()  # made before the waiting line: a Ctrl-C then never meets a half-made one
     executor.add_node(node)
@@ -53,15 +56,12 @@ def main() -> int:
                                   key_hint="give the network's key file as KEYFILE (who_is_where.py 0 KEYFILE)")
         print(f"who_is_where: waiting for {'sealed ' if key else ''}tracks on {tracks.listening} "
               f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}); Ctrl-C ends", file=sys.stderr, flush=True)
-        while rclpy.ok() and (count == 0 or seen[0] < count):
+        while not stop and (count == 0 or seen[0] < count):
             executor.spin_once(timeout_sec=0.5)
     except ValueError as exc:  # an unusable key file: one line
         print(f"who_is_where: {exc}", file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass  # Ctrl-C: the way to end it
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C during the cleanup ends nothing half-way
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()

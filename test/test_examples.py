@@ -93,7 +93,7 @@ def test_the_examples_run_as_commands_say_what_they_wait_for_and_end_cleanly_on_
                             stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stderr is not None
-        first = proc.stderr.readline()  # a barrier: the line comes once it listens (rclpy's Ctrl-C handler is set)
+        first = proc.stderr.readline()  # a barrier: the line comes once it listens (its Ctrl-C handler is set)
         assert "/tracks_named" in first or "/diagnostics" in first, first
         assert "Ctrl-C ends" in first and f"ROS_DOMAIN_ID={ros_domain_id}" in first, first
         proc.send_signal(signal.SIGINT)
@@ -103,6 +103,53 @@ def test_the_examples_run_as_commands_say_what_they_wait_for_and_end_cleanly_on_
             proc.kill()
     assert proc.returncode == 0 and "Traceback" not in err, err
     assert out == ""
+
+
+def test_who_is_where_ends_cleanly_on_ctrl_c_while_tracks_arrive(ros_context, ros_domain_id: int) -> None:
+    """A Ctrl-C while rclpy hands a message over used to surface as a pybind11 error (exit 1, traceback) about
+    every second time: three runs, each interrupted right after its first message while tracks keep coming."""
+    import os
+    import signal
+
+    import rclpy.executors
+
+    from face_reid_master.demo.children import child_env
+    from face_reid_msgs.msg import NamedTrack, NamedTrackArray
+
+    ctx = ros_context()
+    node = rclpy.create_node("tracks_source", context=ctx)
+    pub = node.create_publisher(NamedTrackArray, "/tracks_named", 10)
+    msg = NamedTrackArray(tracks=[NamedTrack(track_id=k, face_id=k, name=f"p{k}", state=NamedTrack.STATE_CONFIRMED)
+                                  for k in range(1, 31)])
+    executor = rclpy.executors.SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    try:
+        for _ in range(3):
+            proc = subprocess.Popen([sys.executable, str(EXAMPLE), "0"], env=child_env(ros_domain_id), cwd=REPO_ROOT,
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+            try:
+                assert proc.stdout is not None
+                os.set_blocking(proc.stdout.fileno(), False)
+                out = b""
+                while b"people in" not in out and proc.poll() is None:  # a barrier: its first message printed
+                    pub.publish(msg)
+                    executor.spin_once(timeout_sec=0.002)
+                    try:
+                        out += os.read(proc.stdout.fileno(), 65536)
+                    except BlockingIOError:
+                        pass
+                proc.send_signal(signal.SIGINT)
+                while proc.poll() is None:  # tracks keep coming while it ends
+                    pub.publish(msg)
+                    executor.spin_once(timeout_sec=0.002)
+                err = proc.communicate(timeout=60)[1].decode(errors="replace")
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+            assert proc.returncode == 0 and "Traceback" not in err and "Error" not in err, err
+    finally:
+        executor.shutdown()
+        node.destroy_node()
 
 
 def test_who_is_where_without_the_key_on_a_secured_network_says_how_to_give_it(ros_context,
