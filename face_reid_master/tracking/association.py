@@ -104,14 +104,15 @@ def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: Index
                        carries: NDArray[np.bool_]) -> tuple[tuple[int, int, float], ...]:
     """(track, track, p) for every two tracks that could have taken each other's detection: p, the probability
     that the assignment swapped them, is the likelihood of the exchanged pairs over both (``nll``: -2 log
-    likelihood per pair, up to a constant; ``possible``: pairs the association could have made). A track that
-    carries an identity (``carries``) and was not matched counts too, against the track that took the detection
-    it could have had. Pairs below 1e-3 are left out."""
+    likelihood per pair, up to a constant; ``possible``: pairs the association could have made). An unmatched
+    track that could carry a person (``carries``: not tentative) counts too, against the track that took the
+    detection it could have had. Pairs below 1e-3 are left out."""
     out: list[tuple[int, int, float]] = []
     if rows.shape[0]:
         own = nll[rows, cols]
         alt = nll[rows][:, cols]  # alt[k, l]: track rows[k] with detection cols[l]
-        ok = possible[rows][:, cols] & possible[rows][:, cols].T
+        ok = possible[rows][:, cols]
+        ok &= ok.T.copy()
         np.fill_diagonal(ok, False)
         k, l_ = np.nonzero(np.triu(ok))
         if k.shape[0]:
