@@ -56,6 +56,10 @@ class MasterConfig:
     prior_probability: float = param(0.1, "Prior of a new cell of the face table (0..1).",
                                      low=0.0, high=1.0, low_open=True, high_open=True)
     min_observations: int = param(3, "Face observations needed before a decision (count).", low=1, high=1000)
+    learn_confidence: float = param(
+        0.99, "A face decision at least this certain teaches its face the track's embeddings; a less certain one "
+        "identifies the track but teaches nothing: one wrong decision cannot make a face another person's (0..1).",
+        low=0.0, high=1.0)
     new_person_scale_c: float = param(1.0, "The paper's c: larger = readier to call a face new.",
                                       low=0.0, high=1e6, low_open=True)
     max_features_per_face: int = param(50, "Embeddings kept per face, a diverse subset (count).", low=1, high=10000)

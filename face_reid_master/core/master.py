@@ -151,7 +151,7 @@ class MasterCore:
             feature_gate_distance=model.decision_distance if cfg.learn_only_consistent_features else None,
             release_after_inconsistent=cfg.release_after_inconsistent, body_evidence=body_evidence,
             lend_lost_faces=cfg.lend_lost_faces, alike_face_distance=cfg.alike_face_distance or None,
-            evidence_sources=sources,
+            learn_confidence=cfg.learn_confidence, evidence_sources=sources,
         )
 
     @property

@@ -68,6 +68,8 @@ class IdentityManagerBase:
     and may override the ``_on_*`` notifications; they read :attr:`tracks`, :attr:`faces` and the bank ``_bank``.
     """
 
+    learn_confidence: float = 0.0  # a method's: a face decision below it identifies its track, teaches its face nothing
+
     def __init__(
         self,
         *,
@@ -172,10 +174,9 @@ class IdentityManagerBase:
         track = None if lender is None else self.tracks.entries.get(lender)
         if track is None or track.face_id != fid:
             return
-        confidence = track.confidence
+        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, lender, fid, stamp, track.confidence))
         track.unassign()
         self.stats.lent_faces_taken += 1
-        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp, confidence))
 
     def step(self, stamp_s: float) -> list[IdentityEvent]:
         """Run one update of Algorithm 1: learn the queued observations, classify the unassigned tracks (by face,
@@ -202,8 +203,8 @@ class IdentityManagerBase:
         """The queued observations: an identified track's join its face (those its face accepts; a swap releases
         the track, :class:`SwapGuard`); an unassigned track's join its buffer and go to the classification."""
         pending = self.tracks.take_pending()
-        unassigned: tuple[list[int], list[F32Array], list[FloatArray]] = ([], [], [])
-        singles: tuple[list[int], list[F32Array]] = ([], [])  # one new feature into a full feature set: batched
+        unassigned: list[tuple[int, F32Array, FloatArray]] = []  # (track, its rows, their eye distances)
+        singles: list[tuple[int, F32Array]] = []  # one new feature into a full feature set: batched
         rows = {tid: rows_of(chunks) for tid, chunks in pending.items()}
         near = self._swaps.consistent(rows, lambda tid: self.faces.slot(self.tracks.entries[tid].face_id))
         bank = self._bank
@@ -220,19 +221,17 @@ class IdentityManagerBase:
                 slot = track.slot
                 if slot is None:
                     track.slot = bank.new_slot(obs)
-                unassigned[0].append(tid)
-                unassigned[1].append(obs)
-                unassigned[2].append(eye_rows(chunks))
+                unassigned.append((tid, obs, eye_rows(chunks)))
             if slot is not None:
                 if obs.shape[0] == 1 and bank.count[slot] == bank.kmax >= 2:
-                    singles[0].append(slot)
-                    singles[1].append(obs)
+                    singles.append((slot, obs))
                 else:
                     bank.add_features(slot, obs)
-        if singles[0]:
-            bank.add_one_each(np.array(singles[0], dtype=np.intp), np.concatenate(singles[1]))
-        if unassigned[0]:
-            self._ingest_unassigned(*unassigned)
+        if singles:
+            bank.add_one_each(np.array([s for s, _ in singles], dtype=np.intp), np.concatenate([o for _, o in singles]))
+        if unassigned:
+            tids, observations, eyes = zip(*unassigned, strict=True)
+            self._ingest_unassigned(list(tids), list(observations), list(eyes))
 
     def _learn_identified(self, track: TrackRecord, chunks: list[Chunk], obs: F32Array,
                           keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
@@ -252,7 +251,7 @@ class IdentityManagerBase:
             swapped = self._swaps.swapped(track, chunks, keep)
             obs = obs if keep.all() else obs[keep]
             if swapped is not None:  # the face keeps what was its person's, then lets the track go
-                if obs.shape[0]:
+                if obs.shape[0] and track.teaches:
                     self._bank.add_features(face.slot, obs)
                 events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
                 obs = rows_of(swapped)
@@ -260,6 +259,9 @@ class IdentityManagerBase:
                 return None, swapped, obs
             if obs.shape[0] == 0:
                 return face.slot, chunks, None
+        if not track.teaches:
+            self.stats.observations_not_learned_uncertain += obs.shape[0]
+            return face.slot, chunks, None
         if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
             track.evidence = Evidence.BOTH  # its own face agrees with another cue's decision
         return face.slot, chunks, obs
@@ -310,10 +312,8 @@ class IdentityManagerBase:
         """Current max posterior (Bayes) / leading vote fraction of an unassigned track; the decision
         confidence once assigned; 0.0 for an unknown track."""
         track = self.tracks.entries.get(track_id)
-        if track is None:
-            return 0.0
-        if track.face_id is not None:
-            return track.confidence
+        if track is None or track.face_id is not None:
+            return 0.0 if track is None else track.confidence
         return self._current_confidence(track)
 
     def posterior_of(self, track_id: int) -> dict[int, float]:
@@ -372,7 +372,11 @@ class IdentityManagerBase:
         else:
             fid = face_or_new
             face = self.faces.entries[fid]
-            self._bank.add_features(face.slot, self._bank.features(track.slot))  # add result.face_images
+            track.teaches = confidence >= self.learn_confidence
+            if track.teaches:  # add result.face_images
+                self._bank.add_features(face.slot, self._bank.features(track.slot))
+            else:
+                self.stats.observations_not_learned_uncertain += int(self._bank.count[track.slot])
             self._bank.free_slot(track.slot)
             face.n_observations += track.n_observations
             kind = IdentityEventKind.ASSIGNED_KNOWN

@@ -51,7 +51,8 @@ class BayesIdentityManager(IdentityManagerBase):
     ``posterior_threshold`` to decide [0.95], ``min_observations`` compared with the decided column [3],
     ``clamp_probability`` applied after normalisation [1e-3], ``sinkhorn_tolerance`` on row sums [1e-3]
     and ``sinkhorn_max_iterations`` [10]; ``sinkhorn_solver`` "newton" (same fixed point in a few
-    iterations) or "sinkhorn" (the paper's alternations).
+    iterations) or "sinkhorn" (the paper's alternations). Ours: ``learn_confidence`` [0], the posterior a face
+    decision needs to teach its face the track's embeddings (below it the track is identified and teaches nothing).
     The remaining arguments are those of
     :class:`IdentityManagerBase`.
     """
@@ -67,6 +68,7 @@ class BayesIdentityManager(IdentityManagerBase):
         sinkhorn_tolerance: float = 1e-6,
         sinkhorn_max_iterations: int = 100,
         sinkhorn_solver: str = "newton",
+        learn_confidence: float = 0.0,
         **bank_args: Any,
     ) -> None:
         super().__init__(**bank_args)  # embedding_dim, max_features_per_face, ...: see IdentityManagerBase
@@ -86,6 +88,7 @@ class BayesIdentityManager(IdentityManagerBase):
             low_open=True, high_open=True,
         )
         self.min_observations = check_int("min_observations", min_observations, 1)
+        self.learn_confidence = check_real("learn_confidence", learn_confidence, 0.0, 1.0)
         self.sinkhorn_tolerance = check_real(
             "sinkhorn_tolerance", sinkhorn_tolerance, 0.0, 1.0, low_open=True, high_open=True
         )

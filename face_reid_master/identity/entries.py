@@ -67,6 +67,7 @@ class TrackRecord:
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
     evidence: str = Evidence.NONE  # identified: what decided it (an evidence.Evidence or another cue's kind)
     new_face: bool = False  # identified: its decision created the face (a person not known before)
+    teaches: bool = True  # identified: its faces join its face (False: decided too uncertainly to learn from)
     face_chunks: list[Chunk] = field(default_factory=list)  # face observations waiting for the next step
     cue_queue: dict[str, list[CueChunk]] = field(default_factory=dict)  # other cues' observations, per cue kind
     bayes_row: int = 0  # Bayes method: its row of the posterior table while unassigned (0: none)
@@ -85,7 +86,7 @@ class TrackRecord:
 
     def unassign(self) -> None:
         """The track holds no face any more: it is classified afresh from its next observations."""
-        self.face_id, self.confidence, self.evidence = None, 0.0, Evidence.NONE
+        self.face_id, self.confidence, self.evidence, self.teaches = None, 0.0, Evidence.NONE, True
         self.votes.clear()
         self.n_observations = 0
 

@@ -100,6 +100,7 @@ class IdentityStats:
     shortlist_searches: int = 0
     faces_forgotten: int = 0
     observations_not_learned_inconsistent: int = 0
+    observations_not_learned_uncertain: int = 0  # faces of tracks decided below learn_confidence
     swaps_released: int = 0
     body_observations: int = 0
     assigned_by_body: int = 0

@@ -94,6 +94,27 @@ def test_face_of_a_live_track_is_not_assignable_to_a_simultaneous_track() -> Non
     assert m.assigned_tracks()[10] == 2
 
 
+def test_a_decision_below_learn_confidence_teaches_its_face_nothing() -> None:
+    rng = np.random.default_rng(1)
+    m = manager_with_faces(3, rng, min_observations=3, learn_confidence=1.0)  # no decision is that certain
+    for i in range(3):
+        feed_one(m, 10, 1, rng, 0.1 * i)
+    assert m.face_id_of(10) == 2 and len(m.faces.features(2)) == 5  # identified; its 3 faces not learned
+    feed_one(m, 10, 1, rng, 0.3)
+    assert len(m.faces.features(2)) == 5 and m.stats.observations_not_learned_uncertain == 4
+    m.track_deleted(10, 0.4)
+    m.step(0.4)
+    for i in range(3):  # the next track of the person: decided again, the face still what it was
+        feed_one(m, 11, 1, rng, 1.0 + 0.1 * i)
+    assert m.face_id_of(11) == 2 and len(m.faces.features(2)) == 5
+    m.learn_confidence = 0.0
+    m.track_deleted(11, 2.0)
+    m.step(2.0)
+    for i in range(3):
+        feed_one(m, 12, 1, rng, 3.0 + 0.1 * i)
+    assert m.face_id_of(12) == 2 and len(m.faces.features(2)) == 5 + 3  # a certain enough decision teaches
+
+
 def test_assigned_track_keeps_extending_its_face_within_the_bound() -> None:
     rng = np.random.default_rng(6)
     m = manager_with_faces(2, rng, min_observations=1, max_features_per_face=8)

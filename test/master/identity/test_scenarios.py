@@ -12,7 +12,8 @@ manager, as the face store does). ``expect`` lists the step's identity events in
 overrides the identity manager's arguments.
 
 People's faces are points of a 128-d space ~0.99 apart (another person) with ~0.3 between two views of one
-person; ``alike`` names a look-alike of Alice 0.7 from her. Clothes are colours of a 4-d body space.
+person; ``alike`` names a look-alike of Alice 0.7 from her, ``twin`` one 0.48 from her. Clothes are colours of a
+4-d body space.
 """
 
 from __future__ import annotations
@@ -36,15 +37,16 @@ PEOPLE = ("alice", "bob", "carol", "dave", "erin", "frank")
 COLOURS = ("red", "blue", "green", "black")
 _NOISE = 0.3 / math.sqrt(2 * DIM)  # two views of one person ~0.3 apart
 _BODY_LIKELIHOOD = LikelihoodModel(SkewNormal(0.0, 0.4, 0.15), SkewNormal(0.0, 1.2, 0.25))  # equal near 0.75
+_ALIKE = {"alike": 0.7, "twin": 0.48}  # distance from Alice
 _OBSERVED = re.compile(r"^(\w+)(?: x(\d+))?$")
 _EVENT = re.compile(r"^(\w+) track (\d+) face (\d+)( by body)?$")
 
 
 def _face_centre(name: str) -> np.ndarray:
     v = np.zeros(DIM, np.float32)
-    if name == "alike":  # 0.7 from Alice: nearer than anyone else, beyond the likelihood's decision distance (~0.6)
-        theta = math.acos(1.0 - 0.7**2 / (2 * 0.7**2))
-        v[0], v[DIM - 1] = 0.7 * math.cos(theta), 0.7 * math.sin(theta)
+    if name in _ALIKE:  # near Alice: "alike" beyond the likelihood's decision distance (~0.6), "twin" within it
+        theta = math.acos(1.0 - _ALIKE[name] ** 2 / (2 * 0.7**2))
+        v[0], v[DIM - 1 - list(_ALIKE).index(name)] = 0.7 * math.cos(theta), 0.7 * math.sin(theta)
     else:
         v[PEOPLE.index(name)] = 0.7
     return v
@@ -62,7 +64,7 @@ class ScenarioRun:
 
     def __init__(self, manager_args: dict[str, Any]) -> None:
         self.args = {"feature_gate_distance": 0.75, "release_after_inconsistent": 3, "lend_lost_faces": True,
-                     **manager_args}
+                     "learn_confidence": 0.99, **manager_args}
         self.rng = np.random.default_rng(7)
         self.manager = self._new_manager()
 
