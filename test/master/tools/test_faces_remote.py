@@ -61,10 +61,10 @@ def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_con
     running = _start_master(ctx)
     master = running[0]
 
-    def faces(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
+    def faces(*args: str, timeout: float = 90.0) -> subprocess.CompletedProcess[str]:  # a cap: a reply ends it
         return subprocess.run([sys.executable, "-m", "face_reid_master.tools.faces_cli", "--master",
                                "/face_reid_master", "--timeout-s", str(timeout), *args], cwd=REPO_ROOT,
-                              env=procs.ros_env(ros_domain_id), capture_output=True, text=True, timeout=120)
+                              env=procs.ros_env(ros_domain_id), capture_output=True, text=True, timeout=180)
 
     try:
         photos = [str(p) for p in sorted((FACES_DIR / "deepface_id01").glob("*.jpg"))[:3]]
@@ -74,7 +74,7 @@ def test_list_add_forget_on_a_running_secured_master(ros_domain_id: int, ros_con
         run = faces("list")  # no key: a secured master lists nothing, and the tool says why
         assert run.returncode == 0 and "0 face(s) on /face_reid_master" in run.stdout
         assert "answers a listing without --key with nothing" in run.stderr, run.stderr
-        run = faces("list", "--key", str(key), "--timeout-s", "30")  # options after the command too
+        run = faces("list", "--key", str(key), "--timeout-s", "90")  # options after the command too
         assert run.returncode == 0 and "on /face_reid_master" in run.stdout, run.stderr
         assert "1 predefined person(s)" in run.stdout and any(  # before: "0 face(s)" and no Alice anywhere
             line.split() == ["Alice", "3"] for line in run.stdout.splitlines()), run.stdout
