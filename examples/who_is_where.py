@@ -2,7 +2,8 @@
 """Print who is where, from the face-reid master's /tracks_named (a robot's view of the camera network).
 
 Usage: who_is_where.py [COUNT [KEYFILE]]: stop after COUNT messages (0, the default: never; Ctrl-C ends it);
-KEYFILE: a secured network's key file (then only sealed tracks are taken)."""
+KEYFILE: a secured network's key file (then only sealed tracks are taken). A message that says what the one
+before it said (nobody there, or the same people at the same places) is not printed again."""
 
 import os
 import signal
@@ -36,12 +37,14 @@ def main() -> int:
         return 2
     count = int(args[0]) if args else 0  # stop after this many messages (0: never)
     key = args[1] if len(args) > 1 else ""  # a secured network's key file: only sealed tracks are taken
-    seen = [0]
+    seen, said = [0], [""]
 
     def on_tracks(msg: NamedTrackArray) -> None:
         lines = [line for line in map(describe, msg.tracks) if line]
-        # one write per message: a Ctrl-C while printing cuts no message in half
-        print("\n  ".join([f"{len(lines)} people in '{msg.header.frame_id}':", *lines]), flush=True)
+        text = "\n  ".join([f"{len(lines)} people in '{msg.header.frame_id}':", *lines])
+        if text != said[0]:  # tracks come many times a second: what has not changed is said once
+            print(text, flush=True)  # one write per message: a Ctrl-C while printing cuts no message in half
+            said[0] = text
         seen[0] += 1
 
     stop = []  # Ctrl-C only asks the loop to end (a KeyboardInterrupt inside rclpy could surface as another error)
