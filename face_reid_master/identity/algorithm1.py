@@ -251,7 +251,7 @@ class IdentityManagerBase:
             swapped = self._swaps.swapped(track, chunks, keep)
             obs = obs if keep.all() else obs[keep]
             if swapped is not None:  # the face keeps what was its person's, then lets the track go
-                if obs.shape[0] and track.teaches:
+                if obs.shape[0] and track.teaches(self.learn_confidence):
                     self._bank.add_features(face.slot, obs)
                 events.append(self._release_swapped(track, stamp, swapped[0].stamp_s))
                 obs = rows_of(swapped)
@@ -259,7 +259,7 @@ class IdentityManagerBase:
                 return None, swapped, obs
             if obs.shape[0] == 0:
                 return face.slot, chunks, None
-        if not track.teaches:
+        if not track.teaches(self.learn_confidence):
             self.stats.observations_not_learned_uncertain += obs.shape[0]
             return face.slot, chunks, None
         if track.evidence not in (Evidence.FACE, Evidence.BOTH) and obs.shape[0]:
@@ -372,8 +372,7 @@ class IdentityManagerBase:
         else:
             fid = face_or_new
             face = self.faces.entries[fid]
-            track.teaches = confidence >= self.learn_confidence
-            if track.teaches:  # add result.face_images
+            if confidence >= self.learn_confidence:  # add result.face_images (TrackRecord.teaches)
                 self._bank.add_features(face.slot, self._bank.features(track.slot))
             else:
                 self.stats.observations_not_learned_uncertain += int(self._bank.count[track.slot])

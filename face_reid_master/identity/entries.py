@@ -67,7 +67,6 @@ class TrackRecord:
     inconsistent: list[Chunk] = field(default_factory=list)  # identified: the current run of faces not its face's
     evidence: str = Evidence.NONE  # identified: what decided it (an evidence.Evidence or another cue's kind)
     new_face: bool = False  # identified: its decision created the face (a person not known before)
-    teaches: bool = True  # identified: its faces join its face (False: decided too uncertainly to learn from)
     face_chunks: list[Chunk] = field(default_factory=list)  # face observations waiting for the next step
     cue_queue: dict[str, list[CueChunk]] = field(default_factory=dict)  # other cues' observations, per cue kind
     bayes_row: int = 0  # Bayes method: its row of the posterior table while unassigned (0: none)
@@ -84,9 +83,13 @@ class TrackRecord:
         """The track carries face ``face_id`` from now on, decided by ``evidence`` (``new``: it created it)."""
         self.face_id, self.confidence, self.evidence, self.new_face = face_id, float(confidence), evidence, new
 
+    def teaches(self, learn_confidence: float) -> bool:
+        """Identified: whether its faces join its face (not after a known-face decision below ``learn_confidence``)."""
+        return self.new_face or self.evidence != Evidence.FACE or self.confidence >= learn_confidence
+
     def unassign(self) -> None:
         """The track holds no face any more: it is classified afresh from its next observations."""
-        self.face_id, self.confidence, self.evidence, self.teaches = None, 0.0, Evidence.NONE, True
+        self.face_id, self.confidence, self.evidence = None, 0.0, Evidence.NONE
         self.votes.clear()
         self.n_observations = 0
 
