@@ -179,12 +179,13 @@ class IdentityManagerBase:
         self.stats.lent_faces_taken += 1
 
     def step(self, stamp_s: float) -> list[IdentityEvent]:
-        """Run one update of Algorithm 1: learn the queued observations, classify the unassigned tracks (by face,
+        """Run one update of Algorithm 1: release the tracks a crossing made more likely someone else (their faces
+        are free for whoever shows them), learn the queued observations, classify the unassigned tracks (by face,
         then by body), then handle deaths."""
         stamp = check_stamp(stamp_s)
         self.stats.steps += 1
         self.tracks.retired.clear()
-        events: list[IdentityEvent] = []
+        events = [self._release_swapped(track, stamp, stamp) for track in self.crossings.withheld()]
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
@@ -237,12 +238,7 @@ class IdentityManagerBase:
                           keep: npt.NDArray[np.bool_] | None, stamp: float, events: list[IdentityEvent]
                           ) -> tuple[int | None, list[Chunk], F32Array | None]:
         """An identified track's observations (``keep``: which its face accepts; None: all): its face's slot and
-        the rows it learns (None: none), or, when they show a swap or its identity is withheld (a crossing made it
-        more likely wrong than right: its face re-decides it), the released track's chunks and rows."""
-        if self.crossings.withholds(track.track_id):
-            events.append(self._release_swapped(track, stamp, stamp))
-            track.n_observations = obs.shape[0]
-            return None, chunks, obs
+        the rows it learns (None: none), or, when they show a swap, the released track's chunks and rows."""
         assert track.face_id is not None
         face = self.faces.entries[track.face_id]
         face.n_observations += obs.shape[0]
@@ -401,10 +397,12 @@ class IdentityManagerBase:
         self.sources.track_identified(track.track_id, fid)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
-        """The track is not its face's person any more: the face returns to face_list, the track is unassigned."""
+        """The track is not its face's person any more: the face returns to face_list (a LOST track's is there,
+        lent), the track is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
-        self.faces.make_available(fid)
+        if self._lent.take(fid) is None:
+            self.faces.make_available(fid)
         track.unassign()
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)

@@ -6,8 +6,9 @@ probability ``p`` that it did (taken at most one half: the association chose the
 which at least one track carries an identity, the doubt ``d`` (the probability that the two tracks' people are
 exchanged) follows the frames as an odd number of swaps: ``d <- d (1 - p) + (1 - d) p``. A track's
 ``identity_confidence`` falls with its doubt over all its crossings, and above one half its identity is withheld:
-the next face seen on it then decides it afresh (the identity manager releases it as a swapped track, under a new
-published id). A decision of the track clears its doubt, and its partners' about it; the partner's end does not
+the identity manager releases it at its next step, as a swapped track (under a new published id). Its face returns
+to face_list at once, so the person's own track can take it when it shows the face (held by the swapped track, it
+would have given them a new id), and the released track is decided afresh by its next face or body. A decision of the track clears its doubt, and its partners' about it; the partner's end does not
 (it says nothing of a swap before it). Below ``floor`` a crossing is forgotten.
 
 Measured on the development scenarios and dropped: clearing the doubt when the partner ends (of the identities it
@@ -60,6 +61,11 @@ class Crossings:
     def withholds(self, track_id: int) -> bool:
         """Whether the track's identity is more likely wrong than right: published as undecided."""
         return self.withheld_at(self.doubt_of(track_id))
+
+    def withheld(self) -> list[TrackRecord]:
+        """The identified live tracks whose identity is more likely wrong than right."""
+        return [t for t in self.tracks.entries.values()
+                if t.face_id is not None and t.crossed and self.withheld_at(self.doubt(t))]
 
     @staticmethod
     def withheld_at(doubt: float) -> bool:

@@ -84,3 +84,24 @@ def test_the_master_publishes_an_identity_more_likely_wrong_than_right_as_undeci
     assert core.published_face_id(5) == 3 and core.published_confidence(5) == pytest.approx(0.7 * full)
     track.crossed[7] = 0.4  # two crossings: 1 - 0.7 * 0.6 = 0.58 that it is someone else
     assert core.published_face_id(5) == 0 and core.published_confidence(5) == 0.0
+
+
+def test_a_track_more_likely_someone_else_is_released_and_its_face_is_free_once_even_when_lent() -> None:
+    from face_reid_master.identity.records import IdentityEventKind
+
+    rng = np.random.default_rng(4)
+    ids = BayesIdentityManager(LIKELIHOOD, embedding_dim=DIM, lend_lost_faces=True)
+    for k in (1, 2, 3):
+        ids.add_observations(k, _face(k - 1, 3, rng), 0.0)
+    ids.step(0.0)
+    ids.track_lost(1)  # Alice's track is lost: her face is lent to face_list
+    assert ids.faces.available == [1]
+    ids.crossings.crossed(1, 2, 0.45, 1.0)
+    ids.crossings.crossed(1, 3, 0.45, 1.0)  # 0.70 that it is someone else now
+    events = ids.step(1.0)
+    assert [(e.kind, e.track_id, e.face_id) for e in events] == [(IdentityEventKind.SWAPPED, 1, 1)]
+    assert ids.faces.available == [1] and ids.face_id_of(1) is None  # in face_list once, nobody holds it
+    ids.track_recovered(1)  # found again: it has no face to take back
+    ids.add_observations(4, _face(0, 3, rng), 2.0)  # Alice shows her face on another track
+    ids.step(2.0)
+    assert ids.assigned_tracks() == {2: 2, 3: 3, 4: 1}
