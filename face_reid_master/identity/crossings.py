@@ -8,8 +8,9 @@ exchanged) follows the frames as an odd number of swaps: ``d <- d (1 - p) + (1 -
 ``identity_confidence`` falls with its doubt over all its crossings, and above one half its identity is withheld:
 the identity manager releases it at its next step, as a swapped track (under a new published id). Its face returns
 to face_list at once, so the person's own track can take it when it shows the face (held by the swapped track, it
-would have given them a new id), and the released track is decided afresh by its next face or body. A decision of the track clears its doubt, and its partners' about it; the partner's end does not
-(it says nothing of a swap before it). Below ``floor`` a crossing is forgotten.
+would have given them a new id), and the released track is decided afresh by its next face or body. A decision
+of the track clears its doubt, and its partners' about it; the partner's end does not (it says nothing of a swap
+before it). Below ``floor`` a crossing is forgotten.
 
 Measured on the development scenarios and dropped: clearing the doubt when the partner ends (of the identities it
 gave back, 42 % were wrong with oracle evidence and 57 % with real evidence), or when the swap guard's gate accepts
