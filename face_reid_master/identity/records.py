@@ -101,7 +101,7 @@ class IdentityStats:
     faces_forgotten: int = 0
     observations_not_learned_inconsistent: int = 0
     observations_not_learned_uncertain: int = 0  # faces of tracks decided below learn_confidence
-    swaps_released: int = 0
+    swaps_released: int = 0  # tracks released as someone else: the swap guard, or a crossing more likely than not
     body_observations: int = 0
     assigned_by_body: int = 0
     lent_faces_taken: int = 0  # faces of LOST tracks given to another track (the person came back as it)
