@@ -360,23 +360,22 @@ class IdentityManagerBase:
         face, which absorbs them."""
         track = self.tracks.entries[tid]
         assert track.slot is not None, "a track is only classified after observations"
-        if face_or_new == 0:
-            fid = self.faces.new_id()  # the track's buffer becomes the new face's feature set
+        new = face_or_new == 0
+        fid = self.faces.new_id() if new else face_or_new
+        if new:  # the track's buffer becomes the new face's feature set
             self.faces.entries[fid] = FaceEntry(fid, track.slot, None, stamp, stamp, track.n_observations)
-            kind = IdentityEventKind.NEW_FACE
             self.stats.new_faces += 1
-        else:
-            fid = face_or_new
+        self._give_face(track, fid, confidence, stamp, Evidence.FACE, new=new)
+        if not new:  # the known face absorbs the buffer (add result.face_images) if the decision teaches it
             face = self.faces.entries[fid]
-            if confidence >= self.learn_confidence:  # add result.face_images (TrackRecord.teaches)
+            if track.teaches(self.learn_confidence):
                 self._bank.add_features(face.slot, self._bank.features(track.slot))
             else:
                 self.stats.observations_not_learned_uncertain += int(self._bank.count[track.slot])
             self._bank.free_slot(track.slot)
             face.n_observations += track.n_observations
-            kind = IdentityEventKind.ASSIGNED_KNOWN
             self.stats.assigned_known += 1
-        self._give_face(track, fid, confidence, stamp, Evidence.FACE, new=kind == IdentityEventKind.NEW_FACE)
+        kind = IdentityEventKind.NEW_FACE if new else IdentityEventKind.ASSIGNED_KNOWN
         track.slot = None
         track.votes.clear()
         return IdentityEvent(kind, tid, fid, stamp, float(confidence))
