@@ -4,7 +4,10 @@ whose identity has become more likely wrong than right is not published with it.
 The tracker reports, per frame, the pairs of tracks its association could have given each other's person, with the
 probability ``p`` that it did (taken at most one half: the association chose the assignment it made). For a pair of
 which at least one track carries an identity, the doubt ``d`` (the probability that the two tracks' people are
-exchanged) follows the frames as an odd number of swaps: ``d <- d (1 - p) + (1 - d) p``. A track's
+exchanged) follows the frames as an odd number of swaps: ``d <- d (1 - p) + (1 - d) p``. The tracker also
+reports the probability ``p`` that the detection a track took is a person it was not following (one whose own
+track is new or gone, as when its person leaves the view while another walks in); for an identified track this
+is a crossing with nobody, not bounded by one half: ``d <- 1 - (1 - d) (1 - p)``. A track's
 ``identity_confidence`` falls with its doubt over all its crossings, and above one half its identity is withheld:
 the identity manager releases it at its next step, as a swapped track (under a new published id). Its face returns
 to face_list at once, so the person's own track can take it when it shows the face (held by the swapped track, it
@@ -25,7 +28,9 @@ from face_reid_camera.common.checks import check_real, check_stamp
 from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.track_list import TrackList
 
-__all__ = ["Crossings"]
+__all__ = ["NOBODY", "Crossings"]
+
+NOBODY = -1  # the partner of a stray in TrackRecord.crossed (no track has a negative id)
 
 
 class Crossings:
@@ -52,6 +57,18 @@ class Crossings:
         p = min(p, 0.5)  # the association chose: it alone never makes the swap the likelier story
         d = ra.crossed.get(b, 0.0)
         self._set(ra, rb, d * (1.0 - p) + (1.0 - d) * p)
+
+    def strayed(self, a: int, p: float, stamp: float) -> None:
+        """The detection track ``a`` took may be a person it was not following, with probability ``p`` (ignored
+        unless it carries an identity)."""
+        p = check_real("probability", p, 0.0, 1.0)
+        check_stamp(stamp)
+        track = self.tracks.entries.get(a)
+        if track is None or track.face_id is None:
+            return
+        d = 1.0 - (1.0 - track.crossed.get(NOBODY, 0.0)) * (1.0 - p)
+        if d >= self.floor:
+            track.crossed[NOBODY] = d
 
     # ------------------------------------------------------------------------------ queries and ends
     def doubt_of(self, track_id: int) -> float:

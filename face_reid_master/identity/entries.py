@@ -73,7 +73,7 @@ class TrackRecord:
     public_id: int = 0  # the id it is published under (core.records.PublicId): track_id until a swap split it
     public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
     face_observations: int = 0  # face embeddings the master used since it got its public id
-    crossed: dict[int, float] = field(default_factory=dict)  # track id -> probability the tracker swapped them
+    crossed: dict[int, float] = field(default_factory=dict)  # track id (NOBODY: a stray) -> probability of a swap
 
     def __post_init__(self) -> None:
         if not self.public_id:

@@ -21,6 +21,11 @@ like no other track.
 Crossings: for two tracks the association could have given each other's detection (both pairs within the wide
 gate), the probability that it swapped them is the likelihood of the exchanged pairs over both assignments'
 (``Matches.swaps``); likewise for a track that took a detection another, undetected, track could have had.
+
+Strays: a track may also take the detection of a person it was not following, one whose own track is new or gone
+(its person left the view as another walked in). For every detection a CONFIRMED or LOST track took, the
+probability that it is such a person (``Matches.strays``) is a logistic of the pair's position log-likelihood and
+its body-appearance distance (:class:`StrayModel`, fitted on development scenarios).
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from face_reid_master.tracking.config import TrackerConfig
 from face_reid_master.tracking.kalman import mahalanobis_sq
 from face_reid_master.tracking.records import TrackState
 
-__all__ = ["Associator", "Matches", "gnn"]
+__all__ = ["Associator", "Matches", "StrayModel", "gnn", "stray_probabilities", "swap_probabilities"]
 
 FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.intp]
@@ -73,19 +78,21 @@ def gnn(cost: FloatArray, feasible: NDArray[np.bool_]) -> tuple[IndexArray, Inde
 class Matches:
     """``rows`` (tracks) matched to ``cols`` (detections); ``near``: (M,) detections within
     ``min_person_separation_m`` of some track's predicted position; ``swaps``: (track, track, probability that
-    this association swapped their people) for the pairs it could have swapped (tracks as in ``rows``)."""
+    this association swapped their people) for the pairs it could have swapped; ``strays``: (track, probability
+    that the detection it took is a person it was not following) (tracks as in ``rows``)."""
 
     rows: IndexArray
     cols: IndexArray
     near: NDArray[np.bool_]
     swaps: tuple[tuple[int, int, float], ...] = ()
+    strays: tuple[tuple[int, float], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
 class _Costs:
     """Per (track, detection): squared Mahalanobis and Euclidean distances, closer than the people's separation,
-    inside the metric gate, feasible for pass 1, its cost (negative log-likelihood plus appearance), clearly
-    another person and alike by appearance (None: no appearance known)."""
+    inside the metric gate, feasible for pass 1, its cost (negative log-likelihood plus appearance), the position
+    part of it, clearly another person and alike by appearance (None: no appearance known)."""
 
     d2: FloatArray
     dist2: FloatArray
@@ -93,11 +100,24 @@ class _Costs:
     in_metric_gate: NDArray[np.bool_]
     feasible: NDArray[np.bool_]
     nll: FloatArray
+    position_nll: FloatArray
     other_person: NDArray[np.bool_] | None
     looks_alike: NDArray[np.bool_] | None
 
 
 _MIN_SWAP_PROBABILITY = 1e-3  # pairs less likely swapped than this are not reported
+_MIN_STRAY_PROBABILITY = 1e-2  # nor tracks less likely strayed (they would only add rounding to the doubt)
+
+
+@dataclass(frozen=True, slots=True)
+class StrayModel:
+    """The log odds that a track's detection is a person it was not following: ``log_odds`` + 0.5 x the pair's
+    negative log-likelihood (``d2 + log det S``, S in m^2) + ``appearance_slope`` x (its body-appearance distance
+    - ``appearance_distance``); the appearance term is 0 where either has no appearance."""
+
+    log_odds: float
+    appearance_slope: float
+    appearance_distance: float
 
 
 def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: IndexArray, cols: IndexArray,
@@ -133,6 +153,23 @@ def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: Index
     return tuple(out)
 
 
+def stray_probabilities(model: StrayModel, position_nll: FloatArray, appearance: FloatArray | None, rows: IndexArray,
+                        cols: IndexArray, follows: NDArray[np.bool_]) -> tuple[tuple[int, float], ...]:
+    """(track, p) for the matched tracks that ``follow`` a person (not tentative): p, the probability that the
+    detection it took is a person it was not following, by ``model`` (``position_nll``: d2 + log det S per pair;
+    ``appearance``: body-appearance distances, NaN = unknown). Tracks below 1e-2 are left out."""
+    keep = follows[rows]
+    r, c = rows[keep], cols[keep]
+    if r.shape[0] == 0:
+        return ()
+    log_odds = model.log_odds + 0.5 * position_nll[r, c]
+    if appearance is not None:
+        a = appearance[r, c]
+        log_odds += np.where(np.isfinite(a), model.appearance_slope * (a - model.appearance_distance), 0.0)
+    p = 1.0 / (1.0 + np.exp(-np.clip(log_odds, -700.0, 700.0)))
+    return tuple((int(t), float(q)) for t, q in zip(r, p, strict=True) if q >= _MIN_STRAY_PROBABILITY)
+
+
 class Associator:
     """The association cascade of one :class:`TrackerConfig` (see the module doc)."""
 
@@ -148,6 +185,7 @@ class Associator:
         self._app_gate = config.appearance_gate
         self._app_weight = config.appearance_weight
         self._app_match = config.appearance_match_distance
+        self._stray = StrayModel(config.stray_log_odds, config.stray_appearance_slope, config.stray_appearance_distance)
 
     def __call__(
         self,
@@ -207,8 +245,10 @@ class Associator:
         possible = (close | (d2 <= self._wide_gate)) & in_metric_gate
         if c.other_person is not None:
             possible &= ~c.other_person
-        swaps = swap_probabilities(nll, possible, rows, cols, state != _TENTATIVE)
-        return Matches(rows, cols, close.any(axis=0), swaps)
+        follows = state != _TENTATIVE
+        swaps = swap_probabilities(nll, possible, rows, cols, follows)
+        strays = stray_probabilities(self._stray, c.position_nll, appearance, rows, cols, follows)
+        return Matches(rows, cols, close.any(axis=0), swaps, strays)
 
     def _costs(self, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, r2: FloatArray,
                appearance: FloatArray | None) -> _Costs:
@@ -217,7 +257,7 @@ class Associator:
         dist2 = ((z[None, :, :] - x_pred[:, None, :2]) ** 2).sum(axis=2)
         in_metric_gate = dist2 <= self._gate_m2
         feasible = (d2 <= self._gate) & in_metric_gate
-        nll = d2 + log_det
+        nll = position_nll = d2 + log_det
         other_person = looks_alike = None
         if appearance is not None:
             known = np.isfinite(appearance)
@@ -225,7 +265,8 @@ class Associator:
             feasible &= ~other_person
             nll = nll + self._app_weight * np.where(known, appearance, self._app_match)
             looks_alike = known & (appearance < self._app_match)
-        return _Costs(d2, dist2, dist2 < self._sep2, in_metric_gate, feasible, nll, other_person, looks_alike)
+        return _Costs(d2, dist2, dist2 < self._sep2, in_metric_gate, feasible, nll, position_nll, other_person,
+                      looks_alike)
 
     def _second_pass(
         self, left_r: IndexArray, near_pred: NDArray[np.bool_], same_looks: NDArray[np.bool_] | None,

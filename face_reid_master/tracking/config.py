@@ -76,6 +76,17 @@ class TrackerConfig:
         "distance (metric units).", low=0.0, high=10.0)
     appearance_gallery_size: int = param(
         16, "Body-appearance embeddings kept per track (count).", low=1, high=1000)
+    stray_log_odds: float = param(
+        -2.5, "Log odds that a detection a track takes is a person it was not following, at a pair negative "
+        "log-likelihood (d2 + log det S, S in m^2) of 0 and the appearance distance stray_appearance_distance; "
+        "each unit of that log-likelihood adds 0.5 (fitted on development scenarios; -100 = never).",
+        low=-100.0, high=100.0)
+    stray_appearance_slope: float = param(
+        9.6, "Log odds of a stray per unit of body-appearance distance above stray_appearance_distance (per "
+        "metric unit; 0 = position only).", low=0.0, high=1000.0)
+    stray_appearance_distance: float = param(
+        0.45, "Body-appearance distance between a track and its detection that says nothing of a stray (metric "
+        "units).", low=0.0, high=10.0)
 
     def __post_init__(self) -> None:
         validate_fields(self)

@@ -82,7 +82,8 @@ class UpdateResult:
     because they lie within ``min_person_separation_m`` of a track (whose person was already matched:
     a duplicate detection).  ``clock_resync``: this frame re-based the clock after a run of rejected
     frames (on a backward jump all tracks are deleted first).  ``swaps``: pairs of tracks this frame's association
-    could have given each other's person, with the probability that it did (crossings).
+    could have given each other's person, with the probability that it did (crossings). ``strays``: tracks that may
+    have taken the detection of a person they were not following, with that probability.
     """
 
     stamp_s: float
@@ -98,6 +99,7 @@ class UpdateResult:
     suppressed_detections: tuple[int, ...] = ()
     clock_resync: bool = False
     swaps: tuple[tuple[int, int, float], ...] = ()  # (track id, track id, probability this frame swapped them)
+    strays: tuple[tuple[int, float], ...] = ()  # (track id, probability its detection is someone else)
 
     @property
     def accepted(self) -> bool:

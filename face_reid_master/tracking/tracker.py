@@ -186,6 +186,7 @@ class Tracker:
             suppressed_detections=tuple(suppressed),
             clock_resync=resync,
             swaps=matched.matches.swaps,
+            strays=matched.matches.strays,
         )
 
     def advance(self, stamp_s: float) -> UpdateResult:
@@ -299,7 +300,8 @@ class Tracker:
         rows = local.rows
         ids = self._tab.ids[cand]
         swaps = tuple((int(ids[a]), int(ids[b]), p) for a, b, p in local.swaps)
-        return _Matched(Matches(cand[rows], local.cols, local.near, swaps), x_pred[rows], P_pred[rows], late)
+        strays = tuple((int(ids[a]), p) for a, p in local.strays)
+        return _Matched(Matches(cand[rows], local.cols, local.near, swaps, strays), x_pred[rows], P_pred[rows], late)
 
     def _candidates(self, x_a: FloatArray, t_a: FloatArray, z_a: FloatArray, z: FloatArray, stamp: float,
                     reattach: bool) -> IndexArray:

@@ -4,7 +4,8 @@ identity events expected out, read as a story. Each file says what it shows in i
 A step at time ``at`` (s) may show faces (``faces: {track: "alice x3"}``: three noisy face embeddings of
 Alice on that track), bodies (``bodies: {track: "red x2"}``), and tell the tracker's ``lost`` / ``found`` /
 ``deleted`` tracks, the pairs of tracks it may have swapped (``crossed: [[1, 2, 0.4]]``: with probability
-0.4), ``forget`` face ids, or ``restart`` (the learned faces saved and loaded into a new
+0.4), the tracks that may have taken a person they were not following (``strayed: [[1, 0.8]]``), ``forget``
+face ids, or ``restart`` (the learned faces saved and loaded into a new
 manager, as the face store does). ``expect`` lists the step's identity events in order as
 ``"<kind> track <T> face <F>"`` (``by body`` when the body decided it); none expected when left out.
 ``faces_of`` checks which face each track carries then (null: none), ``published`` which face a robot reads for it
@@ -83,6 +84,8 @@ class ScenarioRun:
             m.add_body_observations(int(track), rows + self.rng.normal(0.0, 0.02, rows.shape).astype(np.float32), t)
         for a, b, p in step.get("crossed") or ():
             m.crossings.crossed(int(a), int(b), float(p), t)
+        for a, p in step.get("strayed") or ():
+            m.crossings.strayed(int(a), float(p), t)
         for track in step.get("lost") or ():
             m.track_lost(int(track))
         for track in step.get("found") or ():
