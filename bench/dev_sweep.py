@@ -26,6 +26,7 @@ from face_reid_master.evaluation.metrics import evaluate_run
 from face_reid_master.evaluation.runner import run_master
 from face_reid_master.identity.size_likelihood import default_face_likelihood
 from face_reid_master.sim.scenario_files import load_scenario
+from face_reid_master.tracking.config import TrackerConfig
 
 _SUMS = ("right", "wrong", "reid_success", "reid_cases", "face_right", "face_wrong", "body_right", "body_wrong",
          "gallery_detections", "wrong_names", "other_detections", "others_named", "published_detections",
@@ -42,7 +43,8 @@ def _value(text: str) -> Any:
 
 
 def parse_variant(spec: str) -> tuple[str, dict[str, Any]]:
-    """"LABEL:a=1,b=false" -> ("LABEL", {"a": 1, "b": False}); unknown parameters fail in MasterConfig."""
+    """"LABEL:a=1,b=false" -> ("LABEL", {"a": 1, "b": False}); unknown parameters fail in MasterConfig
+    (``tracker.NAME`` sets a tracker parameter)."""
     label, sep, rest = spec.partition(":")
     if not sep or not label:
         raise ValueError(f"a variant is LABEL:param=value,... (LABEL: alone = the defaults), got {spec!r}")
@@ -52,12 +54,19 @@ def parse_variant(spec: str) -> tuple[str, dict[str, Any]]:
     return label, {k: _value(v) for k, v in pairs}
 
 
+def master_config(overrides: dict[str, Any], **defaults: Any) -> MasterConfig:
+    """MasterConfig of ``defaults`` and ``overrides``; ``tracker.NAME`` keys go to its TrackerConfig."""
+    tracker = {k.removeprefix("tracker."): v for k, v in overrides.items() if k.startswith("tracker.")}
+    master = {k: v for k, v in overrides.items() if not k.startswith("tracker.")}
+    return MasterConfig(**{**defaults, **master}, **({"tracker": TrackerConfig(**tracker)} if tracker else {}))
+
+
 def run_variant(scenarios: list[Any], metric: Any, overrides: dict[str, Any]) -> dict[str, int]:
     sums = dict.fromkeys(_SUMS, 0)
     for sc in scenarios:
         space = sc.document["embedding_space"]
         gal = scenario_gallery(sc.document, sc.directory, default_gallery_people(sc.document, None), space=space)
-        cfg = MasterConfig(**{"embedding_space": space, **overrides})
+        cfg = master_config(overrides, embedding_space=space)
         log = run_master(sc.frames, sc.frame_gt_ids, cfg, likelihood=default_face_likelihood(space),
                          body_metric=metric, gallery=gal.people or None, days=sc.day_spans)
         m = evaluate_run(log, gallery_people=gal.gt_of_name or None, scenario_summary=sc.summary, with_mot=False)
@@ -85,7 +94,7 @@ def main(argv: list[str]) -> int:
     args = p.parse_args(argv)
     variants = [parse_variant(v) for v in args.variants]
     for _, overrides in variants:
-        MasterConfig(**overrides)  # a wrong name or value fails before hours of running
+        master_config(overrides)  # a wrong name or value fails before hours of running
     scenarios = [load_scenario(s) for s in args.scenarios.split(",")]
     metric = load_body_metric(args.body_metric)
     rows = []

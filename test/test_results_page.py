@@ -38,10 +38,13 @@ def test_every_development_sweep_is_on_the_page_with_its_sums() -> None:
 def test_a_sweep_variant_is_label_colon_settings() -> None:
     sys.path.insert(0, str(REPO / "bench"))
     try:
-        from dev_sweep import parse_variant
+        from dev_sweep import master_config, parse_variant
     finally:
         sys.path.remove(str(REPO / "bench"))
     assert parse_variant("base:") == ("base", {})
+    _, tracker_too = parse_variant("t:tracker.stray_log_odds=-3.5,learn_confidence=0.9")
+    cfg = master_config(tracker_too)
+    assert cfg.tracker.stray_log_odds == -3.5 and cfg.learn_confidence == 0.9
     assert parse_variant("b:body_max_log_ratio=0.25,body_identity=false,method=bayes") == (
         "b", {"body_max_log_ratio": 0.25, "body_identity": False, "method": "bayes"})
     for bad in ("nolabel", ":a=1", "x:a"):
