@@ -79,7 +79,7 @@ class TrackerConfig:
     stray_log_odds: float = param(
         -2.5, "Log odds that a detection a track takes is a person it was not following, at a pair negative "
         "log-likelihood (d2 + log det S, S in m^2) of 0 and the appearance distance stray_appearance_distance; "
-        "each unit of that log-likelihood adds 0.5 (fitted on development scenarios; -100 = never).",
+        "each unit of that log-likelihood adds 0.5 (chosen on development scenarios; lower = fewer releases).",
         low=-100.0, high=100.0)
     stray_appearance_slope: float = param(
         9.6, "Log odds of a stray per unit of body-appearance distance above stray_appearance_distance (per "
