@@ -186,7 +186,7 @@ class MasterCore:
         for a, b, p in update.swaps:
             self.identity.crossings.crossed(a, b, p, stamp)
         for a, p in update.strays:
-            self.identity.crossings.strayed(a, p, stamp)
+            self.identity.crossings.strayed(a, p)
         self._observe(update.associations, detections, stamp, frame)
         self._track_events(update.deleted, stamp, update.lost, update.recovered)
         self._undecided_stamp = stamp if self._undecided_stamp is None else max(self._undecided_stamp, stamp)

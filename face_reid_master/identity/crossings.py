@@ -58,11 +58,10 @@ class Crossings:
         d = ra.crossed.get(b, 0.0)
         self._set(ra, rb, d * (1.0 - p) + (1.0 - d) * p)
 
-    def strayed(self, a: int, p: float, stamp: float) -> None:
+    def strayed(self, a: int, p: float) -> None:
         """The detection track ``a`` took may be a person it was not following, with probability ``p`` (ignored
         unless it carries an identity)."""
         p = check_real("probability", p, 0.0, 1.0)
-        check_stamp(stamp)
         track = self.tracks.entries.get(a)
         if track is None or track.face_id is None:
             return

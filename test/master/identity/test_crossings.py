@@ -109,10 +109,10 @@ def test_a_track_more_likely_someone_else_is_released_and_its_face_is_free_once_
 
 def test_a_track_that_may_have_strayed_onto_a_newcomer_is_doubted_beyond_one_half_and_released() -> None:
     ids, rng = _alice_and_bob()
-    ids.crossings.strayed(3, 0.9, 1.0)  # an unidentified track: nothing to doubt
+    ids.crossings.strayed(3, 0.9)  # an unidentified track: nothing to doubt
     assert ids.crossings.doubt_of(3) == 0.0
-    ids.crossings.strayed(1, 0.3, 1.0)
-    ids.crossings.strayed(1, 0.4, 1.1)  # nobody else to have swapped with: not bounded by one half
+    ids.crossings.strayed(1, 0.3)
+    ids.crossings.strayed(1, 0.4)  # nobody else to have swapped with: not bounded by one half
     assert ids.crossings.doubt_of(1) == pytest.approx(1.0 - 0.7 * 0.6)
     assert ids.crossings.withholds(1) and not ids.crossings.withholds(2)
     events = ids.step(1.2)
@@ -122,4 +122,4 @@ def test_a_track_that_may_have_strayed_onto_a_newcomer_is_doubted_beyond_one_hal
     ids.step(2.0)
     assert ids.assigned_tracks() == {1: 1, 2: 2} and ids.crossings.doubt_of(1) == 0.0
     with pytest.raises(ValueError):
-        ids.crossings.strayed(1, float("nan"), 3.0)
+        ids.crossings.strayed(1, float("nan"))

@@ -85,7 +85,7 @@ class ScenarioRun:
         for a, b, p in step.get("crossed") or ():
             m.crossings.crossed(int(a), int(b), float(p), t)
         for a, p in step.get("strayed") or ():
-            m.crossings.strayed(int(a), float(p), t)
+            m.crossings.strayed(int(a), float(p))
         for track in step.get("lost") or ():
             m.track_lost(int(track))
         for track in step.get("found") or ():
