@@ -186,6 +186,7 @@ class IdentityManagerBase:
         self.stats.steps += 1
         self.tracks.retired.clear()
         events = [self._release_swapped(track, stamp, stamp) for track in self.crossings.withheld()]
+        events += [self._restart(track, stamp) for track in self.crossings.mixed()]
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
@@ -403,8 +404,22 @@ class IdentityManagerBase:
         if self._lent.take(fid) is None:
             self.faces.make_available(fid)
         track.unassign()
+        self.crossings.forget_strays(track)
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
+
+    def _restart(self, track: TrackRecord, stamp: float) -> IdentityEvent:
+        """An unidentified track is probably someone else now: the face buffer and cue evidence it gathered go, and
+        it is classified afresh from its next observations."""
+        if track.slot is not None:
+            self._bank.free_slot(track.slot)
+            track.slot = None
+        self._on_track_forgotten(track)
+        track.unassign()
+        self.sources.forget_track(track.track_id)
+        self.crossings.forget_strays(track)
+        self.stats.tracks_restarted += 1
+        return IdentityEvent(IdentityEventKind.RESTARTED, track.track_id, 0, stamp, 0.0)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
         self.sources.forget_track(tid)

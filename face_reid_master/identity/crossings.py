@@ -60,10 +60,10 @@ class Crossings:
 
     def strayed(self, a: int, p: float) -> None:
         """The detection track ``a`` took may be a person it was not following, with probability ``p`` (ignored
-        unless it carries an identity)."""
+        for a track the identity manager holds nothing of)."""
         p = check_real("probability", p, 0.0, 1.0)
         track = self.tracks.entries.get(a)
-        if track is None or track.face_id is None:
+        if track is None:
             return
         d = 1.0 - (1.0 - track.crossed.get(NOBODY, 0.0)) * (1.0 - p)
         if d >= self.floor:
@@ -84,6 +84,12 @@ class Crossings:
         return [t for t in self.tracks.entries.values()
                 if t.face_id is not None and t.crossed and self.withheld_at(self.doubt(t))]
 
+    def mixed(self) -> list[TrackRecord]:
+        """The unidentified live tracks whose evidence so far is more likely another person's than their
+        current person's (a stray more likely than not): they are classified afresh."""
+        return [t for t in self.tracks.entries.values()
+                if t.face_id is None and self.withheld_at(t.crossed.get(NOBODY, 0.0))]
+
     @staticmethod
     def withheld_at(doubt: float) -> bool:
         """Whether an identity with this doubt is withheld (more likely wrong than right)."""
@@ -96,6 +102,11 @@ class Crossings:
         for d in track.crossed.values():
             keep *= 1.0 - d
         return 1.0 - keep
+
+    @staticmethod
+    def forget_strays(track: TrackRecord) -> None:
+        """The track's strays so far are spent (it was released or classified afresh for them)."""
+        track.crossed.pop(NOBODY, None)
 
     def forget_all(self, track: TrackRecord) -> None:
         """The track is identified afresh: its crossings are over (in its partners' records too)."""

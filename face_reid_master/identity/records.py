@@ -36,6 +36,8 @@ class IdentityEventKind(str, enum.Enum):
     RELEASED = "released"  # the track died: its face goes back to face_list (assignable again)
     SWAPPED = "swapped"  # the track's faces stopped matching its face (a tracker swap): face back to face_list,
     # the track is classified afresh
+    RESTARTED = "restarted"  # an unidentified track probably took another person: its evidence so far is dropped,
+    # it is classified afresh (face_id 0)
 
 
 @dataclass(frozen=True)
@@ -104,4 +106,5 @@ class IdentityStats:
     swaps_released: int = 0  # tracks released as someone else: the swap guard, or a crossing more likely than not
     body_observations: int = 0
     assigned_by_body: int = 0
+    tracks_restarted: int = 0  # unidentified tracks classified afresh: a stray made their evidence another person's
     lent_faces_taken: int = 0  # faces of LOST tracks given to another track (the person came back as it)
