@@ -290,9 +290,6 @@ class MasterCore:
                 continue  # not learned (its id not durable, or max_faces): the track stays unidentified
             public = self.public_id(ev.track_id)
             kept.append(ev if public == ev.track_id else dataclasses.replace(ev, track_id=public))
-            if ev.kind == IdentityEventKind.RESTARTED:
-                self._split_track(ev.track_id, stamp)
-                continue
             if ev.kind == IdentityEventKind.NEW_FACE:
                 self.stats.faces_created += 1
             elif ev.kind == IdentityEventKind.ASSIGNED_KNOWN:

@@ -186,7 +186,8 @@ class IdentityManagerBase:
         self.stats.steps += 1
         self.tracks.retired.clear()
         events = [self._release_swapped(track, stamp, stamp) for track in self.crossings.withheld()]
-        events += [self._restart(track, stamp) for track in self.crossings.mixed()]
+        for track in self.crossings.mixed():
+            self._restart(track)
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
@@ -408,9 +409,9 @@ class IdentityManagerBase:
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
-    def _restart(self, track: TrackRecord, stamp: float) -> IdentityEvent:
-        """An unidentified track is probably someone else now: the face buffer and cue evidence it gathered go, and
-        it is classified afresh from its next observations."""
+    def _restart(self, track: TrackRecord) -> None:
+        """An unidentified track probably follows someone else now: the face buffer and cue evidence it gathered go,
+        and it is classified afresh from its next observations (under the same published id: it claimed nobody)."""
         if track.slot is not None:
             self._bank.free_slot(track.slot)
             track.slot = None
@@ -419,7 +420,6 @@ class IdentityManagerBase:
         self.sources.forget_track(track.track_id)
         self.crossings.forget_strays(track)
         self.stats.tracks_restarted += 1
-        return IdentityEvent(IdentityEventKind.RESTARTED, track.track_id, 0, stamp, 0.0)
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
         self.sources.forget_track(tid)

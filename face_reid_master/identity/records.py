@@ -36,8 +36,6 @@ class IdentityEventKind(str, enum.Enum):
     RELEASED = "released"  # the track died: its face goes back to face_list (assignable again)
     SWAPPED = "swapped"  # the track's faces stopped matching its face (a tracker swap): face back to face_list,
     # the track is classified afresh
-    RESTARTED = "restarted"  # an unidentified track probably took another person: its evidence so far is dropped,
-    # it is classified afresh (face_id 0)
 
 
 @dataclass(frozen=True)
