@@ -11,7 +11,10 @@ is a crossing with nobody, not bounded by one half: ``d <- 1 - (1 - d) (1 - p)``
 ``identity_confidence`` falls with its doubt over all its crossings, and above one half its identity is withheld:
 the identity manager releases it at its next step, as a swapped track (under a new published id). Its face returns
 to face_list at once, so the person's own track can take it when it shows the face (held by the swapped track, it
-would have given them a new id), and the released track is decided afresh by its next face or body. A decision
+would have given them a new id), and the released track is decided afresh by its next face or body. An unidentified
+track's strays add up alike; above one half its face buffer and body evidence are another person's more likely
+than not: the identity manager drops them and classifies the track afresh from its next observations (it keeps its
+published id: it claimed nobody). A decision
 of the track clears its doubt, and its partners' about it; the partner's end does not (it says nothing of a swap
 before it). Below ``floor`` a crossing is forgotten.
 
@@ -19,7 +22,9 @@ Measured on the development scenarios and dropped: clearing the doubt when the p
 gave back, 42 % were wrong with oracle evidence and 57 % with real evidence), or when the swap guard's gate accepts
 a face seen on the track again (with real evidence almost every identity it gave back was wrong: the gate takes a
 look-alike's face for the person's; deciding afresh, by the classification, won); weighing it by the faces and
-bodies seen next, and exchanging the identities of two tracks it showed swapped (oracle evidence, 20 people).
+bodies seen next, and exchanging the identities of two tracks it showed swapped (oracle evidence, 20 people);
+publishing an unidentified track classified afresh under a new id (what a robot reads was the same, but the
+tracks were cut into many short undecided ones).
 """
 
 from __future__ import annotations
