@@ -109,7 +109,7 @@ def test_a_track_more_likely_someone_else_is_released_and_its_face_is_free_once_
 
 def test_a_track_that_may_have_strayed_onto_a_newcomer_is_doubted_beyond_one_half_and_released() -> None:
     ids, rng = _alice_and_bob()
-    ids.crossings.strayed(3, 0.9)  # an unidentified track: nothing to doubt
+    ids.crossings.strayed(3, 0.9)  # a track the manager holds nothing of: nothing to doubt
     assert ids.crossings.doubt_of(3) == 0.0
     ids.crossings.strayed(1, 0.3)
     ids.crossings.strayed(1, 0.4)  # nobody else to have swapped with: not bounded by one half
@@ -118,6 +118,7 @@ def test_a_track_that_may_have_strayed_onto_a_newcomer_is_doubted_beyond_one_hal
     events = ids.step(1.2)
     assert [(e.kind.value, e.track_id, e.face_id) for e in events] == [("swapped", 1, 1)]
     assert ids.assigned_tracks() == {2: 2}
+    assert ids.crossings.doubt_of(1) == 0.0 and ids.stats.tracks_restarted == 0  # the release spent its strays
     ids.add_observations(1, _face(0, 3, rng), 2.0)  # Alice after all: decided afresh, the doubt is gone
     ids.step(2.0)
     assert ids.assigned_tracks() == {1: 1, 2: 2} and ids.crossings.doubt_of(1) == 0.0
