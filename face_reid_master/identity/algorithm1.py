@@ -170,11 +170,11 @@ class IdentityManagerBase:
 
     def _take_lent(self, fid: int, stamp: float) -> None:
         """Face ``fid`` goes to another track: a LOST track that lent it is no longer identified."""
-        lender = self._lent.take(fid)
-        track = None if lender is None else self.tracks.entries.get(lender)
-        if track is None or track.face_id != fid:
+        track = self._lent.take_holder(fid, self.tracks.entries)
+        if track is None:
             return
-        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, lender, fid, stamp, track.confidence))
+        self._side_events.append(IdentityEvent(IdentityEventKind.RELEASED, track.track_id, fid, stamp,
+                                               track.confidence))
         track.unassign()
         self.stats.lent_faces_taken += 1
 
@@ -186,8 +186,9 @@ class IdentityManagerBase:
         self.stats.steps += 1
         self.tracks.retired.clear()
         events = [self._release_swapped(track, stamp, stamp) for track in self.crossings.withheld()]
-        for track in self.crossings.mixed():
-            self._restart(track)
+        for track in self.crossings.take_mixed():  # a stray more likely than not: its evidence was someone else's
+            self._forget_evidence(track)
+            self.stats.tracks_restarted += 1
         self._learn(stamp, events)
         for tid, face_or_new, confidence in self._decide():
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
@@ -196,11 +197,7 @@ class IdentityManagerBase:
         events.extend(self._side_events)
         self._side_events = []
         deaths, self.tracks.deaths = self.tracks.deaths, {}
-        for tid, died in deaths.items():
-            ev = self._remove_track(tid, died)
-            if ev is not None:
-                events.append(ev)
-        return events
+        return events + [ev for tid, died in deaths.items() if (ev := self._remove_track(tid, died)) is not None]
 
     def _learn(self, stamp: float, events: list[IdentityEvent]) -> None:
         """The queued observations: an identified track's join its face (those its face accepts; a swap releases
@@ -327,19 +324,16 @@ class IdentityManagerBase:
         return sorted(self.faces.entries)
 
     def forget_face(self, face_id: int) -> bool:
-        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown.
-
-        The face leaves face_list (its table column / threshold votes go) and its bank slot is zeroed. A live track
-        carrying it becomes unidentified: its assignment, confidence and queued observations are dropped (meant for
-        the forgotten face), so while the person stays in view new observations are classified afresh and normally
-        create a *new* face id after ``min_observations``.  Face ids are never reused within this manager."""
+        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown. The face
+        leaves face_list (its table column / threshold votes go), its bank slot is zeroed; a live track carrying it
+        becomes unidentified (its queued observations, meant for the forgotten face, are dropped) and is classified
+        afresh, normally as a *new* face id. Face ids are never reused within this manager."""
         fid = check_int("face_id", face_id, -(2**63))
         face = self.faces.entries.get(fid)
         if face is None:
             return False
-        lent_by = self._lent.take(fid)
-        lender = None if lent_by is None else self.tracks.entries.get(lent_by)
-        if lender is not None and lender.face_id == fid:
+        lender = self._lent.take_holder(fid, self.tracks.entries)
+        if lender is not None:
             lender.face_id, lender.confidence = None, 0.0  # a LOST track lent it: it holds nothing now
         track = None if face.track_id is None else self.tracks.entries.get(face.track_id)
         if track is not None and track.face_id == fid:
@@ -409,17 +403,14 @@ class IdentityManagerBase:
         self.stats.swaps_released += 1
         return IdentityEvent(IdentityEventKind.SWAPPED, track.track_id, fid, stamp, confidence, since)
 
-    def _restart(self, track: TrackRecord) -> None:
-        """An unidentified track probably follows someone else now: the face buffer and cue evidence it gathered go,
-        and it is classified afresh from its next observations (under the same published id: it claimed nobody)."""
+    def _forget_evidence(self, track: TrackRecord) -> None:
+        """An unidentified track's evidence goes (its face buffer, classification row and cues' evidence)."""
         if track.slot is not None:
             self._bank.free_slot(track.slot)
             track.slot = None
         self._on_track_forgotten(track)
-        track.unassign()
         self.sources.forget_track(track.track_id)
-        self.crossings.forget_strays(track)
-        self.stats.tracks_restarted += 1
+        track.unassign()
 
     def _remove_track(self, tid: int, stamp: float) -> IdentityEvent | None:
         self.sources.forget_track(tid)
@@ -428,10 +419,7 @@ class IdentityManagerBase:
             return None
         track.crossed.clear()  # its partners keep their doubt: its end does not say whether they were swapped
         if track.face_id is None:
-            if track.slot is not None:
-                self._bank.free_slot(track.slot)
-            self._on_track_forgotten(track)
-            return None
+            return self._forget_evidence(track)
         if not self._lent.returned(track.face_id, tid):  # a lent face is in face_list already
             self.faces.make_available(track.face_id)
         self.stats.released += 1

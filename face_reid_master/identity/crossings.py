@@ -89,11 +89,14 @@ class Crossings:
         return [t for t in self.tracks.entries.values()
                 if t.face_id is not None and t.crossed and self.withheld_at(self.doubt(t))]
 
-    def mixed(self) -> list[TrackRecord]:
-        """The unidentified live tracks whose evidence so far is more likely another person's than their
-        current person's (a stray more likely than not): they are classified afresh."""
-        return [t for t in self.tracks.entries.values()
-                if t.face_id is None and self.withheld_at(t.crossed.get(NOBODY, 0.0))]
+    def take_mixed(self) -> list[TrackRecord]:
+        """The unidentified live tracks whose evidence so far is more likely another person's than their current
+        person's (a stray more likely than not), to be classified afresh: their strays are spent."""
+        mixed = [t for t in self.tracks.entries.values()
+                 if t.face_id is None and self.withheld_at(t.crossed.get(NOBODY, 0.0))]
+        for track in mixed:
+            self.forget_strays(track)
+        return mixed
 
     @staticmethod
     def withheld_at(doubt: float) -> bool:

@@ -8,6 +8,8 @@ another track took it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from face_reid_master.identity.entries import TrackRecord
 from face_reid_master.identity.face_list import FaceList
 
@@ -41,6 +43,12 @@ class LentFaces:
     def take(self, face_id: int) -> int | None:
         """The face goes to another track (or is forgotten): the LOST track that lent it, if one did."""
         return self.lender.pop(face_id, None)
+
+    def take_holder(self, face_id: int, tracks: Mapping[int, TrackRecord]) -> TrackRecord | None:
+        """:meth:`take`, as the record of the LOST track that lent the face while it still holds it (else None)."""
+        lender = self.take(face_id)
+        track = None if lender is None else tracks.get(lender)
+        return track if track is not None and track.face_id == face_id else None
 
     def returned(self, face_id: int, track_id: int) -> bool:
         """Whether the dying track had lent its face (then it is in face_list already, and no longer lent)."""
