@@ -324,10 +324,9 @@ class IdentityManagerBase:
         return sorted(self.faces.entries)
 
     def forget_face(self, face_id: int) -> bool:
-        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown. The face
-        leaves face_list (its table column / threshold votes go), its bank slot is zeroed; a live track carrying it
-        becomes unidentified (its queued observations, meant for the forgotten face, are dropped) and is classified
-        afresh, normally as a *new* face id. Face ids are never reused within this manager."""
+        """Remove a learned face entirely (privacy: "delete this person"); False if the id is unknown. It leaves
+        face_list and the bank; a live track carrying it becomes unidentified (its queued observations, meant for it,
+        are dropped) and is classified afresh, normally as a *new* face id. Face ids are never reused here."""
         fid = check_int("face_id", face_id, -(2**63))
         face = self.faces.entries.get(fid)
         if face is None:
@@ -419,7 +418,8 @@ class IdentityManagerBase:
             return None
         track.crossed.clear()  # its partners keep their doubt: its end does not say whether they were swapped
         if track.face_id is None:
-            return self._forget_evidence(track)
+            self._forget_evidence(track)
+            return None
         if not self._lent.returned(track.face_id, tid):  # a lent face is in face_list already
             self.faces.make_available(track.face_id)
         self.stats.released += 1
