@@ -14,9 +14,8 @@ to face_list at once, so the person's own track can take it when it shows the fa
 would have given them a new id), and the released track is decided afresh by its next face or body. An unidentified
 track's strays add up alike; above one half its face buffer and body evidence are another person's more likely
 than not: the identity manager drops them and classifies the track afresh from its next observations (it keeps its
-published id: it claimed nobody). A decision
-of the track clears its doubt, and its partners' about it; the partner's end does not (it says nothing of a swap
-before it). Below ``floor`` a crossing is forgotten.
+published id: it claimed nobody). A decision of the track clears its doubt, and its partners' about it; the
+partner's end does not (it says nothing of a swap before it). Below ``floor`` a crossing is forgotten.
 
 Measured on the development scenarios and dropped: clearing the doubt when the partner ends (of the identities it
 gave back, 42 % were wrong with oracle evidence and 57 % with real evidence), or when the swap guard's gate accepts
