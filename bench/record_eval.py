@@ -79,6 +79,7 @@ def record(name: str, scenario: Path, options: list[str]) -> dict[str, Any]:
                        "seed": doc.get("seed"), "level": doc.get("level"), "people": params.get("num_people"),
                        "cameras": params.get("num_cameras"), "duration_s": params.get("duration_s"),
                        "second_day": params.get("second_day"), "color_resolution": params.get("color_resolution"),
+                       **({"day_gap_s": params.get("day_gap_s")} if params.get("second_day") else {}),
                        **({"oracle": True, "oracle_noise_std": params.get("oracle_noise_std")}
                           if doc.get("oracle") else {})},
         **provenance(),

@@ -49,6 +49,14 @@ _COLUMNS = ("result", "faces / bodies", "people x cameras x s", "colour", "evide
 _TABLE_HEAD = "| " + " | ".join(_COLUMNS) + " |\n" + "|---" * len(_COLUMNS) + "|\n"
 
 
+
+def _days(sim: dict[str, Any]) -> str:
+    """", 2 days" (with the gap between them, when recorded) for a two-day scenario, else ""."""
+    if not sim.get("second_day"):
+        return ""
+    gap = sim.get("day_gap_s")
+    return ", 2 days" + (f" {gap / 3600:g} h apart" if gap else "")
+
 def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100.0 * x:.1f} %"
 
@@ -97,7 +105,7 @@ def _row(doc: dict[str, Any]) -> str:
     colour_text = f"{colour[0]}x{colour[1]}" if colour else "640x480"
     honest = "yes" if res.get("protocol", {}).get("honest") else "**no**"
     return (f"| {doc['name']} | {Path(str(sim['faces_dir'])).name} / {bodies} | {sim['people']} x {sim['cameras']} x "
-            f"{sim['duration_s']:g} (seed {sim['seed']}{', 2 days' if sim.get('second_day') else ''}) | "
+            f"{sim['duration_s']:g} (seed {sim['seed']}{_days(sim)}) | "
             f"{colour_text} | {_evidence(doc)} | {honest} | {res.get('confidence_map', 'raw')} | "
             f"{t2['success']} / {t2['failure']} | "
             f"{_pct(t2['failure'] / decided if decided else None)} | {t2['recover_rate']:.2f} | {ev['face']} | "
@@ -186,7 +194,7 @@ def headline() -> str:
         decided = t2["success"] + t2["failure"]
         colour = sim.get("color_resolution")
         what = f"{sim['people']} x {sim['cameras']}, {sim['duration_s'] / 60:.3g}" + (
-            ", 2 days" if sim.get("second_day") else "") + (f", {colour[0]}x{colour[1]} colour" if colour else "")
+            _days(sim)) + (f", {colour[0]}x{colour[1]} colour" if colour else "")
         rows.append(f"| {d['name']} | {what} | {d.get('evidence') or '-'} | {t2['success']} / {t2['failure']} | "
                     f"{_pct(t2['failure'] / decided if decided else None)} | {t2['recover_rate']:.2f} | "
                     f"{res['calibration'].get('ece', float('nan')):.3f} | {_pct(dets.get('wrong_name_rate'))} | "

@@ -48,6 +48,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--rate-hz", type=float, default=None, help="frames per second per camera (default 15 / 5)")
     p.add_argument("--second-day", action="store_true",
                    help="add a second day: the same room, other photos, some people replaced by new ones")
+    p.add_argument("--day-gap", type=float, default=SimConfig.day_gap_s, metavar="S",
+                   help="seconds between the end of day 1 and the start of day 2 (default %(default)g: "
+                        "overnight, longer than the body evidence's window, so day-1 clothes do not count on day 2)")
     p.add_argument("--new-people", type=int, default=None,
                    help="people on day 2 who were not there on day 1 (default people // 3)")
     p.add_argument("--room", type=str, default=None, metavar="WxD",
@@ -114,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = SimConfig(
             num_people=args.people, num_cameras=args.cameras, duration_s=duration, seed=args.seed, level=args.level,
             rate_hz=args.rate_hz, second_day=args.second_day, new_people=args.new_people,
+            day_gap_s=args.day_gap,
             room_size_m=_room(args.room), embedder=args.embedder, color_resolution=_resolution(args.color_resolution),
             bodies=BodySimConfig() if args.bodies is not None else None,
             motion=MotionConfig(passing_distance_m=args.passing_distance),

@@ -20,7 +20,7 @@ every face embedding and body descriptor of a person is replaced by one fixed re
 noise (the identity logic's floor); scenario.json then has ``"oracle": true`` and ``oracle_evidence``. Only
 those arrays change: everything else is the same scenario as without it.
 
-Days: with ``second_day`` the same room and cameras are replayed ``day_gap_s`` after day 1 ends with
+Days: with ``second_day`` the same room and cameras are replayed ``day_gap_s`` (default overnight) after day 1 ends with
 ``people - new_people`` of the day-1 people (their day-2 photos) and ``new_people`` identities never seen
 on day 1.
 """
@@ -88,7 +88,7 @@ class SimConfig:
     rate_hz: float | None = None  # None: 15 Hz (feature) / 5 Hz (pixel)
     second_day: bool = False
     new_people: int | None = None  # None: num_people // 3
-    day_gap_s: float = 600.0
+    day_gap_s: float = 50400.0  # overnight: longer than the body evidence's window (clothes change by day 2)
     room_size_m: tuple[float, float] | None = None  # None: scaled with the number of cameras
     miss_probability: float = 0.05
     false_positives_per_frame: float = 0.01

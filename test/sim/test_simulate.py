@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from conftest import copy_fixture_faces
 
+from face_reid_master.core.config import MasterConfig
 from face_reid_master.records import CameraFrameRecord, PersonRecord
 from face_reid_master.sim.cli import main
 from face_reid_master.sim.photos import NUM_FRAME_CHANGES, NUM_VARIANTS, InsufficientFacesError, PhotoBank
@@ -152,14 +153,16 @@ def test_second_day_brings_back_some_people_and_new_ones(feature_dir: Path) -> N
     s = load_scenario(feature_dir)
     days = s.days
     assert [d["day"] for d in days] == [1, 2]
-    assert days[1]["start_s"] == pytest.approx(20.0 + 600.0)
+    assert days[1]["start_s"] == pytest.approx(20.0 + SimConfig.day_gap_s)  # overnight
+    assert SimConfig.day_gap_s > MasterConfig.body_window_s  # day-1 clothes do not count on day 2
     assert days[0]["gt_ids"] == [0, 1, 2]
     back = [g for g in days[1]["gt_ids"] if g in days[0]["gt_ids"]]
     assert len(back) == 2 and days[1]["gt_ids"][-1] == 3 and len(s.identities) == 4
     g = s.ground_truth
     assert g.xy.shape == (4, g.t_s.size, 2) and g.in_view.shape == (4, g.t_s.size, 2)
     assert np.isnan(g.xy[3, g.day == 1]).all() and np.isfinite(g.xy[3, g.day == 2]).all()
-    gts_day2 = {int(x) for f, gts in zip(s.frames, s.frame_gt_ids, strict=True) if f.stamp_s >= 620.0 for x in gts}
+    day2 = days[1]["start_s"]
+    gts_day2 = {int(x) for f, gts in zip(s.frames, s.frame_gt_ids, strict=True) if f.stamp_s >= day2 for x in gts}
     assert 3 in gts_day2 and not gts_day2 - set(days[1]["gt_ids"]) - {-1}
     summary = s.summary
     assert summary["losses"] == sum(d["losses"] for d in summary["per_day"])
