@@ -29,6 +29,7 @@ import numpy.typing as npt
 from face_reid_camera.common.checks import check_int, check_real, check_stamp
 from face_reid_master.identity.body_evidence import BodyEvidence
 from face_reid_master.identity.body_identification import BodyIdentification
+from face_reid_master.identity.co_sightings import CoSightings
 from face_reid_master.identity.crossings import Crossings
 from face_reid_master.identity.entries import (
     Chunk,
@@ -108,6 +109,7 @@ class IdentityManagerBase:
                               self._on_face_available, self._on_faces_unavailable)
         self.tracks = TrackList()  # track_list: the live tracks, their queued observations and deaths
         self.crossings = Crossings(self.tracks)  # the doubt a possible tracker swap leaves on identities
+        self.co_sightings = CoSightings(self.tracks, self.stats)  # two tracks seen at the same time are two people
         self._lent = LentFaces(self.faces, self.lend_lost_faces)
         self._side_events: list[IdentityEvent] = []  # lent faces taken from their LOST tracks this step
 
@@ -190,7 +192,8 @@ class IdentityManagerBase:
             self._forget_evidence(track)
             self.stats.tracks_restarted += 1
         self._learn(stamp, events)
-        for tid, face_or_new, confidence in self._decide():
+        self.co_sightings.note()
+        for tid, face_or_new, confidence in self.co_sightings.allowed(self._decide()):
             events.append(self._apply_decision(tid, face_or_new, confidence, stamp))
         for source in self.sources:
             events.extend(self._cue_step(source, stamp))
@@ -262,12 +265,11 @@ class IdentityManagerBase:
         return face.slot, chunks, obs
 
     def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
-        """One cue's observations: an identified track's describe its face's person; faceless tracks gather
-        evidence against every learned face and are given one of face_list when it is strong enough (their own
-        face, once seen, overrules it)."""
+        """One cue's observations: an identified track's describe its face's person; a faceless track is given
+        one of face_list when its evidence against every learned face is strong enough (its own face overrules)."""
         source.observe(self.tracks.take_cue(source.kind), list(self.faces.entries))
         events = []
-        for tid, fid, p in source.decide(self.faces.available, stamp, self._faces_alike):
+        for tid, fid, p in self.co_sightings.allowed(source.decide(self.faces.available, stamp, self._faces_alike)):
             track = self.tracks.entries.get(tid)
             if track is not None and track.face_id is None and track.slot is None and fid in self.faces.available:
                 events.append(self._apply_cue_decision(track, fid, p, stamp, source.kind))

@@ -74,6 +74,9 @@ class TrackRecord:
     public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
     face_observations: int = 0  # face embeddings the master used since it got its public id
     crossed: dict[int, float] = field(default_factory=dict)  # track id (NOBODY: a stray) -> probability of a swap
+    person_since_s: float = 0.0  # it has followed one person since (first sighting, last crossing or stray)
+    seen_until_s: float = 0.0  # its last sighting (any observation)
+    not_faces: set[int] = field(default_factory=set)  # faces of tracks seen alongside it (co_sightings)
 
     def __post_init__(self) -> None:
         if not self.public_id:
@@ -86,6 +89,12 @@ class TrackRecord:
     def teaches(self, learn_confidence: float) -> bool:
         """Identified: whether its faces join its face (not after a known-face decision below ``learn_confidence``)."""
         return self.new_face or self.evidence != Evidence.FACE or self.confidence >= learn_confidence
+
+    def person_changed(self) -> None:
+        """A crossing or stray made another person likelier than not on the track: it follows them from its last
+        sighting on, and what it was seen alongside before says nothing of them."""
+        self.person_since_s = self.seen_until_s
+        self.not_faces.clear()
 
     def unassign(self) -> None:
         """The track holds no face any more: it is classified afresh from its next observations."""

@@ -105,4 +105,5 @@ class IdentityStats:
     body_observations: int = 0
     assigned_by_body: int = 0
     tracks_restarted: int = 0  # unidentified tracks classified afresh: a stray made their evidence another person's
+    decisions_excluded_co_seen: int = 0  # decisions not taken (per step): the face's track was seen alongside the track
     lent_faces_taken: int = 0  # faces of LOST tracks given to another track (the person came back as it)

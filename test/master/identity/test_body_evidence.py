@@ -151,3 +151,20 @@ def test_the_identity_layer_takes_two_close_faces_for_one_person_only() -> None:
 def test_arguments_are_checked(bad: dict) -> None:
     with pytest.raises(ValueError, match=next(iter(bad))):
         BodyEvidence(BODY_LIKELIHOOD, **bad)
+
+
+def test_a_faceless_track_seen_alongside_a_face_s_track_is_not_given_that_face_and_it_is_counted() -> None:
+    ids = _manager()
+    ids.add_observations(1, np.repeat(_face(0), 3, axis=0), 0.0)  # Alice shows her face, in red
+    for t in (0.0, 1.0, 2.0):  # beside her, someone else in red
+        ids.add_body_observations(1, RED, t)
+        ids.add_body_observations(2, RED + 0.05, t)
+        ids.step(t)
+    (alice,) = ids.face_ids()
+    ids.track_deleted(1, 3.0)  # Alice leaves: her face is free
+    ids.step(3.0)
+    for t in (4.0, 5.0, 6.0):
+        ids.add_body_observations(2, RED + 0.05, t)
+        assert not ids.step(t)
+    assert ids.face_id_of(2) is None and ids.stats.decisions_excluded_co_seen == 3
+    assert alice in ids.faces.available

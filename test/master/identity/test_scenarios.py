@@ -123,4 +123,5 @@ def test_scenario(path: Path) -> None:
 def test_there_are_scenarios_for_each_behaviour() -> None:
     names = {p.stem for p in SCENARIOS}
     assert {"leave_and_return", "swap", "stranger", "look_alikes", "body_only", "second_day", "forget",
-            "restart", "crossing_with_no_face_after", "person_split_over_two_faces"} <= names
+            "restart", "crossing_with_no_face_after", "person_split_over_two_faces",
+            "seen_alongside_is_someone_else"} <= names
