@@ -23,6 +23,9 @@ def test_the_results_page_is_generated_from_the_result_files() -> None:
         row = next(line for line in page.splitlines() if line.startswith(f"| {doc['name']} |"))
         assert f"| {t2['success']} / {t2['failure']} |" in row
         assert ("| yes |" in row) == bool(doc["result"]["protocol"]["honest"])
+        gap = doc["simulation"].get("day_gap_s")
+        if doc["simulation"].get("second_day") and gap:
+            assert f"2 days {gap / 3600:g} h apart" in row  # the gap between the days is shown
 
 
 def test_every_development_sweep_is_on_the_page_with_its_sums() -> None:

@@ -26,8 +26,9 @@ look-alike's face for the person's; deciding afresh, by the classification, won)
 bodies seen next, and exchanging the identities of two tracks it showed swapped (oracle evidence, 20 people);
 weighing it, strays included, by the bodies an identified track shows next, its bodies held from its face meanwhile
 (oracle evidence gained little; with real evidence, 20 people, wrong identity per detection rose 3.7 -> 4.7 %: the
-bodies of whoever the track took often looked like its face's, and lowered the doubt); publishing an unidentified track classified afresh under a new id (what a robot reads was the same, but the
-tracks were cut into many short undecided ones).
+bodies of whoever the track took often looked like its face's, and lowered the doubt); publishing an unidentified
+track classified afresh under a new id (what a robot reads was the same, but the tracks were cut into many short
+undecided ones).
 """
 
 from __future__ import annotations

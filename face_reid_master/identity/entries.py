@@ -74,7 +74,7 @@ class TrackRecord:
     public_since_s: float | None = None  # when the current public id began (None: when the tracker made it)
     face_observations: int = 0  # face embeddings the master used since it got its public id
     crossed: dict[int, float] = field(default_factory=dict)  # track id (NOBODY: a stray) -> probability of a swap
-    person_since_s: float = 0.0  # it has followed one person since (first sighting, last crossing or stray)
+    person_since_s: float = 0.0  # it has followed one person since (first sighting, or a crossing past one half)
     seen_until_s: float = 0.0  # its last sighting (any observation)
     not_faces: set[int] = field(default_factory=set)  # faces of tracks seen alongside it (co_sightings)
 
