@@ -1,7 +1,7 @@
 """Two tracks seen at the same time are two people: a face carried by a track that was seen alongside an
 unidentified one is not the unidentified track's person.
 
-Each track record keeps the span over which it has followed one person (``person_since_s`` to ``seen_until_s``:
+Each track record keeps the span over which it has followed one person (``person_since_s`` to ``last_seen_s``:
 from its first sighting, or from the crossing or stray that made another person likelier than not, to its last
 sighting). When an identified track whose identity is published (not withheld by a crossing) and an unidentified
 one have both been seen over a common span longer than ``overlap_s``, the identified track's face joins the
@@ -35,16 +35,17 @@ class CoSightings:
     def note(self) -> None:
         """After a step's observations: each unidentified track learns the faces of tracks seen alongside it."""
         records = list(self.tracks.entries.values())
-        held = [t for t in records if t.face_id is not None and not Crossings.withheld_at(Crossings.doubt(t))]
+        held = [(t, t.face_id) for t in records
+                if t.face_id is not None and not Crossings.withheld_at(Crossings.doubt(t))]
         if not held:
             return
         for track in records:
             if track.face_id is not None:
                 continue
-            for other in held:
-                if (other.face_id not in track.not_faces and min(track.seen_until_s, other.seen_until_s)
+            for other, face in held:
+                if (face not in track.not_faces and min(track.last_seen_s, other.last_seen_s)
                         - max(track.person_since_s, other.person_since_s) > self.overlap_s):
-                    track.not_faces.add(other.face_id)  # type: ignore[arg-type]
+                    track.not_faces.add(face)
 
     def allowed(self, decisions: list[tuple[int, int, float]]) -> list[tuple[int, int, float]]:
         """The (track, face or 0 = new, confidence) decisions not excluded (:meth:`excludes`)."""

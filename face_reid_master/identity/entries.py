@@ -75,7 +75,6 @@ class TrackRecord:
     face_observations: int = 0  # face embeddings the master used since it got its public id
     crossed: dict[int, float] = field(default_factory=dict)  # track id (NOBODY: a stray) -> probability of a swap
     person_since_s: float = 0.0  # it has followed one person since (first sighting, or a crossing past one half)
-    seen_until_s: float = 0.0  # its last sighting (any observation)
     not_faces: set[int] = field(default_factory=set)  # faces of tracks seen alongside it (co_sightings)
 
     def __post_init__(self) -> None:
@@ -93,7 +92,7 @@ class TrackRecord:
     def person_changed(self) -> None:
         """A crossing or stray made another person likelier than not on the track: it follows them from its last
         sighting on, and what it was seen alongside before says nothing of them."""
-        self.person_since_s = self.seen_until_s
+        self.person_since_s = self.last_seen_s
         self.not_faces.clear()
 
     def unassign(self) -> None:

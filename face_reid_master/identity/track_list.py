@@ -45,7 +45,7 @@ class TrackList:
         track = self.entries.get(track_id)
         if track is None:
             track = self.entries[track_id] = TrackRecord(track_id, first_seen_s=stamp, last_seen_s=stamp,
-                                                         person_since_s=stamp, seen_until_s=stamp)
+                                                         person_since_s=stamp)
         elif latest:
             track.last_seen_s = max(track.last_seen_s, stamp)
         return track
@@ -53,15 +53,12 @@ class TrackList:
     def queue(self, track_id: int, chunk: Chunk) -> None:
         """Face observations of the track for the next step."""
         track = self.seen(track_id, chunk.stamp_s)
-        track.seen_until_s = max(track.seen_until_s, chunk.stamp_s)
         track.face_chunks.append(chunk)
         self._face_queued.setdefault(track_id, track)
 
     def queue_cue(self, kind: str, track_id: int, chunk: CueChunk) -> None:
-        """Observations of cue ``kind`` (not the face) on the track for the next step (they do not move its last
-        sighting)."""
-        track = self.seen(track_id, chunk.stamp_s, latest=False)
-        track.seen_until_s = max(track.seen_until_s, chunk.stamp_s)
+        """Observations of cue ``kind`` (not the face) on the track for the next step."""
+        track = self.seen(track_id, chunk.stamp_s)
         track.cue_queue.setdefault(kind, []).append(chunk)
         self._cue_queued.setdefault(kind, {}).setdefault(track_id, track)
 

@@ -10,8 +10,7 @@ from face_reid_master.identity.track_list import TrackList
 
 def _seen(tracks: TrackList, track_id: int, *stamps: float, face: int | None = None) -> None:
     for t in stamps:
-        record = tracks.seen(track_id, t)
-        record.seen_until_s = max(record.seen_until_s, t)
+        tracks.seen(track_id, t)
     if face is not None:
         tracks.entries[track_id].face_id = face
 
