@@ -40,10 +40,12 @@ evidence and is left out of the pooled calibration and the README's table. **fac
 re-identification cases whose track showed at least 3 faces, and the share recovered right (what a perfect
 identity logic could reach). **wrong id / undecided (detections)**: of the true people's detections on a
 published track, the share shown another person's face id, and the share shown none yet (what a robot reads).
+**wrong after a switch**: of the wrong decisions, those taken for the person the track followed from the decision
+to its end, after the tracker had moved the undecided track from its majority person (a robot read it right).
 
 """
 _COLUMNS = ("result", "faces / bodies", "people x cameras x s", "colour", "evidence", "honest", "confidence",
-            "Table II right / wrong", "wrong of decided", "recover rate", "face decisions right / wrong",
+            "Table II right / wrong", "wrong of decided", "wrong after a switch", "recover rate", "face decisions right / wrong",
             "body decisions right / wrong", "ECE", "wrong names (detections)", "strangers named (detections)",
             "face re-id cases recovered", "wrong id (detections)", "undecided (detections)", "commit, date")
 _TABLE_HEAD = "| " + " | ".join(_COLUMNS) + " |\n" + "|---" * len(_COLUMNS) + "|\n"
@@ -108,8 +110,8 @@ def _row(doc: dict[str, Any]) -> str:
             f"{sim['duration_s']:g} (seed {sim['seed']}{_days(sim)}) | "
             f"{colour_text} | {_evidence(doc)} | {honest} | {res.get('confidence_map', 'raw')} | "
             f"{t2['success']} / {t2['failure']} | "
-            f"{_pct(t2['failure'] / decided if decided else None)} | {t2['recover_rate']:.2f} | {ev['face']} | "
-            f"{ev['body']} | {cal.get('ece', float('nan')):.3f} | {_pct(dets.get('wrong_name_rate'))} | "
+            f"{_pct(t2['failure'] / decided if decided else None)} | {t2.get('failure_after_switch', '-')} | "
+            f"{t2['recover_rate']:.2f} | {ev['face']} | {ev['body']} | {cal.get('ece', float('nan')):.3f} | {_pct(dets.get('wrong_name_rate'))} | "
             f"{_pct(dets.get('other_named_rate'))} | {_robot(res)} | {doc['commit']}, {doc['date']} |")
 
 

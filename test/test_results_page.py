@@ -22,6 +22,8 @@ def test_the_results_page_is_generated_from_the_result_files() -> None:
         t2 = doc["result"]["table_ii"]
         row = next(line for line in page.splitlines() if line.startswith(f"| {doc['name']} |"))
         assert f"| {t2['success']} / {t2['failure']} |" in row
+        switched = t2.get("failure_after_switch")
+        assert switched is None or f" % | {switched} | " in row
         assert ("| yes |" in row) == bool(doc["result"]["protocol"]["honest"])
         gap = doc["simulation"].get("day_gap_s")
         if doc["simulation"].get("second_day") and gap:

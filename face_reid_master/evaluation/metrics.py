@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,6 +55,7 @@ class TrackOutcome:
     cross_day: bool  # re-identification case whose person's previous track was on an earlier day
     face_busy: bool = False  # new id while every learned face of the person was held by another live track
     evidence: str = ""  # what decided it: "face" or "body" ("" = undecided)
+    after_switch: bool = False  # wrong person, but the one the track followed from its decision to its end
 
 
 def _day_of(stamp: float, days: Sequence[tuple[int, float, float, tuple[int, ...]]]) -> int:
@@ -118,6 +119,7 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
         own = [f for f, (s, _) in log.faces.items() if face_person[f] == person and s < at]
         return bool(own) and all(any(a <= at < b and tid != track_id for a, b, tid in held.get(f, ())) for f in own)
 
+    followed_from = _followed_from(log)
     out: list[TrackOutcome] = []
     last_day_of_person: dict[int, int] = {}
     for t in evaluated_tracks(log):
@@ -134,9 +136,26 @@ def track_outcomes(log: RunLog) -> list[TrackOutcome]:
         verdict, why = decision_verdict(face_person.get(fid, -1), kind, p, reid)
         busy = why == "new_id" and all_faces_busy(p, stamp, t.track_id)
         evidence = t.evidence[0] if t.evidence else "face"
+        switched = why == "wrong_person" and followed_from(t.track_id, stamp, face_person.get(fid, -1))
         out.append(TrackOutcome(t.track_id, p, t.birth_s, reid, verdict, why, fid, stamp, cross_day, busy,
-                                evidence))
+                                evidence, switched))
     return out
+
+
+def _followed_from(log: RunLog) -> Callable[[int, float, int], bool]:
+    """A test: did a track follow ``person`` from ``stamp`` to its end (at least ``PURE_TRACK_MIN_PURITY`` of its
+    true people's detections from then on)? False without per-detection records (a live run)."""
+    order = np.argsort(log.det_track, kind="stable")
+    by_track = log.det_track[order]
+
+    def followed(track_id: int, stamp: float, person: int) -> bool:
+        lo, hi = np.searchsorted(by_track, [track_id, track_id + 1])
+        rows = order[lo:hi]
+        gt = log.det_gt[rows][log.det_stamp_s[rows] >= stamp]
+        gt = gt[gt >= 0]
+        return bool(gt.size) and float(np.mean(gt == person)) >= PURE_TRACK_MIN_PURITY
+
+    return followed
 
 
 def reid_with_face(outcomes: Sequence[TrackOutcome], tracks: Mapping[int, TrackLog],
@@ -312,6 +331,7 @@ def evaluate_run(
         "failure_wrong_person": fail_wrong,
         "failure_new_id": fail_new,
         "failure_new_id_face_busy": sum(o.face_busy for o in reid),
+        "failure_wrong_person_after_switch": sum(o.after_switch for o in reid),
         "none": none,
         "mean_reid_time_s": _mean(times),
         "median_reid_time_s": _median(times),
@@ -338,6 +358,7 @@ def evaluate_run(
                       and by_id[o.track_id].assignments[0][2] == "new" for o in first),
         "success": len(first_ok),
         "failure_wrong_person": first_wrong,
+        "failure_wrong_person_after_switch": sum(o.after_switch for o in first),
         "none": sum(o.outcome == "none" for o in first),
         "mean_decision_time_s": _mean(first_times),
     }
@@ -358,6 +379,7 @@ def evaluate_run(
     table_ii = {
         "success": n_success,
         "failure": fail_wrong + fail_new + first_wrong,
+        "failure_after_switch": sum(o.after_switch for o in outcomes),
         "re_id_time_s": _mean(times),
         "recover_rate": reidentification["recover_rate"],
         "recover_rate_paper": reidentification["recover_rate_gt_opportunities"],

@@ -90,8 +90,8 @@ def test_outcomes_and_times_on_a_hand_made_timeline() -> None:
     first = r["first_appearance"]
     assert (first["tracks"], first["new_id"], first["failure_wrong_person"]) == (2, 2, 0)
     assert first["mean_decision_time_s"] == pytest.approx(2.5)  # (2 + 3) / 2
-    assert r["table_ii"] == {"success": 2, "failure": 2, "re_id_time_s": 5.0, "recover_rate": 0.4,
-                             "recover_rate_paper": 0.4}
+    assert r["table_ii"] == {"success": 2, "failure": 2, "failure_after_switch": 0, "re_id_time_s": 5.0,
+                             "recover_rate": 0.4, "recover_rate_paper": 0.4}  # no per-detection records: no switch
     assert r["tracker"]["false_positive_tracks"] == 1 and r["tracker"]["tracks_never_confirmed"] == 1
     assert r["tracker"]["tracks_per_person"] == {"0": 3, "1": 4}
     names = r["predefined_people"]
@@ -345,7 +345,8 @@ def test_cli_prints_json_and_saves_plots(scenario_dir: Path, tmp_path: Path, cap
     printed = json.loads(capsys.readouterr().out)
     assert printed == json.loads((tmp_path / "r.json").read_text())
     assert printed["method"] == "threshold" and printed["scenario"]["cameras"] == 2
-    assert set(printed["table_ii"]) == {"success", "failure", "re_id_time_s", "recover_rate", "recover_rate_paper"}
+    assert set(printed["table_ii"]) == {"success", "failure", "failure_after_switch", "re_id_time_s", "recover_rate",
+                                        "recover_rate_paper"}
     assert printed["gallery"]["people"] and len(printed["gallery"]["people"]) == 1  # half of 3 day-1 people
     assert printed["predefined_people"]["gallery_people"] == 1
     assert printed["detections"] == printed["scenario"]["detections"] > 0

@@ -105,3 +105,24 @@ def test_oracle_separation_of_people_means_and_observations() -> None:
     assert sep["min_between_observations_distance"] == round(float(np.hypot(2.0, 0.1)), 4)
     assert sep["closest_observations_people"] == [0, 1]
     assert sep["median_within_person_distance"] == 0.1  # each row of 0 is 0.1 from its mean, of 1: 0.5, of 2: 0
+
+
+def test_a_wrong_person_decision_on_the_person_the_track_followed_from_then_on_is_told_apart() -> None:
+    # face 1 is Bob's (person 1, learned by track 1), face 2 Alice's (person 0, track 4). Track 2 follows Alice,
+    # undecided, then the tracker moves it to Bob, who shows his face: decided Bob, right from then to its end,
+    # yet Alice is its majority person. Track 3 is decided Bob on Bob and then carries him onto Alice.
+    rows = [(1, 1, t) for t in (0.0, 0.5, 1.0)] + [(4, 0, t) for t in (2.0, 2.5, 3.0)]
+    rows += [(2, 0, 10.0 + k) for k in range(5)] + [(2, 1, 15.0 + k) for k in range(3)]
+    rows += [(3, 1, 20.0)] + [(3, 0, 21.0 + k) for k in range(5)]
+    tracks = {1: _track(1, 1, 0.0, faces=3, assigned=(1.0, 1, "new")),
+              4: _track(4, 0, 2.0, faces=3, assigned=(3.0, 2, "new")),
+              2: _track(2, 0, 10.0, faces=3, assigned=(15.0, 1, "known"), face_gt=[(15.0 + k, 1) for k in range(3)]),
+              3: _track(3, 0, 20.0, faces=3, assigned=(20.0, 1, "known"), face_gt=[(20.0, 1)] * 3)}
+    tracks[2].gt_counts, tracks[3].gt_counts = {0: 5, 1: 3}, {1: 1, 0: 5}
+    track, gt, stamp = (np.array(c) for c in zip(*rows, strict=True))
+    log = RunLog("bayes", tracks, {1: (1.0, 1), 2: (3.0, 4)}, np.arange(len(rows)), stamp, gt, track,
+                 np.zeros(len(rows)), days=((1, 0.0, 100.0, (0, 1)),))
+    result = evaluate_run(log, with_mot=False)
+    reid = result["reidentification"]
+    assert (reid["failure_wrong_person"], reid["failure_wrong_person_after_switch"]) == (2, 1)
+    assert (result["table_ii"]["failure"], result["table_ii"]["failure_after_switch"]) == (2, 1)
