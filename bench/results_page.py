@@ -45,9 +45,10 @@ to its end, after the tracker had moved the undecided track from its majority pe
 
 """
 _COLUMNS = ("result", "faces / bodies", "people x cameras x s", "colour", "evidence", "honest", "confidence",
-            "Table II right / wrong", "wrong of decided", "wrong after a switch", "recover rate", "face decisions right / wrong",
-            "body decisions right / wrong", "ECE", "wrong names (detections)", "strangers named (detections)",
-            "face re-id cases recovered", "wrong id (detections)", "undecided (detections)", "commit, date")
+            "Table II right / wrong", "wrong of decided", "wrong after a switch", "recover rate",
+            "face decisions right / wrong", "body decisions right / wrong", "ECE", "wrong names (detections)",
+            "strangers named (detections)", "face re-id cases recovered", "wrong id (detections)",
+            "undecided (detections)", "commit, date")
 _TABLE_HEAD = "| " + " | ".join(_COLUMNS) + " |\n" + "|---" * len(_COLUMNS) + "|\n"
 
 
@@ -111,7 +112,8 @@ def _row(doc: dict[str, Any]) -> str:
             f"{colour_text} | {_evidence(doc)} | {honest} | {res.get('confidence_map', 'raw')} | "
             f"{t2['success']} / {t2['failure']} | "
             f"{_pct(t2['failure'] / decided if decided else None)} | {t2.get('failure_after_switch', '-')} | "
-            f"{t2['recover_rate']:.2f} | {ev['face']} | {ev['body']} | {cal.get('ece', float('nan')):.3f} | {_pct(dets.get('wrong_name_rate'))} | "
+            f"{t2['recover_rate']:.2f} | {ev['face']} | {ev['body']} | {cal.get('ece', float('nan')):.3f} | "
+            f"{_pct(dets.get('wrong_name_rate'))} | "
             f"{_pct(dets.get('other_named_rate'))} | {_robot(res)} | {doc['commit']}, {doc['date']} |")
 
 
