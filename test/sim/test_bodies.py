@@ -443,3 +443,13 @@ def test_eval_checks_and_uses_the_body_metric_given(faces: Path, cache: Path, cr
     assert metric == {"model": "body metric", "source": str(path), "identities_seen": worn}
     assert printed["body_metric"]["bodies"] == shipped["body_metric"]["bodies"] > 0
     assert printed["body_metric"]["rank1"] != shipped["body_metric"]["rank1"]
+
+
+def test_npz_files_are_written_through_a_temporary_file_of_their_own(tmp_path: Path) -> None:
+    target = tmp_path / "cache.npz"
+    (tmp_path / "cache.npz.tmp").mkdir()  # where a fixed temporary name would collide (another writer's file)
+    write_npz(target, {"a": np.arange(3)})
+    write_npz(target, {"a": np.arange(4)})  # a second writer replaces it whole
+    with np.load(target) as data:
+        assert data["a"].tolist() == [0, 1, 2, 3]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache.npz", "cache.npz.tmp"]  # nothing left behind
