@@ -39,7 +39,8 @@ identity logic's floor ([evaluation](evaluation.md#oracle-evidence)); it sits be
 evidence and is left out of the pooled calibration and the README's table. **face re-id cases recovered**: the
 re-identification cases whose track showed at least 3 faces, and the share recovered right (what a perfect
 identity logic could reach). **wrong id / undecided (detections)**: of the true people's detections on a
-published track, the share shown another person's face id, and the share shown none yet (what a robot reads).
+published track, the share shown another person's face id (in brackets: the part of it a track carried onto them
+from a person it had followed before, through a tracker switch), and the share shown none yet (what a robot reads).
 **wrong after a switch**: of the wrong decisions, those taken for the person the track followed from the decision
 to its end, after the tracker had moved the undecided track from its majority person (a robot read it right).
 
@@ -80,7 +81,10 @@ def _robot(res: dict[str, Any]) -> str:
     face = res.get("reidentification", {}).get("with_face")
     per = res.get("per_detection", {})
     cases = f"{face['success']} of {face['tracks']} ({_pct(face['recover_rate'])})" if face else "-"
-    return f"{cases} | {_pct(per.get('wrong_identity_rate'))} | {_pct(per.get('undecided_rate'))}"
+    wrong = _pct(per.get("wrong_identity_rate"))
+    if per.get("wrong_identity_carried_rate") is not None:
+        wrong += f" ({_pct(per['wrong_identity_carried_rate'])} carried)"
+    return f"{cases} | {wrong} | {_pct(per.get('undecided_rate'))}"
 
 
 def _separation(doc: dict[str, Any]) -> str:

@@ -24,6 +24,8 @@ def test_the_results_page_is_generated_from_the_result_files() -> None:
         assert f"| {t2['success']} / {t2['failure']} |" in row
         switched = t2.get("failure_after_switch")
         assert switched is None or f" % | {switched} | " in row
+        carried = doc["result"]["per_detection"].get("wrong_identity_carried_rate")
+        assert carried is None or f" ({100 * carried:.1f} % carried) |" in row
         assert ("| yes |" in row) == bool(doc["result"]["protocol"]["honest"])
         gap = doc["simulation"].get("day_gap_s")
         if doc["simulation"].get("second_day") and gap:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from face_reid_master.evaluation.runner import RunLog, TrackLog
 
@@ -186,19 +187,38 @@ def identity_per_detection(log: RunLog, face_person: Mapping[int, int]) -> dict[
     owner = np.array([face_person.get(int(f), -1) for f in fid.tolist()], dtype=np.int64)
     decided = fid > 0
     right = int(np.count_nonzero(decided & (owner == gt)))
-    wrong = int(np.count_nonzero(decided & (owner != gt)))
+    wrong_rows = decided & (owner != gt)
+    wrong = int(np.count_nonzero(wrong_rows))
     undecided = int(np.count_nonzero(~decided))
     n = int(fid.size)
+    carried = _carried(log.det_track[counted], log.det_stamp_s[counted], gt, owner, wrong_rows)
     return {
         "published_detections": n,
         "right": right,
         "wrong_identity": wrong,
+        "wrong_identity_carried": carried,
         "undecided": undecided,
         "right_rate": _ratio(right, n),
         "wrong_identity_rate": _ratio(wrong, n),
+        "wrong_identity_carried_rate": _ratio(carried, n),
         "undecided_rate": _ratio(undecided, n),
         "wrong_of_decided_rate": _ratio(wrong, right + wrong),
     }
+
+
+def _carried(track: NDArray[np.int64], stamp: NDArray[np.float64], gt: NDArray[np.int64], owner: NDArray[np.int64],
+             wrong: NDArray[np.bool_]) -> int:
+    """How many of the ``wrong`` detections show the face id of a person their track followed earlier: an identity
+    the tracker carried onto someone else (the counted detections' track, stamp, true person and shown id's person)."""
+    carried = 0
+    for t in np.unique(track[wrong]).tolist():
+        mine = track == t
+        seen: dict[int, float] = {}  # person -> the track's first detection of them
+        for p, s in zip(gt[mine].tolist(), stamp[mine].tolist(), strict=True):
+            seen[p] = min(seen.get(p, math.inf), s)
+        rows = np.flatnonzero(mine & wrong)
+        carried += int(sum(seen.get(int(owner[i]), math.inf) < stamp[i] for i in rows.tolist()))
+    return carried
 
 
 def _mean(values: Sequence[float]) -> float | None:

@@ -126,3 +126,21 @@ def test_a_wrong_person_decision_on_the_person_the_track_followed_from_then_on_i
     reid = result["reidentification"]
     assert (reid["failure_wrong_person"], reid["failure_wrong_person_after_switch"]) == (2, 1)
     assert (result["table_ii"]["failure"], result["table_ii"]["failure_after_switch"]) == (2, 1)
+
+
+def test_wrong_ids_a_track_carried_from_a_person_it_followed_before_are_told_apart() -> None:
+    # face 1 is Bob's (person 1), face 2 Alice's (person 0). Track 3 is decided Bob on Bob, then the tracker moves
+    # it to Alice: it carries Bob's id onto her (5 detections). Track 5 follows only Alice and shows Bob's id (3
+    # detections): a wrong decision, nothing carried. Track 2 follows Alice undecided, then Bob shown as Bob: right.
+    rows = [(1, 1, t, f) for t, f in ((0.0, 0), (0.5, 0), (1.0, 1))] + [(4, 0, t, f) for t, f in ((2.0, 0), (3.0, 2))]
+    rows += [(2, 0, 10.0 + k, 0) for k in range(5)] + [(2, 1, 15.0 + k, 1) for k in range(3)]
+    rows += [(3, 1, 20.0, 1)] + [(3, 0, 21.0 + k, 1) for k in range(5)]
+    rows += [(5, 0, 30.0 + k, 1) for k in range(3)]
+    tracks = {1: _track(1, 1, 0.0, faces=3, assigned=(1.0, 1, "new")),
+              4: _track(4, 0, 2.0, faces=3, assigned=(3.0, 2, "new"))}
+    track, gt, stamp, face = (np.array(c) for c in zip(*rows, strict=True))
+    log = RunLog("bayes", tracks, {1: (1.0, 1), 2: (3.0, 4)}, np.arange(len(rows)), stamp, gt, track, face,
+                 days=((1, 0.0, 100.0, (0, 1)),))
+    per = identity_per_detection(log, face_persons(log))
+    assert (per["wrong_identity"], per["wrong_identity_carried"]) == (8, 5)
+    assert per["wrong_identity_carried_rate"] == round(5 / len(rows), 4)
