@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io
 import json
-import os
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -29,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.body.descriptor import BodyDescriptor, BodyDescriptorConfig
+from face_reid_camera.common.atomic_file import write_npz
 from face_reid_camera.common.errors import ModelLoadError
 from face_reid_camera.common.resources import model_path
 
@@ -162,17 +161,7 @@ def save_body_projection(projection: BodyProjection, path: str | Path) -> Path:
     for b in projection.blocks:
         arrays[f"{b.name}_mean"] = b.mean
         arrays[f"{b.name}_components"] = b.components
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        for name in sorted(arrays):
-            buf = io.BytesIO()
-            np.lib.format.write_array(buf, np.ascontiguousarray(arrays[name]), allow_pickle=False)
-            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.external_attr = 0o644 << 16
-            info.compress_type = zipfile.ZIP_DEFLATED
-            zf.writestr(info, buf.getvalue())
-    os.replace(tmp, out)
+    write_npz(out, arrays, compress=True)
     return out
 
 

@@ -22,9 +22,7 @@ import argparse
 import bz2
 import hashlib
 import importlib.util
-import os
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -33,6 +31,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.atomic_file import write_atomically
 from face_reid_camera.common.errors import ModelChecksumError, ModelFormatError
 
 __all__ = [
@@ -553,19 +552,6 @@ def read_dat_bytes(path: str | Path, *, expected_sha256: str | None = DAT_SHA256
     return raw
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; model files are meant to be shared/committed
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def convert(dat_path: str | Path, out_path: str | Path, *, write_sha256_file: bool = True) -> str:
     """Verify, parse and convert ``dat_path`` into ``out_path``; return the ONNX file's sha256 hex.
 
@@ -574,9 +560,9 @@ def convert(dat_path: str | Path, out_path: str | Path, *, write_sha256_file: bo
     out = Path(out_path)
     onnx_bytes = build_onnx(parse_dlib_net(read_dat_bytes(dat_path)))
     digest = hashlib.sha256(onnx_bytes).hexdigest()
-    _write_atomic(out, onnx_bytes)
+    write_atomically(out, lambda f: f.write(onnx_bytes))
     if write_sha256_file:
-        _write_atomic(out.with_name(out.name + ".sha256"), (digest + "\n").encode("ascii"))
+        write_atomically(out.with_name(out.name + ".sha256"), lambda f: f.write((digest + "\n").encode("ascii")))
     return digest
 
 

@@ -33,8 +33,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.atomic_file import write_atomically
 from face_reid_camera.common.errors import ModelChecksumError, ModelFormatError
-from face_reid_camera.tools.dlib_to_onnx import _write_atomic, find_package_file
+from face_reid_camera.tools.dlib_to_onnx import find_package_file
 
 __all__ = [
     "DEFAULT_OUT_PATH",
@@ -312,10 +313,10 @@ def convert(
     out_path = Path(out)
     source_path = Path(source) if source is not None else find_default_source()
     onnx_bytes = build_onnx(read_source_bytes(source_path))
-    _write_atomic(out_path, onnx_bytes)
+    write_atomically(out_path, lambda f: f.write(onnx_bytes))
     if write_sha256_file:
         line = f"{hashlib.sha256(onnx_bytes).hexdigest()}  {out_path.name}\n"
-        _write_atomic(out_path.with_name(out_path.name + ".sha256"), line.encode("ascii"))
+        write_atomically(out_path.with_name(out_path.name + ".sha256"), lambda f: f.write(line.encode("ascii")))
     return out_path
 
 

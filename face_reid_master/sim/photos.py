@@ -32,9 +32,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from face_reid_camera.common.atomic_file import write_npz
 from face_reid_camera.common.embedding_spaces import embedder_space, space_dim
 from face_reid_camera.tools.eval_faces import HEAD_ROI_SIDE_PER_EYE_DISTANCE, head_roi_for_face
-from face_reid_master.sim.scenario_files import write_npz
 from face_reid_master.sim.visibility import glance_ids
 
 T = TypeVar("T")

@@ -39,10 +39,7 @@
 
 from __future__ import annotations
 
-import io
 import json
-import os
-import tempfile
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -53,6 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from face_reid_camera.camera_model import CameraIntrinsics, CameraPose
+from face_reid_camera.common.atomic_file import write_atomically, write_npz
 from face_reid_camera.common.embedding_spaces import DLIB_SPACE, space_dim
 from face_reid_master.records import BodyRecord, CameraFrameRecord, PersonRecord
 from face_reid_master.sim.visibility import coverage_fraction
@@ -74,7 +72,6 @@ __all__ = [
     "load_scenario",
     "load_scenario_document",
     "scenario_document",
-    "write_npz",
     "write_scenario",
 ]
 
@@ -196,28 +193,6 @@ def _add_bodies(document: dict[str, Any], bodies: BodyWorld, table: FrameTable) 
     summary["body_crops_skipped_unreadable"] = sorted(set(bank.skipped_unreadable))
 
 
-def write_npz(path: Path, arrays: dict[str, NDArray[Any]]) -> None:
-    """An uncompressed .npz with fixed zip timestamps (byte-identical for identical arrays), atomically: through a
-    temporary file of its own, so that two processes writing the same file (two simulators sharing one
-    ``--cache``) do not collide; the last to finish wins."""
-    fd, name_tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    tmp = Path(name_tmp)
-    try:
-        with os.fdopen(fd, "wb") as raw, zipfile.ZipFile(raw, "w", compression=zipfile.ZIP_STORED,
-                                                          allowZip64=True) as zf:
-            for name in sorted(arrays):
-                buf = io.BytesIO()
-                np.lib.format.write_array(buf, np.ascontiguousarray(arrays[name]), allow_pickle=False)
-                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-                info.external_attr = 0o644 << 16
-                zf.writestr(info, buf.getvalue())
-        tmp.chmod(0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def write_scenario(result: SimResult, out_dir: str | Path) -> Path:
     """Write scenario.json, frames.npz and ground_truth.npz into ``out_dir`` (created if needed)."""
     out = Path(out_dir)
@@ -236,9 +211,8 @@ def write_scenario(result: SimResult, out_dir: str | Path) -> Path:
         arrays.update(table.body.arrays())
     write_npz(out / "frames.npz", arrays)
     write_npz(out / "ground_truth.npz", result.ground_truth)
-    tmp = out / "scenario.json.tmp"
-    tmp.write_text(json.dumps(result.document, indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, out / "scenario.json")
+    text = json.dumps(result.document, indent=1, sort_keys=True) + "\n"
+    write_atomically(out / "scenario.json", lambda f: f.write(text.encode("utf-8")))
     return out
 
 

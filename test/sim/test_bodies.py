@@ -19,6 +19,7 @@ from conftest import copy_fixture_faces
 
 from face_reid_camera.body.descriptor import body_descriptor
 from face_reid_camera.body.projection import BodyProjection, fit_pca_block, load_body_projection, save_body_projection
+from face_reid_camera.common.atomic_file import write_npz
 from face_reid_master.records import BodyRecord
 from face_reid_master.sim.bodies import (
     PKU_VIEW_DEG,
@@ -31,7 +32,7 @@ from face_reid_master.sim.bodies import (
     view_angle_deg,
 )
 from face_reid_master.sim.cli import main
-from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario, write_npz, write_scenario
+from face_reid_master.sim.scenario_files import ScenarioFormatError, load_scenario, write_scenario
 from face_reid_master.sim.simulate import SimConfig, simulate
 
 FACE_IDENTITIES = ("lfw_Colin_Powell", "lfw_Tony_Blair", "deepface_id02", "deepface_id03", "facerec_obama")
@@ -444,12 +445,3 @@ def test_eval_checks_and_uses_the_body_metric_given(faces: Path, cache: Path, cr
     assert printed["body_metric"]["bodies"] == shipped["body_metric"]["bodies"] > 0
     assert printed["body_metric"]["rank1"] != shipped["body_metric"]["rank1"]
 
-
-def test_npz_files_are_written_through_a_temporary_file_of_their_own(tmp_path: Path) -> None:
-    target = tmp_path / "cache.npz"
-    (tmp_path / "cache.npz.tmp").mkdir()  # where a fixed temporary name would collide (another writer's file)
-    write_npz(target, {"a": np.arange(3)})
-    write_npz(target, {"a": np.arange(4)})  # a second writer replaces it whole
-    with np.load(target) as data:
-        assert data["a"].tolist() == [0, 1, 2, 3]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache.npz", "cache.npz.tmp"]  # nothing left behind
