@@ -6,7 +6,9 @@ than ``gate_distance`` from every stored feature of the track's face is therefor
 track's last ``release_after`` observations were all beyond the gate, the track has been swapped: the
 identity manager gives its face back to face_list (a SWAPPED event) and classifies the track afresh from the
 run's first observation on. ``gate_distance`` None = the paper (everything is learned); ``release_after`` 0 =
-never released.
+never released. Releasing after one inconsistent observation instead of three (development, 6 people) changed
+nothing with oracle evidence (the tracker switches that carry an identity there show no face before they end) and
+with real evidence made more wrong decisions (62 -> 64 over nine seeds).
 """
 
 from __future__ import annotations
