@@ -43,13 +43,13 @@ person N(0, 0.045 m), another N(0, 0.12 m), alarm at 4.6 nats, one height at mos
 as a stray. With oracle evidence it removed every wrong decision on 6 people (five seeds: 3 -> 0) and wrong
 identity per detection fell on every 20-person seed (0.38 -> 0.02, 0.81 -> 0.37, 0.92 -> 0.60, 0.37 -> 0.09 %);
 with real evidence it was even or better on 6 people (nine seeds: 62 -> 61 wrong, 1.08 -> 0.87 %), 20 people seeds
-202 and 213 (65 -> 62, 60 -> 61) and 1920x1080 (23 -> 21), but lost on seed 215 (53 -> 73 wrong, 1.0 -> 2.8 %;
-without the half-alarm cap 58, alarm at 6.9 nats 64). There 146 of its 169 alarms were real switches; the loss came
-after: one person's first face decision went to a look-alike's face (posterior 0.964) instead of a new face, and
-every later track of theirs was decided as one of three look-alikes' faces, whose body galleries took their bodies
-(wrong body rows learned 2059 -> 5099). The simulator's head-height noise is independent per detection (3 cm); with
-noisier heights replayed (per-camera bias, slow drift, outliers) it still helped the oracle runs but left more
-detections undecided.
+202, 213 and 216 (65 -> 62, 60 -> 61, 23 -> 22) and 1920x1080 (23 -> 21), but lost on seed 215 (53 -> 73 wrong, 1.0
+-> 2.8 %; without the half-alarm cap 58, alarm at 6.9 nats 64). There 146 of its 169 alarms were real switches; the
+loss came after: one person's first face decision went to a look-alike's face (posterior 0.964) instead of a new
+face, and every later track of theirs was decided as one of three look-alikes' faces, whose body galleries took
+their bodies (wrong body rows learned 2059 -> 5099). The simulator's head-height noise is independent per detection
+(3 cm); with noisier heights replayed (per-camera bias, slow drift, outliers) it still helped the oracle runs but
+left more detections undecided.
 """
 
 from __future__ import annotations
