@@ -17,7 +17,7 @@ identity per detection 1.08 -> 0.87 %), but at 20 people it did not: seeds 215 3
 body doubted right choices about as often as wrong ones. Variants measured on the same seeds did no better: the
 evidence without the feature funnel's bound on abandoned faces (218: 300 / 54), the body's Bayes factor against
 every other face rather than against "someone else" (215: 305 / 44, recover 0.51 -> 0.47; 218: 288 / 52), the
-body's evidence on every face rather than on the face's choice (215: 325 / 75). The code is on the branch
+body's evidence, unbounded, on every face rather than on the face's choice (215: 325 / 75). The code is on the branch
 ``body-confirms``.
 """
 
