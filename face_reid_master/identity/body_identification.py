@@ -7,18 +7,18 @@ evidence is strong enough. A track's own face, once seen, overrules its body.
 
 Measured on the development scenarios and not adopted: letting the body confirm or doubt a face's choice (an
 undecided track that shows a face keeps comparing its bodies, and before the face decides, the body's log odds for
-the learned face the track's face most likely is multiply that face's posterior; never another face). Unbounded,
-it made oracle runs worse (6 people, five seeds: 3 -> 13 wrong: bodies gathered over a long faceless stretch
-outweighed a clear face). Bounded at 2.3 nats (a factor of 10), the 6-person oracle runs were unchanged and 6 people with real
+the learned face the track's face most likely is multiply that face's posterior; never another face). Unbounded, it
+made oracle runs worse (6 people, five seeds: 3 -> 13 wrong: bodies gathered over a long faceless stretch outweighed
+a clear face). Bounded at 2.3 nats (a factor of 10), the 6-person oracle runs were unchanged and 6 people with real
 evidence gained on every measure (nine seeds: 275 / 62 -> 293 / 52 right / wrong, recover 0.59 -> 0.62, wrong
-identity per detection 1.08 -> 0.87 %), but at 20 people it did not: seeds 215 355 / 53 -> 334 / 54, 217 352 / 60
--> 346 / 53, 218 327 / 45 -> 298 / 48, 1920x1080 410 / 23 -> 411 / 20; wrong identity per detection 1.00 -> 2.34,
-2.92 -> 2.47, 1.46 -> 1.70, 0.65 -> 0.59 %. In a crowd of twenty several people's recent bodies look alike, so the
-body doubted right choices about as often as wrong ones. Variants measured on the same seeds did no better: the
-evidence without the feature funnel's bound on abandoned faces (218: 300 / 54), the body's Bayes factor against
-every other face rather than against "someone else" (215: 305 / 44, recover 0.51 -> 0.47; 218: 288 / 52), the
-body's evidence, unbounded, on every face rather than on the face's choice (215: 325 / 75), confirming only, never
-doubting (218: 326 / 52; 6 people real 291 / 59, 1.12 %). The code is on the branch ``body-confirms``.
+identity per detection 1.08 -> 0.87 %), but at 20 people it did not: seeds 215 355 / 53 -> 334 / 54, 217 352 / 60 ->
+346 / 53, 218 327 / 45 -> 298 / 48, 1920x1080 410 / 23 -> 411 / 20; wrong identity per detection 1.00 -> 2.34, 2.92
+-> 2.47, 1.46 -> 1.70, 0.65 -> 0.59 %. In a crowd of twenty several people's recent bodies look alike, so the body
+doubted right choices about as often as wrong ones. Variants measured on the same seeds did no better: the evidence
+without the feature funnel's bound on abandoned faces (218: 300 / 54), the body's Bayes factor against every other
+face rather than against "someone else" (215: 305 / 44, recover 0.51 -> 0.47; 218: 288 / 52), the body's evidence,
+unbounded, on every face rather than on the face's choice (215: 325 / 75), confirming only, never doubting (218: 326
+/ 52; 6 people real 291 / 59, 1.12 %). The code is on the branch ``body-confirms``.
 """
 
 from __future__ import annotations
