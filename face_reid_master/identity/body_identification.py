@@ -19,6 +19,16 @@ without the feature funnel's bound on abandoned faces (218: 300 / 54), the body'
 face rather than against "someone else" (215: 305 / 44, recover 0.51 -> 0.47; 218: 288 / 52), the body's evidence,
 unbounded, on every face rather than on the face's choice (215: 325 / 75), confirming only, never doubting (218: 326
 / 52; 6 people real 291 / 59, 1.12 %). The code is on the branch ``body-confirms``.
+
+Measured and not adopted either: the body keeping a face from declaring a new person. Most new-person decisions
+that are wrong are a returning person whose own learned face was free but missed by the embedder; an undecided
+track that shows a face compared its bodies too (never decided by them), and while they made one learned face's
+person likelier than 0.9 its face could not call it new. Six people with real evidence gained (nine seeds: 275 / 62
+-> 265 / 47, wrong identity per detection 1.08 -> 0.61 %, recover 0.59 -> 0.60), but the oracle runs lost (five
+seeds: 155 / 3 -> 140 / 8): a newcomer dressed like someone seen lately waits unlearned, and meanwhile their faceless
+tracks are given that someone by their body. At 20 people with real evidence it lost too (213: 358 / 60 -> 326 / 85,
+one person never learned and taken for others 28 times; 215 355 / 53 -> 341 / 55; 217 352 / 60 -> 350 / 58; 218 327
+/ 45 -> 317 / 48). The code, a scenario file and a test are on the branch ``new-person-veto``.
 """
 
 from __future__ import annotations
