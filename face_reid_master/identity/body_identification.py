@@ -26,11 +26,11 @@ track that shows a face compared its bodies too (never decided by them), and whi
 person likelier than 0.9 its face could not call it new. Six people with real evidence gained (nine seeds: 275 / 62
 -> 265 / 47, wrong identity per detection 1.08 -> 0.61 %, recover 0.59 -> 0.60), but the oracle runs lost (five
 seeds: 155 / 3 -> 140 / 8): a newcomer dressed like someone seen lately waits unlearned, and meanwhile their faceless
-tracks are given that someone by their body. At 20 people with real evidence it lost too (213: 358 / 60 -> 326 / 85,
-one person never learned and taken for others 28 times; 215 355 / 53 -> 341 / 55; 217 352 / 60 -> 350 / 58; 218 327
-/ 45 -> 317 / 48). Vetoing only where the face, too, gives the body's choice some weight (its posterior at least
-0.01) never vetoes: the missed face sits at the table's clamp (0.001-0.007), the face's evidence against it is
-strong. The code, a scenario file and a test are on the branch ``new-person-veto``.
+tracks are given that someone by their body. At 20 people with real evidence it lost too (213: 358 / 60 -> 326 / 85:
+one person never learned, first appearances taken for a known person 5 -> 28; 215 355 / 53 -> 341 / 55; 217 352 /
+60 -> 350 / 58; 218 327 / 45 -> 317 / 48). Vetoing only where the face, too, gives the body's choice some
+weight (its posterior at least 0.01) never vetoes: the missed face sits at the table's clamp (0.001-0.007), the
+face's evidence against it is strong. The code, a scenario file and a test are on the branch ``new-person-veto``.
 """
 
 from __future__ import annotations
