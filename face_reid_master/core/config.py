@@ -57,8 +57,9 @@ class MasterConfig:
                                      low=0.0, high=1.0, low_open=True, high_open=True)
     min_observations: int = param(3, "Face observations needed before a decision (count).", low=1, high=1000)
     learn_confidence: float = param(
-        0.99, "A face decision at least this certain teaches its face the track's embeddings; a less certain one "
-        "identifies the track but teaches nothing: one wrong decision cannot make a face another person's (0..1).",
+        0.99, "A face decision at least this certain teaches its face the track's face and body embeddings; a less "
+        "certain one identifies the track but teaches nothing: one wrong decision cannot make a face, or its person's "
+        "clothes, another person's (0..1).",
         low=0.0, high=1.0)
     new_person_scale_c: float = param(1.0, "The paper's c: larger = readier to call a face new.",
                                       low=0.0, high=1e6, low_open=True)

@@ -70,6 +70,7 @@ class IdentityManagerBase:
     """
 
     learn_confidence: float = 0.0  # a method's: a face decision below it identifies its track, teaches its face nothing
+    # (neither faces nor bodies)
 
     def __init__(
         self,
@@ -265,9 +266,16 @@ class IdentityManagerBase:
         return face.slot, chunks, obs
 
     def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
-        """One cue's observations: an identified track's describe its face's person; a faceless track is given
-        one of face_list when its evidence against every learned face is strong enough (its own face overrules)."""
-        source.observe(self.tracks.take_cue(source.kind), list(self.faces.entries))
+        """One cue's observations: an identified track's describe its face's person (unless a face decided it below
+        ``learn_confidence``); a faceless track is given one of face_list when its evidence against every learned
+        face is strong enough (its own face overrules)."""
+        queued = []
+        for track, chunks in self.tracks.take_cue(source.kind):
+            if track.face_id is None or track.teaches(self.learn_confidence):
+                queued.append((track, chunks))
+            else:  # decided by a face below learn_confidence: what it wears may be another person's
+                self.stats.cue_observations_not_learned_uncertain += sum(c.values.shape[0] for c in chunks)
+        source.observe(queued, list(self.faces.entries))
         events = []
         for tid, fid, p in self.co_sightings.allowed(source.decide(self.faces.available, stamp, self._faces_alike)):
             track = self.tracks.entries.get(tid)
@@ -380,7 +388,8 @@ class IdentityManagerBase:
     def _give_face(self, track: TrackRecord, fid: int, confidence: float, stamp: float, evidence: str,
                    new: bool) -> None:
         """The track carries face ``fid`` from now on (a known face leaves face_list, taken from a LOST track that
-        lent it); the bodies it gathered join the face's gallery."""
+        lent it); the bodies it gathered join the face's gallery if the decision teaches (:meth:`TrackRecord.teaches`),
+        else they go."""
         face = self.faces.entries[fid]
         if not new:
             self._take_lent(fid, stamp)
@@ -390,7 +399,10 @@ class IdentityManagerBase:
         self._on_track_identified(track)
         track.give(fid, confidence, evidence, new)
         self.crossings.forget_all(track)  # decided on what it showed since
-        self.sources.track_identified(track.track_id, fid)
+        if track.teaches(self.learn_confidence):
+            self.sources.track_identified(track.track_id, fid)
+        else:  # one uncertain decision must not teach the face's person another's clothes either
+            self.sources.forget_track(track.track_id)
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
         """The track is not its face's person any more: the face returns to face_list (a LOST track's is there,

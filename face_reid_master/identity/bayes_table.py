@@ -69,9 +69,8 @@ class BayesIdentityManager(IdentityManagerBase):
     ``clamp_probability`` applied after normalisation [1e-3], ``sinkhorn_tolerance`` on row sums [1e-3]
     and ``sinkhorn_max_iterations`` [10]; ``sinkhorn_solver`` "newton" (same fixed point in a few
     iterations) or "sinkhorn" (the paper's alternations). Ours: ``learn_confidence`` [0], the posterior a face
-    decision needs to teach its face the track's embeddings (below it the track is identified and teaches nothing).
-    The remaining arguments are those of
-    :class:`IdentityManagerBase`.
+    decision needs to teach its face the track's face and body embeddings (below it the track is identified and
+    teaches nothing). The remaining arguments are those of :class:`IdentityManagerBase`.
     """
 
     def __init__(

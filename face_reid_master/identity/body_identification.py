@@ -1,9 +1,10 @@
 """Our extension of Algorithm 1: a track that shows no face is identified by its body.
 
 Body observations are queued in each track's record until the identity step; then those of identified tracks join their
-face's body gallery and those of faceless tracks are weighed against every learned face's recent bodies
-(:class:`~face_reid_master.identity.body_evidence.BodyEvidence`), which decides the faceless tracks whose
-evidence is strong enough. A track's own face, once seen, overrules its body.
+face's body gallery (not those of a track a face decided below ``learn_confidence``: one uncertain decision must not
+teach one person's clothes to another's face) and those of faceless tracks are weighed against every learned face's
+recent bodies (:class:`~face_reid_master.identity.body_evidence.BodyEvidence`), which decides the faceless tracks
+whose evidence is strong enough. A track's own face, once seen, overrules its body.
 
 Measured on the development scenarios and not adopted: letting the body confirm or doubt a face's choice (an
 undecided track that shows a face keeps comparing its bodies, and before the face decides, the body's log odds for
@@ -70,7 +71,8 @@ class BodyIdentification:
         return row[None, :] if np.isfinite(row[0]) else None  # NaN rows: not described
 
     def forget_track(self, track_id: int) -> None:
-        """The track was deleted: its evidence goes (its queued bodies went with its record)."""
+        """The track was deleted (its queued bodies went with its record) or identified without teaching: its
+        evidence goes."""
         self.evidence.forget_track(track_id)
 
     def forget_face(self, face_id: int) -> None:

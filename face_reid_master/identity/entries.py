@@ -86,7 +86,8 @@ class TrackRecord:
         self.face_id, self.confidence, self.evidence, self.new_face = face_id, float(confidence), evidence, new
 
     def teaches(self, learn_confidence: float) -> bool:
-        """Identified: whether its faces join its face (not after a known-face decision below ``learn_confidence``)."""
+        """Identified: whether what it shows (faces, bodies) joins its face (not after a known-face decision below
+        ``learn_confidence``)."""
         return self.new_face or self.evidence != Evidence.FACE or self.confidence >= learn_confidence
 
     def person_changed(self) -> None:

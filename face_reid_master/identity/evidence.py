@@ -78,7 +78,7 @@ class EvidenceSource(Protocol):
         """The track got face ``face_id`` (by any cue): what it gathered describes that face's person now."""
 
     def forget_track(self, track_id: int) -> None:
-        """The track was deleted."""
+        """The track was deleted, or identified by a decision that teaches nothing: what it gathered goes."""
 
     def forget_face(self, face_id: int) -> None:
         """The face was forgotten."""

@@ -101,6 +101,7 @@ class IdentityStats:
     faces_forgotten: int = 0
     observations_not_learned_inconsistent: int = 0
     observations_not_learned_uncertain: int = 0  # faces of tracks decided below learn_confidence
+    cue_observations_not_learned_uncertain: int = 0  # other cues' (bodies) of tracks decided below it
     swaps_released: int = 0  # tracks released as someone else: the swap guard, or a crossing more likely than not
     body_observations: int = 0
     assigned_by_body: int = 0

@@ -168,3 +168,26 @@ def test_a_faceless_track_seen_alongside_a_face_s_track_is_not_given_that_face_a
         assert not ids.step(t)
     assert ids.face_id_of(2) is None and ids.stats.decisions_excluded_co_seen == 3
     assert alice in ids.faces.available
+
+
+@pytest.mark.parametrize("learn_confidence", [0.0, 1.0])
+def test_a_face_decision_below_learn_confidence_teaches_its_face_no_bodies_and_counts_them(
+        learn_confidence: float) -> None:
+    ids = BayesIdentityManager(BODY_LIKELIHOOD, embedding_dim=DIM, min_observations=2, body_evidence=_evidence(),
+                               learn_confidence=learn_confidence)  # 1.0: no decision is that certain
+    ids.add_observations(1, np.repeat(_face(0), 3, axis=0), 0.0)  # Alice: a new face (a new face always teaches)
+    ids.add_body_observations(1, RED, 0.0)
+    ids.step(0.0)
+    ids.track_deleted(1, 1.0)
+    ids.step(1.0)
+    (alice,) = ids.face_ids()
+    ids.add_observations(2, np.repeat(_face(0), 3, axis=0), 2.0)  # taken for Alice (known: below 1.0)
+    ids.add_body_observations(2, BLUE, 2.0)  # queued with the faces that decide it
+    ids.step(2.0)
+    assert ids.face_id_of(2) == alice
+    ids.add_body_observations(2, np.repeat(BLUE, 2, axis=0), 3.0)  # and after it
+    ids.step(3.0)
+    gallery = ids.body_evidence.face_bodies(alice, 3.0)
+    taught = learn_confidence == 0.0
+    assert gallery.shape[0] == (4 if taught else 1)  # RED, and BLUE only from a decision that teaches
+    assert ids.stats.cue_observations_not_learned_uncertain == (0 if taught else 3)
