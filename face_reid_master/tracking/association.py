@@ -52,7 +52,9 @@ decided as one of three look-alikes' faces, whose body galleries took their bodi
 5099); on 218 re-identifications taken for another person rose (27 -> 35): a released track is decided again, and
 with real evidence a decision just over the posterior threshold is often wrong. The simulator's head-height noise is
 independent per detection (3 cm); with noisier heights replayed (per-camera bias, slow drift, outliers) it still
-helped the oracle runs but left more detections undecided. The code is on the branch ``height-check``.
+helped the oracle runs but left more detections undecided. Measured again once uncertain face decisions no longer
+taught their face's body gallery: still worse on 215 (362 / 53 -> 348 / 68 right / wrong) and 218 (334 / 46 ->
+332 / 50). The code is on the branch ``height-check``.
 """
 
 from __future__ import annotations
