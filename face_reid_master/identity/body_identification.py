@@ -7,10 +7,11 @@ recent bodies (:class:`~face_reid_master.identity.body_evidence.BodyEvidence`), 
 whose evidence is strong enough. A track's own face, once seen, overrules its body.
 
 Measured on the development scenarios (real evidence, fused): an uncertain known-face decision teaching its face's
-body gallery nothing took the seven 20-person scenarios from 2521 / 329 right / wrong to 2550 / 316 (recover 0.596 ->
-0.603); oracle runs were unchanged, six people nearly so (nine seeds 275 / 62 -> 274 / 62). Withholding the bodies of uncertain new-person decisions as well
-(a new face learns its person's clothes only from a decision of at least ``learn_confidence``) did not win: six
-people, nine seeds 274 / 62 -> 289 / 65; seed 215 362 / 53 -> 350 / 59 (wrong identity per detection 1.07 -> 1.31 %).
+body gallery nothing took the seven 20-person scenarios from 2521 / 329 right / wrong to 2550 / 316 (recover 0.596
+-> 0.603); oracle runs were unchanged, six people nearly so (nine seeds 275 / 62 -> 274 / 62). Withholding the
+bodies of uncertain new-person decisions as well (a new face learns its person's clothes only from a decision of at
+least ``learn_confidence``) did not win: six people, nine seeds 274 / 62 -> 289 / 65; seed 215 362 / 53 -> 350 / 59
+(wrong identity per detection 1.07 -> 1.31 %).
 
 Measured on the development scenarios and not adopted: letting the body confirm or doubt a face's choice (an
 undecided track that shows a face keeps comparing its bodies, and before the face decides, the body's log odds for
