@@ -70,7 +70,6 @@ class IdentityManagerBase:
     """
 
     learn_confidence: float = 0.0  # a method's: a face decision below it identifies its track, teaches its face nothing
-    # (neither faces nor bodies)
 
     def __init__(
         self,
@@ -266,15 +265,10 @@ class IdentityManagerBase:
         return face.slot, chunks, obs
 
     def _cue_step(self, source: EvidenceSource, stamp: float) -> list[IdentityEvent]:
-        """One cue's observations: an identified track's describe its face's person (unless a face decided it below
-        ``learn_confidence``); a faceless track is given one of face_list when its evidence against every learned
-        face is strong enough (its own face overrules)."""
-        queued = []
-        for track, chunks in self.tracks.take_cue(source.kind):
-            if track.face_id is None or track.teaches(self.learn_confidence):
-                queued.append((track, chunks))
-            else:  # decided by a face below learn_confidence: what it wears may be another person's
-                self.stats.cue_observations_not_learned_uncertain += sum(c.values.shape[0] for c in chunks)
+        """One cue's observations: an identified track's describe its face's person (if its decision teaches); a
+        faceless track is given one of face_list when its evidence against every learned face is strong enough."""
+        queued, withheld = self.tracks.take_cue(source.kind, self.learn_confidence)
+        self.stats.cue_observations_not_learned_uncertain += withheld
         source.observe(queued, list(self.faces.entries))
         events = []
         for tid, fid, p in self.co_sightings.allowed(source.decide(self.faces.available, stamp, self._faces_alike)):
@@ -355,8 +349,7 @@ class IdentityManagerBase:
         return True
 
     def eviction_order(self, exclude: Iterable[int] = ()) -> list[int]:
-        """The unnamed faces of face_list (no live or lost track holds them) not in ``exclude``, least recently
-        seen first: what the face cap may evict (named faces never)."""
+        """Unnamed faces of face_list no live or lost track holds, not in ``exclude``, least recently seen first."""
         return self.faces.eviction_order(set(exclude) | set(self._lent.lender))
 
     # ------------------------------------------------------------------------------ internals
@@ -388,8 +381,7 @@ class IdentityManagerBase:
     def _give_face(self, track: TrackRecord, fid: int, confidence: float, stamp: float, evidence: str,
                    new: bool) -> None:
         """The track carries face ``fid`` from now on (a known face leaves face_list, taken from a LOST track that
-        lent it); the bodies it gathered join the face's gallery if the decision teaches (:meth:`TrackRecord.teaches`),
-        else they go."""
+        lent it); the bodies it gathered join the face's gallery if the decision teaches, else they go."""
         face = self.faces.entries[fid]
         if not new:
             self._take_lent(fid, stamp)
@@ -399,14 +391,10 @@ class IdentityManagerBase:
         self._on_track_identified(track)
         track.give(fid, confidence, evidence, new)
         self.crossings.forget_all(track)  # decided on what it showed since
-        if track.teaches(self.learn_confidence):
-            self.sources.track_identified(track.track_id, fid)
-        else:  # one uncertain decision must not teach the face's person another's clothes either
-            self.sources.forget_track(track.track_id)
+        self.sources.track_identified(track.track_id, fid, track.teaches(self.learn_confidence))
 
     def _release_swapped(self, track: TrackRecord, stamp: float, since: float) -> IdentityEvent:
-        """The track is not its face's person any more: the face returns to face_list (a LOST track's is there,
-        lent), the track is unassigned."""
+        """Not its face's person any more: its face returns to face_list (a lent one is there), it is unassigned."""
         assert track.face_id is not None
         fid, confidence = track.face_id, track.confidence
         if self._lent.take(fid) is None:

@@ -97,10 +97,14 @@ class Cues:
     def __iter__(self) -> Iterator[EvidenceSource]:
         return iter(self.sources)
 
-    def track_identified(self, track_id: int, face_id: int) -> None:
-        """What the track's cues gathered describes face ``face_id``'s person now."""
+    def track_identified(self, track_id: int, face_id: int, teaches: bool) -> None:
+        """What the track's cues gathered describes face ``face_id``'s person now, if its decision ``teaches``;
+        otherwise it goes (one uncertain decision must not teach one person's clothes to another's face)."""
         for source in self.sources:
-            source.track_identified(track_id, face_id)
+            if teaches:
+                source.track_identified(track_id, face_id)
+            else:
+                source.forget_track(track_id)
 
     def forget_track(self, track_id: int) -> None:
         for source in self.sources:

@@ -79,10 +79,19 @@ class TrackList:
             pending[tid], track.face_chunks = track.face_chunks, []
         return pending
 
-    def take_cue(self, kind: str) -> list[tuple[TrackRecord, list[CueChunk]]]:
-        """The queued observations of cue ``kind`` per track, in queueing order; those queues are emptied."""
+    def take_cue(self, kind: str, learn_confidence: float) -> tuple[list[tuple[TrackRecord, list[CueChunk]]], int]:
+        """The queued observations of cue ``kind`` per track, in queueing order, of the tracks they describe: faceless
+        ones and those whose decision teaches (:meth:`TrackRecord.teaches`: a track a face decided less certainly may
+        wear another person's clothes); and how many rows the others held. Those queues are emptied."""
         queued = self._cue_queued.pop(kind, {})
-        return [(track, track.cue_queue.pop(kind)) for track in queued.values()]
+        taught, withheld = [], 0
+        for track in queued.values():
+            chunks = track.cue_queue.pop(kind)
+            if track.face_id is None or track.teaches(learn_confidence):
+                taught.append((track, chunks))
+            else:
+                withheld += sum(c.values.shape[0] for c in chunks)
+        return taught, withheld
 
     def remove(self, track_id: int, stamp: float) -> TrackRecord | None:
         """The track is gone for good (its death handled): its record goes with everything in it (kept in

@@ -28,7 +28,7 @@ def test_a_tracks_queued_evidence_and_bayes_row_live_in_its_record_and_go_with_i
     ids.track_deleted(7, 1.5)
     ids.step(1.5)  # its last evidence is learned, then the record goes whole: no queue, no row is left
     assert 7 not in ids.tracks.entries and rec.bayes_row == 0 and ids.posterior_table()[1] == []
-    assert ids.tracks.take_pending() == {} and ids.tracks.take_cue(Evidence.BODY) == []
+    assert ids.tracks.take_pending() == {} and ids.tracks.take_cue(Evidence.BODY, 0.0) == ([], 0)
 
 
 def test_a_swap_changes_the_published_id_in_the_record_the_tracker_id_stays() -> None:
