@@ -98,8 +98,8 @@ class Cues:
         return iter(self.sources)
 
     def track_identified(self, track_id: int, face_id: int, teaches: bool) -> None:
-        """What the track's cues gathered describes face ``face_id``'s person now, if its decision ``teaches``;
-        otherwise it goes (one uncertain decision must not teach one person's clothes to another's face)."""
+        """What the track's cues gathered describes face ``face_id``'s person now if its decision ``teaches``, else it
+        goes."""
         for source in self.sources:
             if teaches:
                 source.track_identified(track_id, face_id)

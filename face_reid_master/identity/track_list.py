@@ -80,14 +80,14 @@ class TrackList:
         return pending
 
     def take_cue(self, kind: str, learn_confidence: float) -> tuple[list[tuple[TrackRecord, list[CueChunk]]], int]:
-        """The queued observations of cue ``kind`` per track, in queueing order, of the tracks they describe: faceless
-        ones and those whose decision teaches (:meth:`TrackRecord.teaches`: a track a face decided less certainly may
-        wear another person's clothes); and how many rows the others held. Those queues are emptied."""
+        """The queued observations of cue ``kind`` per track, in queueing order, of the faceless tracks and
+        the identified ones that teach (:meth:`TrackRecord.teaches`: not those a face decided below
+        ``learn_confidence``), and how many rows the others held. Those queues are emptied."""
         queued = self._cue_queued.pop(kind, {})
         taught, withheld = [], 0
         for track in queued.values():
             chunks = track.cue_queue.pop(kind)
-            if track.face_id is None or track.teaches(learn_confidence):
+            if track.face_id is None or track.teaches(learn_confidence):  # teaches: an identified track's rule
                 taught.append((track, chunks))
             else:
                 withheld += sum(c.values.shape[0] for c in chunks)
