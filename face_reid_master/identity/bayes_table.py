@@ -31,7 +31,7 @@ a look-alike's face keeps rising with more views of it, so a wrong decision is t
 0.99 it also teaches its face (``learn_confidence``): the pollution cascades. A separate threshold of 0.995 for
 new-person decisions alone (6 people, nine seeds: 275 / 62 -> 274 / 64, 1.08 -> 2.02 %) only delayed them: the
 returning people whose face was missed reached 0.995 too. Counting one camera's face observations of an undecided
-track as evidence at most every 0.5 s (all still buffered; branch ``face-min-interval-experiment``) halved the wrong
+track as evidence at most every 0.5 s (all still buffered) halved the wrong
 decisions but moved along the frontier, not beyond it, at 20 people (215: 355 / 53 -> 243 / 26, recover 0.51 ->
 0.41; 218: 327 / 45 -> 215 / 22, 0.51 -> 0.42; main's own decisions at posterior >= 0.98-0.99 give the same) and
 lost recover on oracle evidence (6 people, five seeds: 155 / 3 -> 130 / 2, recover 0.79 -> 0.68); with 6 people

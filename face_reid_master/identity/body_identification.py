@@ -26,7 +26,7 @@ doubted right choices about as often as wrong ones. Variants measured on the sam
 without the feature funnel's bound on abandoned faces (218: 300 / 54), the body's Bayes factor against every other
 face rather than against "someone else" (215: 305 / 44, recover 0.51 -> 0.47; 218: 288 / 52), the body's evidence,
 unbounded, on every face rather than on the face's choice (215: 325 / 75), confirming only, never doubting (218: 326
-/ 52; 6 people real 291 / 59, 1.12 %). The code is on the branch ``body-confirms``.
+/ 52; 6 people real 291 / 59, 1.12 %).
 
 Measured and not adopted either: the body keeping a face from declaring a new person. Most new-person decisions
 that are wrong are a returning person whose own learned face was free but missed by the embedder; an undecided
@@ -38,7 +38,7 @@ tracks are given that someone by their body. At 20 people with real evidence it 
 one person never learned, first appearances taken for a known person 5 -> 28; 215 355 / 53 -> 341 / 55; 217 352 /
 60 -> 350 / 58; 218 327 / 45 -> 317 / 48). Vetoing only where the face, too, gives the body's choice some
 weight (its posterior at least 0.01) never vetoes: the missed face sits at the table's clamp (0.001-0.007), the
-face's evidence against it is strong. The code, a scenario file and a test are on the branch ``new-person-veto``.
+face's evidence against it is strong.
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ with real evidence a decision just over the posterior threshold is often wrong. 
 independent per detection (3 cm); with noisier heights replayed (per-camera bias, slow drift, outliers) it still
 helped the oracle runs but left more detections undecided. Measured again once uncertain face decisions no longer
 taught their face's body gallery: still worse on 215 (362 / 53 -> 348 / 68 right / wrong) and 218 (334 / 46 ->
-332 / 50). The code is on the branch ``height-check``.
+332 / 50).
 """
 
 from __future__ import annotations
