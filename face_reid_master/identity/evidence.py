@@ -100,11 +100,11 @@ class Cues:
     def track_identified(self, track_id: int, face_id: int, teaches: bool) -> None:
         """What the track's cues gathered describes face ``face_id``'s person now if its decision ``teaches``, else it
         goes."""
+        if not teaches:
+            self.forget_track(track_id)
+            return
         for source in self.sources:
-            if teaches:
-                source.track_identified(track_id, face_id)
-            else:
-                source.forget_track(track_id)
+            source.track_identified(track_id, face_id)
 
     def forget_track(self, track_id: int) -> None:
         for source in self.sources:

@@ -87,7 +87,8 @@ class TrackList:
         taught, withheld = [], 0
         for track in queued.values():
             chunks = track.cue_queue.pop(kind)
-            if track.face_id is None or track.teaches(learn_confidence):  # teaches: an identified track's rule
+            # faceless first: a track whose lent face was forgotten keeps its decision's evidence kind, not a face
+            if track.face_id is None or track.teaches(learn_confidence):
                 taught.append((track, chunks))
             else:
                 withheld += sum(c.values.shape[0] for c in chunks)

@@ -191,3 +191,20 @@ def test_a_face_decision_below_learn_confidence_teaches_its_face_no_bodies_and_c
     taught = learn_confidence == 0.0
     assert gallery.shape[0] == (4 if taught else 1)  # RED, and BLUE only from a decision that teaches
     assert ids.stats.cue_observations_not_learned_uncertain == (0 if taught else 3)
+
+
+def test_a_track_whose_uncertainly_decided_face_was_forgotten_while_lent_gathers_bodies_again() -> None:
+    ids = BayesIdentityManager(BODY_LIKELIHOOD, embedding_dim=DIM, min_observations=2, body_evidence=_evidence(),
+                               learn_confidence=1.0, lend_lost_faces=True)  # 1.0: every known-face decision uncertain
+    ids.add_observations(1, np.repeat(_face(0), 3, axis=0), 0.0)  # Alice: a new face
+    ids.step(0.0)
+    ids.track_deleted(1, 1.0)
+    ids.step(1.0)
+    (alice,) = ids.face_ids()
+    ids.add_observations(2, np.repeat(_face(0), 3, axis=0), 2.0)  # taken for Alice, below learn_confidence
+    ids.step(2.0)
+    ids.track_lost(2)  # it lends Alice's face, which is then deleted ("forget this person")
+    assert ids.forget_face(alice) and ids.face_id_of(2) is None
+    ids.add_body_observations(2, np.repeat(BLUE, 2, axis=0), 3.0)  # faceless now: what it wears is its own evidence
+    ids.step(3.0)
+    assert ids.stats.cue_observations_not_learned_uncertain == 0
