@@ -25,7 +25,13 @@ gate), the probability that it swapped them is the likelihood of the exchanged p
 Strays: a track may also take the detection of a person it was not following, one whose own track is new or gone
 (its person left the view as another walked in). For every detection a CONFIRMED or LOST track took, the
 probability that it is such a person (``Matches.strays``) is a logistic of the pair's position log-likelihood and
-its body-appearance distance (:class:`StrayModel`, fitted on development scenarios).
+its body-appearance distance (:class:`StrayModel`, fitted on development scenarios), raised when the track had
+missed the camera's previous frame but saw it within ``stray_occlusion_max_s`` (``occluded``): a switch happens most
+often as a person comes out from behind another. On the strays of development seeds 202 and 213 (20 people), those
+reported on the frame after one that saw the track were real switches less often than the model's odds said, by
+2.1 log odds with real evidence and 0.4 with oracle evidence; those after one missed frame to 3 s were within 0.8 of
+them with real evidence and 1.1-3 log odds commoner with oracle evidence. Beyond 3 s (a person walking into the
+camera's view) they were, with real evidence, as rare as on the next frame again.
 
 Measured on the development scenarios and not adopted: keeping a suspected stray's look (p >= 0.05) out of its
 track's gallery, so that the track's next detections are judged against its look from before (the gallery takes a
@@ -173,11 +179,13 @@ _MIN_STRAY_PROBABILITY = 1e-2  # nor tracks less likely strayed (they would only
 class StrayModel:
     """The log odds that a track's detection is a person it was not following: ``log_odds`` + 0.5 x the pair's
     negative log-likelihood (``d2 + log det S``, S in m^2) + ``appearance_slope`` x (its body-appearance distance
-    - ``appearance_distance``); the appearance term is 0 where either has no appearance."""
+    - ``appearance_distance``); the appearance term is 0 where either has no appearance; + ``occlusion_log_odds``
+    for a track hidden from the camera until this frame."""
 
     log_odds: float
     appearance_slope: float
     appearance_distance: float
+    occlusion_log_odds: float = 0.0
 
 
 def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: IndexArray, cols: IndexArray,
@@ -214,15 +222,19 @@ def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: Index
 
 
 def stray_probabilities(model: StrayModel, position_nll: FloatArray, appearance: FloatArray | None, rows: IndexArray,
-                        cols: IndexArray, follows: NDArray[np.bool_]) -> tuple[tuple[int, float], ...]:
+                        cols: IndexArray, follows: NDArray[np.bool_], occluded: NDArray[np.bool_] | None = None
+                        ) -> tuple[tuple[int, float], ...]:
     """(track, p) for the matched tracks that ``follow`` a person (not tentative): p, the probability that the
     detection it took is a person it was not following, by ``model`` (``position_nll``: d2 + log det S per pair;
-    ``appearance``: body-appearance distances, NaN = unknown). Tracks below 1e-2 are left out."""
+    ``appearance``: body-appearance distances, NaN = unknown; ``occluded``: tracks hidden from the camera until
+    this frame, None = none). Tracks below 1e-2 are left out."""
     keep = follows[rows]
     r, c = rows[keep], cols[keep]
     if r.shape[0] == 0:
         return ()
     log_odds = model.log_odds + 0.5 * position_nll[r, c]
+    if occluded is not None:
+        log_odds += np.where(occluded[r], model.occlusion_log_odds, 0.0)
     if appearance is not None:
         a = appearance[r, c]
         log_odds += np.where(np.isfinite(a), model.appearance_slope * (a - model.appearance_distance), 0.0)
@@ -245,7 +257,8 @@ class Associator:
         self._app_gate = config.appearance_gate
         self._app_weight = config.appearance_weight
         self._app_match = config.appearance_match_distance
-        self._stray = StrayModel(config.stray_log_odds, config.stray_appearance_slope, config.stray_appearance_distance)
+        self._stray = StrayModel(config.stray_log_odds, config.stray_appearance_slope, config.stray_appearance_distance,
+                                 config.stray_occlusion_log_odds)
 
     def __call__(
         self,
@@ -259,6 +272,7 @@ class Associator:
         stamp: float,
         appearance: FloatArray | None = None,
         alike: NDArray[np.intp] | None = None,
+        occluded: NDArray[np.bool_] | None = None,
     ) -> Matches:
         """Associate detections ``z`` (M, 2) with variances ``r2`` (M,) at ``stamp`` to N tracks.
 
@@ -267,6 +281,7 @@ class Associator:
         track's newest measurement at or before ``stamp`` (its first one if it was born later).
         ``appearance`` (N, M): body-appearance distances (NaN = unknown; None = none known); ``alike`` (M,): how many
         tracks look like each detection (below ``appearance_match_distance``), when these N are not all of them.
+        ``occluded`` (N,): tracks hidden from this frame's camera until now (their strays are likelier; None = none).
         """
         c = self._costs(x_pred, P_pred, z, r2, appearance)
         d2, dist2, close, in_metric_gate, feasible, nll = c.d2, c.dist2, c.close, c.in_metric_gate, c.feasible, c.nll
@@ -307,7 +322,7 @@ class Associator:
             possible &= ~c.other_person
         follows = state != _TENTATIVE
         swaps = swap_probabilities(nll, possible, rows, cols, follows)
-        strays = stray_probabilities(self._stray, c.position_nll, appearance, rows, cols, follows)
+        strays = stray_probabilities(self._stray, c.position_nll, appearance, rows, cols, follows, occluded)
         return Matches(rows, cols, close.any(axis=0), swaps, strays)
 
     def _costs(self, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, r2: FloatArray,

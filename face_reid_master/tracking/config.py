@@ -87,6 +87,13 @@ class TrackerConfig:
     stray_appearance_distance: float = param(
         0.45, "Body-appearance distance between a track and its detection that says nothing of a stray (metric "
         "units).", low=0.0, high=10.0)
+    stray_occlusion_log_odds: float = param(
+        1.5, "Log odds added to a stray when the track had missed the camera's previous frame but was seen by it "
+        "within stray_occlusion_max_s: a person who comes out from behind another is more often someone else "
+        "(chosen on development scenarios; 0 = off).", low=0.0, high=100.0)
+    stray_occlusion_max_s: float = param(
+        3.0, "How long a track unseen by a camera counts as hidden from it for stray_occlusion_log_odds; a "
+        "longer gap is a person walking into that camera's view (s).", low=0.0, high=3600.0)
 
     def __post_init__(self) -> None:
         validate_fields(self)

@@ -77,6 +77,15 @@ class TrackTable:
             if h == h and stamp >= hist.height_stamp_s:  # finite (not NaN)
                 hist.height_m, hist.height_stamp_s = h, stamp
 
+    def hidden(self, rows: NDArray[np.intp], camera_id: str, previous_s: float, stamp: float, max_gap_s: float
+               ) -> NDArray[np.bool_] | None:
+        """Of ``rows``: the tracks ``camera_id`` saw within ``max_gap_s`` before ``stamp`` but not in its previous
+        frame, at ``previous_s`` (hidden from it since, or gone); None for a first (inf) or a late frame."""
+        if previous_s >= stamp:
+            return None
+        seen = np.array([self.hist[i].cameras.get(camera_id, -math.inf) for i in rows.tolist()])
+        return (seen < previous_s) & (stamp - seen <= max_gap_s)
+
     def remember_looks(self, appearance: NDArray[np.float32], rows: NDArray[np.intp], cols: NDArray[np.intp],
                        created_cols: list[int]) -> None:
         """Add each described detection's embedding (row ``col`` of ``appearance``) to the gallery of the track it

@@ -89,6 +89,7 @@ class Tracker:
 
     def _clear_arrays(self) -> None:
         self._tab = TrackTable()
+        self._camera_frames: dict[str, float] = {}  # camera id -> stamp of its newest frame applied
         self._quiet_until = -math.inf  # no lifecycle transition can fall due before this stamp
 
     # ------------------------------------------------------------------ read-only properties
@@ -162,7 +163,8 @@ class Tracker:
         r2 = stds**2
         if appearance is not None and not np.isfinite(appearance).any():
             appearance = None
-        matched = self._match(positions, r2, stamp, appearance)
+        matched = self._match(positions, r2, stamp, appearance, camera_id)
+        self._camera_frames[camera_id] = max(self._camera_frames.get(camera_id, -math.inf), stamp)
         self._update_matched(matched, positions, r2, heights, stamp, camera_id)
         rows, cols = matched.matches.rows, matched.matches.cols
         associations = list(zip(self._tab.ids[rows].tolist(), cols.tolist(), strict=True))
@@ -278,10 +280,9 @@ class Tracker:
             t_a[i], z_a[i], x_a[i], P_a[i] = step.stamp_s, step.z, step.x, step.P
         return x_a, P_a, t_a, z_a
 
-    def _match(self, z: FloatArray, r2: FloatArray, stamp: float, appearance: NDArray[np.float32] | None
-               ) -> _Matched:
-        """Predict the tracks that could take a detection to ``stamp`` and associate the detections
-        (association.Associator); the others (beyond every gate and reach) are left out of both."""
+    def _match(self, z: FloatArray, r2: FloatArray, stamp: float, appearance: NDArray[np.float32] | None,
+               camera_id: str) -> _Matched:
+        """Associate the detections with the tracks that could take one (:meth:`_candidates`), predicted."""
         m = z.shape[0]
         if m == 0 or self._tab.ids.shape[0] == 0:
             return _Matched(Matches(_NO_INDEX, _NO_INDEX, np.zeros(m, dtype=bool)), None, None, None)
@@ -296,7 +297,10 @@ class Tracker:
             alike = (looks_all < self._cfg.appearance_match_distance).sum(axis=0)  # NaN compares False
             looks = looks_all[cand]
         x_pred, P_pred = self._model.predict(x_a[cand], P_a[cand], stamp - t_a[cand])
-        local = self._associate(x_pred, P_pred, self._tab.state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike)
+        hidden = self._tab.hidden(cand, camera_id, self._camera_frames.get(camera_id, math.inf), stamp,
+                                  self._cfg.stray_occlusion_max_s)
+        local = self._associate(x_pred, P_pred, self._tab.state[cand], t_a[cand], z_a[cand], z, r2, stamp, looks, alike,
+                                hidden)
         rows = local.rows
         ids = self._tab.ids[cand]
         swaps = tuple((int(ids[a]), int(ids[b]), p) for a, b, p in local.swaps)

@@ -35,6 +35,16 @@ def test_the_stray_probability_is_a_logistic_of_position_likelihood_and_appearan
     assert stray_probabilities(MODEL, nll, None, rows, cols, np.zeros(1, dtype=bool)) == ()  # a tentative track
 
 
+def test_a_track_hidden_from_the_camera_until_this_frame_is_likelier_to_have_strayed() -> None:
+    model = StrayModel(log_odds=-3.0, appearance_slope=10.0, appearance_distance=0.5, occlusion_log_odds=1.5)
+    nll = np.array([[0.0], [0.0]])
+    rows, cols, follows = np.array([0, 1]), np.array([0, 0]), np.ones(2, dtype=bool)
+    hidden = np.array([True, False])
+    by_track = dict(stray_probabilities(model, nll, None, rows, cols, follows, hidden))
+    assert by_track[0] == pytest.approx(_sigmoid(-1.5)) and by_track[1] == pytest.approx(_sigmoid(-3.0))
+    assert dict(stray_probabilities(model, nll, None, rows, cols, follows))[0] == pytest.approx(_sigmoid(-3.0))
+
+
 def _walk(tracker: Tracker, x0: float, k0: int, k1: int, look: np.ndarray | None) -> list[tuple[int, float]]:
     """One person walks +x at 0.5 m/s from ``x0`` (frames k0..k1-1, 10 per s); the strays reported."""
     strays: list[tuple[int, float]] = []
@@ -68,3 +78,29 @@ def test_a_track_that_takes_a_newcomer_where_its_person_left_reports_a_stray(app
         _walk(alone, 0.0, 0, 20, None)
         by_position = alone.update_arrays(np.array([[1.15, 0.9]]), np.array([0.05]), np.array([np.nan]), 2.3, "c")
         assert strayed > by_position.strays[0][1]
+
+
+def _newcomer_stray(config: TrackerConfig, empty_frames: list[float]) -> float:
+    """The person of :func:`_walk` leaves at 1.9 s; camera ``c`` then sends ``empty_frames`` (no detection) and at
+    2.3 s sees someone else 0.9 m to the side of where the person was heading: the track's stray probability."""
+    tracker = Tracker(config)
+    _walk(tracker, 0.0, 0, 20, None)
+    for stamp in empty_frames:
+        tracker.update_arrays(np.zeros((0, 2)), np.zeros(0), np.zeros(0), stamp, "c")
+    result = tracker.update_arrays(np.array([[1.15, 0.9]]), np.array([0.05]), np.array([np.nan]), 2.3, "c")
+    (track,) = tracker.track_ids()
+    return dict(result.strays)[track]
+
+
+def test_a_track_the_camera_missed_in_its_previous_frames_reports_a_likelier_stray() -> None:
+    config = TrackerConfig()
+    unseen = [2.0, 2.1, 2.2]  # the camera looked and did not see the person (hidden, or gone)
+    hidden = _newcomer_stray(config, unseen)
+    no_frames = _newcomer_stray(config, [])  # the camera sent nothing since it last saw the person
+    assert hidden > no_frames
+    odds = (hidden / (1.0 - hidden)) / (no_frames / (1.0 - no_frames))
+    assert math.log(odds) == pytest.approx(config.stray_occlusion_log_odds, abs=1e-6)
+    off = TrackerConfig(stray_occlusion_log_odds=0.0)
+    assert _newcomer_stray(off, unseen) == pytest.approx(no_frames)
+    long_gone = TrackerConfig(stray_occlusion_max_s=0.3)  # unseen for 0.4 s: a person walking into view, not hidden
+    assert _newcomer_stray(long_gone, unseen) == pytest.approx(no_frames)
