@@ -10,7 +10,7 @@ import pytest
 
 from face_reid_master.tracking.association import StrayModel, stray_probabilities
 from face_reid_master.tracking.config import TrackerConfig
-from face_reid_master.tracking.tracker import Tracker
+from face_reid_master.tracking.tracker import FrameStatus, Tracker
 
 MODEL = StrayModel(log_odds=-3.0, appearance_slope=10.0, appearance_distance=0.5)
 DIM = 8
@@ -104,3 +104,18 @@ def test_a_track_the_camera_missed_in_its_previous_frames_reports_a_likelier_str
     assert _newcomer_stray(off, unseen) == pytest.approx(no_frames)
     long_gone = TrackerConfig(stray_occlusion_max_s=0.3)  # unseen for 0.4 s: a person walking into view, not hidden
     assert _newcomer_stray(long_gone, unseen) == pytest.approx(no_frames)
+
+
+def test_a_late_frame_finds_no_track_hidden() -> None:
+    """A frame older than the camera's newest cannot tell what that camera missed since."""
+    strays = []
+    for config in (TrackerConfig(), TrackerConfig(stray_occlusion_log_odds=0.0)):
+        tracker = Tracker(config)
+        _walk(tracker, 0.0, 0, 20, None)
+        for stamp in (2.0, 2.1, 2.3):
+            tracker.update_arrays(np.zeros((0, 2)), np.zeros(0), np.zeros(0), stamp, "c")
+        result = tracker.update_arrays(np.array([[1.15, 0.9]]), np.array([0.05]), np.array([np.nan]), 2.2, "c")
+        assert result.status is FrameStatus.APPLIED_LATE
+        (track,) = tracker.track_ids()
+        strays.append(dict(result.strays)[track])
+    assert strays[0] == pytest.approx(strays[1])
