@@ -26,7 +26,7 @@ Strays: a track may also take the detection of a person it was not following, on
 (its person left the view as another walked in). For every detection a CONFIRMED or LOST track took, the
 probability that it is such a person (``Matches.strays``) is a logistic of the pair's position log-likelihood and
 its body-appearance distance (:class:`StrayModel`, fitted on development scenarios), raised when the track had
-missed the camera's previous frame but saw it within ``stray_occlusion_max_s`` (``occluded``): a switch happens most
+missed the camera's previous frame but saw it within ``stray_occlusion_max_s`` (``hidden``): a switch happens most
 often as a person comes out from behind another. On the strays of development seeds 202 and 213 (20 people), those
 reported on the frame after one that saw the track were real switches less often than the model's odds said, by
 2.1 log odds with real evidence and 0.4 with oracle evidence; those after one missed frame to 3 s were within 0.8 of
@@ -222,19 +222,19 @@ def swap_probabilities(nll: FloatArray, possible: NDArray[np.bool_], rows: Index
 
 
 def stray_probabilities(model: StrayModel, position_nll: FloatArray, appearance: FloatArray | None, rows: IndexArray,
-                        cols: IndexArray, follows: NDArray[np.bool_], occluded: NDArray[np.bool_] | None = None
+                        cols: IndexArray, follows: NDArray[np.bool_], hidden: NDArray[np.bool_] | None = None
                         ) -> tuple[tuple[int, float], ...]:
     """(track, p) for the matched tracks that ``follow`` a person (not tentative): p, the probability that the
     detection it took is a person it was not following, by ``model`` (``position_nll``: d2 + log det S per pair;
-    ``appearance``: body-appearance distances, NaN = unknown; ``occluded``: tracks hidden from the camera until
+    ``appearance``: body-appearance distances, NaN = unknown; ``hidden``: tracks hidden from the camera until
     this frame, None = none). Tracks below 1e-2 are left out."""
     keep = follows[rows]
     r, c = rows[keep], cols[keep]
     if r.shape[0] == 0:
         return ()
     log_odds = model.log_odds + 0.5 * position_nll[r, c]
-    if occluded is not None:
-        log_odds += np.where(occluded[r], model.occlusion_log_odds, 0.0)
+    if hidden is not None:
+        log_odds += np.where(hidden[r], model.occlusion_log_odds, 0.0)
     if appearance is not None:
         a = appearance[r, c]
         log_odds += np.where(np.isfinite(a), model.appearance_slope * (a - model.appearance_distance), 0.0)
@@ -272,7 +272,7 @@ class Associator:
         stamp: float,
         appearance: FloatArray | None = None,
         alike: NDArray[np.intp] | None = None,
-        occluded: NDArray[np.bool_] | None = None,
+        hidden: NDArray[np.bool_] | None = None,
     ) -> Matches:
         """Associate detections ``z`` (M, 2) with variances ``r2`` (M,) at ``stamp`` to N tracks.
 
@@ -281,7 +281,7 @@ class Associator:
         track's newest measurement at or before ``stamp`` (its first one if it was born later).
         ``appearance`` (N, M): body-appearance distances (NaN = unknown; None = none known); ``alike`` (M,): how many
         tracks look like each detection (below ``appearance_match_distance``), when these N are not all of them.
-        ``occluded`` (N,): tracks hidden from this frame's camera until now (their strays are likelier; None = none).
+        ``hidden`` (N,): tracks hidden from this frame's camera until now (their strays are likelier; None = none).
         """
         c = self._costs(x_pred, P_pred, z, r2, appearance)
         d2, dist2, close, in_metric_gate, feasible, nll = c.d2, c.dist2, c.close, c.in_metric_gate, c.feasible, c.nll
@@ -322,7 +322,7 @@ class Associator:
             possible &= ~c.other_person
         follows = state != _TENTATIVE
         swaps = swap_probabilities(nll, possible, rows, cols, follows)
-        strays = stray_probabilities(self._stray, c.position_nll, appearance, rows, cols, follows, occluded)
+        strays = stray_probabilities(self._stray, c.position_nll, appearance, rows, cols, follows, hidden)
         return Matches(rows, cols, close.any(axis=0), swaps, strays)
 
     def _costs(self, x_pred: FloatArray, P_pred: FloatArray, z: FloatArray, r2: FloatArray,
