@@ -36,9 +36,10 @@ def test_every_development_sweep_is_on_the_page_with_its_sums() -> None:
     page = (REPO / "docs" / "results.md").read_text(encoding="utf-8")
     for path in sorted((REPO / "bench" / "results").glob("choices_*.json")):
         doc = json.loads(path.read_text(encoding="utf-8"))
-        assert f"### {doc['name']}" in page and doc["command"] in page
+        assert f"### {doc['name']}\n" in page and doc["command"] in page
+        section = page.split(f"### {doc['name']}\n", 1)[1].split("\n### ", 1)[0]  # labels repeat across sweeps
         for v in doc["variants"]:
-            row = next(line for line in page.splitlines() if line.startswith(f"| {v['label']} |"))
+            row = next(line for line in section.splitlines() if line.startswith(f"| {v['label']} |"))
             assert f"| {v['right']} / {v['wrong']} |" in row and f"| {v['body_right']} / {v['body_wrong']} |" in row
 
 
