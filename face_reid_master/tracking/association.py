@@ -93,15 +93,18 @@ and to the other tracks'): with 6 people and real evidence those give 0.25 (sd 0
 of 46 per unit (the stray model's: 9.6), and the check was as wrong as uncalibrated (215: 375 / 67, 2.08 %). A stray
 is reported just when a detection looks unlike its track, and the same person keeps looking unlike it for a while.
 
-Measured on development seed 215 (20 people) and not adopted: the association acting on its own probabilities.
-With oracle evidence nearly every remaining wrong decision there is an undecided track the tracker moved to
-another person and then decided right for that person (7 of 8; seed 213: 3 of 4), and at each switch the tracker
-had reported a stray of 0.65-1.0 (oracle bodies of two people lie only 0.5-0.74 apart in the metric, inside
+Measured on the development scenarios and not adopted: the association acting on its own probabilities. With
+oracle evidence nearly every remaining wrong decision at 20 people is an undecided track the tracker moved to another
+person and then decided right for that person (seed 215: 7 of 8; 213: 3 of 4), and at each switch the tracker had
+reported a stray of 0.65-1.0 (oracle bodies of two people lie only 0.5-0.74 apart in the metric, inside
 ``appearance_gate``). Refusing a detection whose stray probability is above 0.5 (the track coasts, the detection
-starts a track): oracle 438 / 8 -> 407 / 2 right / wrong, but wrong identity per detection 0.26 -> 0.47 %; real
-377 / 53 -> 353 / 39, recover 0.52 -> 0.47, 1.38 -> 1.73 %; above 0.9 worse everywhere (real 334 / 68, 4.15 %).
-Exchanging two tracks' detections (or handing one to an unmatched track) where the likelihood of the exchange is
-above one half, against the cascade's choice: oracle 438 / 8 -> 402 / 9 and 0.26 -> 0.51 %; real 373 / 49, even.
+starts a track) took the wrong decisions of four oracle seeds from 18 to 10 (215: 438 / 8 -> 407 / 2 right / wrong),
+but wrong identity per detection rose on all four (0.26 -> 0.47, 0.42 -> 0.62, 0.00 -> 0.11, 0.14 -> 0.43 %), and
+with real evidence it rose too (215, 213, 218: 1.38 -> 1.73, 1.52 -> 3.71, 1.31 -> 2.19 %), recover fell (0.52 ->
+0.47, 0.63 -> 0.56, 0.51 -> 0.45) and seed 213 made more wrong decisions (46 -> 59); above 0.9 seed 215 real was
+worse on every count (334 / 68, 4.15 %). Exchanging two tracks' detections (or handing one to an unmatched track)
+where the likelihood of the exchange is above one half, against the cascade's choice (seed 215): oracle 438 / 8 ->
+402 / 9 and 0.26 -> 0.51 %; real 373 / 49, wrong identity per detection even.
 """
 
 from __future__ import annotations
